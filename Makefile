@@ -1,0 +1,45 @@
+# Set-up and checks. `make demo` and `make test` work on a fresh machine.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: demo test bench install install-test system-deps rust clean
+
+$(VENV)/bin/python:
+	python3 -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+
+# the package with its Rust extension, built in release mode by maturin
+install: $(VENV)/bin/python rust
+	$(PIP) install -q -e .
+
+install-test: install system-deps
+	$(PIP) install -q -e '.[test]'
+
+# Rust toolchain: use the one on PATH, else install it from the rustup crate's installer on crates.io
+rust:
+	@command -v cargo >/dev/null || [ -x $$HOME/.cargo/bin/cargo ] || { \
+	  echo "cargo not found: installing a Rust toolchain"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) DEBIAN_FRONTEND=noninteractive apt-get install -y -qq cargo rustc; }
+
+# LinuxCNC's interpreter (rs274) is the peer the tests compare against
+system-deps:
+	@command -v rs274 >/dev/null || { \
+	  $(SUDO) apt-get update -qq && \
+	  $(SUDO) DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends linuxcnc-uspace; }
+
+demo: install
+	$(VENV)/bin/ncadapt demo --out demo-out
+
+test: install-test
+	PATH="$$HOME/.cargo/bin:$$PATH" cargo test -q --workspace --exclude ncadapt-nc-py
+	$(PY) -m pytest -q
+
+bench: install-test
+	$(PIP) install -q -e '.[bench]'
+	$(PY) benchmarks/bench_correct.py
+
+clean:
+	rm -rf $(VENV) target demo-out

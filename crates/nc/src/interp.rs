@@ -1,0 +1,685 @@
+//! Modal interpreter: RS274/NGC as LinuxCNC reads it, for the subset that can be corrected exactly.
+//!
+//! The interpreter walks the lexed lines once, keeps the modal state (motion, plane, units,
+//! distance modes, work offset, feed, spindle, tool) and records every block that changes the
+//! position. Constructs it cannot follow faithfully are reported with their line and never guessed:
+//! positions they make uncertain become NaN, and the blocks they affect are marked unsupported.
+
+use crate::error::NcError;
+use crate::lex::{Lexed, Opaque, Word};
+
+/// Number of tracked axes.
+pub const NAXES: usize = 9;
+/// Axis letters in their index order.
+pub const AXES: [u8; NAXES] = *b"XYZABCUVW";
+/// Millimetres per inch.
+pub const MM_PER_INCH: f64 = 25.4;
+
+/// What a recorded block does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Motion {
+    Rapid = 0,
+    Feed = 1,
+    ArcCw = 2,
+    ArcCcw = 3,
+    /// Changes the position in a way the engine does not trace (G28, G53, canned cycle, ...).
+    Other = 4,
+}
+
+impl Motion {
+    pub fn is_arc(self) -> bool {
+        matches!(self, Motion::ArcCw | Motion::ArcCcw)
+    }
+}
+
+/// Plane index: 0 = G17 (XY), 1 = G18 (ZX), 2 = G19 (YZ).
+/// For each plane: the first and second in-plane axes and the normal axis, as indices into AXES.
+pub const PLANE_AXES: [[usize; 3]; 3] = [[0, 1, 2], [2, 0, 1], [1, 2, 0]];
+
+/// One block that changes the position.
+#[derive(Clone, Debug)]
+pub struct Record {
+    /// 0-based line index.
+    pub line: u32,
+    pub motion: Motion,
+    /// 0 = XY, 1 = ZX, 2 = YZ.
+    pub plane: u8,
+    /// Program units are inches.
+    pub inch: bool,
+    /// G91.
+    pub incremental: bool,
+    /// G90.1 (absolute arc centres).
+    pub arc_absolute: bool,
+    /// Can be corrected: supported, start and end known.
+    pub supported: bool,
+    /// Bit i set when axis AXES[i] is written in the block.
+    pub named: u16,
+    /// End position, mm (degrees for A, B, C); NaN where unknown.
+    pub end: [f64; NAXES],
+    /// Arc centre in the plane's (first, second) coordinates, mm.
+    pub center: [f64; 2],
+    /// Arc turns (P word), 1 for an ordinary arc.
+    pub turns: u32,
+}
+
+/// A construct the engine does not interpret, with the line where it appears.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unsupported {
+    pub line: u32,
+    pub col: u32,
+    pub construct: String,
+    /// Motion blocks it affects (including its own line when that one moves).
+    pub blocks: u32,
+}
+
+/// A remark on something kept but not corrected (G53 moves, block delete, ...).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Note {
+    pub line: u32,
+    pub message: String,
+}
+
+/// Modal summary of a whole program, for `inspect`.
+#[derive(Clone, Debug, Default)]
+pub struct Summary {
+    pub inch_lines: u32,
+    pub mm_lines: u32,
+    pub planes: [u32; 3],
+    pub counts: [u32; 5],
+    pub work_offsets: Vec<u16>,
+    pub tools: Vec<u32>,
+    pub block_delete_lines: u32,
+    /// 0-based line where the program ends (M2/M30/closing %), if it does.
+    pub end_line: Option<u32>,
+}
+
+/// The result of interpreting a program.
+#[derive(Clone, Debug, Default)]
+pub struct Interp {
+    pub records: Vec<Record>,
+    /// For every line, the index of its record or u32::MAX.
+    pub line_record: Vec<u32>,
+    pub unsupported: Vec<Unsupported>,
+    pub notes: Vec<Note>,
+    pub summary: Summary,
+    /// Initial position (all NaN: a program does not know where the machine is).
+    pub origin: [f64; NAXES],
+}
+
+/// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
+#[derive(Clone, Copy, Debug, Default)]
+struct Active {
+    canned: Option<(u32, usize)>,
+    cutter_comp: Option<(u32, usize)>,
+    shift: Option<(u32, usize)>,
+    rotation: Option<(u32, usize)>,
+    scaling: Option<(u32, usize)>,
+    polar: Option<(u32, usize)>,
+    diameter: Option<(u32, usize)>,
+    inverse_time: Option<(u32, usize)>,
+    flow: Option<(u32, usize)>,
+}
+
+impl Active {
+    fn first(&self) -> Option<usize> {
+        [
+            self.flow,
+            self.shift,
+            self.rotation,
+            self.scaling,
+            self.polar,
+            self.diameter,
+            self.cutter_comp,
+            self.canned,
+            self.inverse_time,
+        ]
+        .iter()
+        .flatten()
+        .map(|&(_, idx)| idx)
+        .next()
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Mode {
+    Motion(Motion),
+    Canned(i32),
+    None,
+}
+
+struct State {
+    pos: [f64; NAXES],
+    mode: Mode,
+    plane: u8,
+    inch: bool,
+    incremental: bool,
+    arc_absolute: bool,
+    active: Active,
+}
+
+fn code(w: &Word) -> i32 {
+    (w.value * 10.0).round() as i32
+}
+
+fn g_name(c: i32) -> String {
+    if c % 10 == 0 {
+        format!("G{}", c / 10)
+    } else {
+        format!("G{}.{}", c / 10, c % 10)
+    }
+}
+
+fn ierr(line: usize, col: usize, msg: impl Into<String>) -> NcError {
+    NcError::Interpret { line: line + 1, col: col + 1, message: msg.into() }
+}
+
+/// Radius mismatch LinuxCNC accepts between start and end of a centre-format arc.
+const ARC_ABS_TOL_MM: f64 = 0.00005 * MM_PER_INCH;
+const ARC_REL_TOL: f64 = 0.001;
+
+/// Interpret a lexed program.
+pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
+    let nlines = lx.lines.len();
+    let mut out = Interp {
+        records: Vec::with_capacity(nlines),
+        line_record: vec![u32::MAX; nlines],
+        origin: [f64::NAN; NAXES],
+        ..Default::default()
+    };
+    let mut st = State {
+        pos: [f64::NAN; NAXES],
+        mode: Mode::None,
+        plane: 0,
+        inch: false,
+        incremental: false,
+        arc_absolute: false,
+        active: Active::default(),
+    };
+    // No motion mode until the program names one, as in LinuxCNC.
+    let mut first_content_seen = false;
+    let mut percent_open = false;
+
+    for li in 0..nlines {
+        let line = &lx.lines[li];
+        let words = lx.line_words(li);
+        if line.percent {
+            if !first_content_seen {
+                percent_open = true;
+                first_content_seen = true;
+                continue;
+            } else if percent_open {
+                out.summary.end_line = Some(li as u32);
+                break;
+            }
+            continue;
+        }
+        if words.is_empty() && line.opaque.is_none() {
+            continue;
+        }
+        first_content_seen = true;
+        if line.block_delete {
+            out.summary.block_delete_lines += 1;
+        }
+        let col = |w: &Word| (w.start - line.start) as usize;
+
+        if let Some((kind, at)) = line.opaque {
+            let c = (at - line.start) as usize;
+            let construct = match kind {
+                Opaque::Expression => "parameters or expressions (# or [ ])",
+                Opaque::OWordFlow => "O-word subroutine or control flow",
+                Opaque::Polar => "polar coordinates (@ ^)",
+            };
+            let idx = push_unsupported(&mut out, li, c, construct);
+            if kind == Opaque::OWordFlow && st.active.flow.is_none() {
+                st.active.flow = Some((li as u32, idx));
+            }
+            // an assignment alone moves nothing; anything else may move any axis
+            let assignment_only = words.is_empty() && kind == Opaque::Expression;
+            if !assignment_only || kind == Opaque::Polar {
+                st.pos = [f64::NAN; NAXES];
+                push_record(&mut out, &st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                out.unsupported[idx].blocks += 1;
+            }
+            continue;
+        }
+
+        // gather words
+        let mut gs: [(i32, usize); 8] = [(0, 0); 8];
+        let mut ng = 0usize;
+        let mut axis: [Option<f64>; NAXES] = [None; NAXES];
+        let mut axis_col = 0usize;
+        let mut ijk: [Option<f64>; 3] = [None; 3];
+        let mut r: Option<(f64, usize)> = None;
+        let mut p: Option<f64> = None;
+        let mut ms: [(i32, usize); 4] = [(0, 0); 4];
+        let mut nm = 0usize;
+        let mut named: u16 = 0;
+        let mut l_word: Option<f64> = None;
+        for w in words {
+            match w.letter {
+                b'G' => {
+                    if ng < gs.len() {
+                        gs[ng] = (code(w), col(w));
+                        ng += 1;
+                    }
+                }
+                b'M' => {
+                    if nm < ms.len() {
+                        ms[nm] = (w.value.round() as i32, col(w));
+                        nm += 1;
+                    }
+                }
+                b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'U' | b'V' | b'W' => {
+                    let k = AXES.iter().position(|&a| a == w.letter).unwrap();
+                    if axis[k].is_none() {
+                        axis_col = col(w);
+                    }
+                    axis[k] = Some(w.value);
+                    named |= 1 << k;
+                }
+                b'I' => ijk[0] = Some(w.value),
+                b'J' => ijk[1] = Some(w.value),
+                b'K' => ijk[2] = Some(w.value),
+                b'R' => r = Some((w.value, col(w))),
+                b'P' => p = Some(w.value),
+                b'L' => l_word = Some(w.value),
+                b'T' => {
+                    let t = w.value.round() as u32;
+                    if !out.summary.tools.contains(&t) {
+                        out.summary.tools.push(t);
+                    }
+                }
+                _ => {}
+            }
+        }
+
+        // modal and non-modal G codes, in LinuxCNC's order of execution
+        let mut motion_word: Option<(Mode, usize)> = None;
+        let mut g53 = false;
+        let mut nonmodal_axis_user: Option<(i32, usize)> = None;
+        let mut unit_change = None;
+        let mut untraced: Option<usize> = None;
+        for &(c, gc) in &gs[..ng] {
+            match c {
+                0 => motion_word = Some((Mode::Motion(Motion::Rapid), gc)),
+                10 => motion_word = Some((Mode::Motion(Motion::Feed), gc)),
+                20 => motion_word = Some((Mode::Motion(Motion::ArcCw), gc)),
+                30 => motion_word = Some((Mode::Motion(Motion::ArcCcw), gc)),
+                40 => {}                                   // dwell
+                170 => st.plane = 0,
+                180 => st.plane = 1,
+                190 => st.plane = 2,
+                200 => unit_change = Some(true),
+                210 => unit_change = Some(false),
+                900 => st.incremental = false,
+                910 => st.incremental = true,
+                901 => st.arc_absolute = true,
+                911 => st.arc_absolute = false,
+                400 => st.active.cutter_comp = None,
+                410 | 411 | 420 | 421 => {
+                    if st.active.cutter_comp.is_none() {
+                        let idx = push_unsupported(&mut out, li, gc, &format!("cutter compensation {}", g_name(c)));
+                        st.active.cutter_comp = Some((li as u32, idx));
+                    }
+                }
+                430 | 431 | 432 | 490 => {}               // tool length: program coordinates are the tool tip
+                540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => {
+                    let o = c as u16;
+                    if !out.summary.work_offsets.contains(&o) {
+                        out.summary.work_offsets.push(o);
+                    }
+                }
+                530 => g53 = true,
+                610 | 611 | 640 => {}                      // path control
+                940 | 950 => st.active.inverse_time = None,
+                930 => {
+                    if st.active.inverse_time.is_none() {
+                        let idx = push_unsupported(&mut out, li, gc, "inverse-time feed G93");
+                        st.active.inverse_time = Some((li as u32, idx));
+                    }
+                }
+                960 | 970 | 980 | 990 => {}                // spindle mode, canned return level
+                800 => {
+                    motion_word = Some((Mode::None, gc));
+                }
+                730 | 740 | 760 | 810 | 820 | 830 | 840 | 850 | 860 | 870 | 880 | 890 | 841 | 842 => {
+                    motion_word = Some((Mode::Canned(c), gc));
+                }
+                80 => st.active.diameter = None,
+                70 => {
+                    if st.active.diameter.is_none() {
+                        let idx = push_unsupported(&mut out, li, gc, "lathe diameter mode G7");
+                        st.active.diameter = Some((li as u32, idx));
+                    }
+                }
+                920 | 520 => {
+                    let idx = push_unsupported(&mut out, li, gc, &format!("coordinate shift {}", g_name(c)));
+                    if st.active.shift.is_none() {
+                        st.active.shift = Some((li as u32, idx));
+                    }
+                    nonmodal_axis_user = Some((c, idx));
+                }
+                921 => {
+                    push_unsupported(&mut out, li, gc, "coordinate shift reset G92.1");
+                    st.active.shift = None;
+                }
+                922 | 923 => {
+                    push_unsupported(&mut out, li, gc, &format!("coordinate shift {}", g_name(c)));
+                }
+                100 => {
+                    let l = l_word.unwrap_or(0.0).round() as i32;
+                    let idx = push_unsupported(&mut out, li, gc, &format!("offset setting G10 L{l}"));
+                    if matches!(l, 2 | 20) && st.active.shift.is_none() {
+                        st.active.shift = Some((li as u32, idx));
+                    }
+                    nonmodal_axis_user = Some((c, idx));
+                }
+                280 | 300 | 281 | 301 => {
+                    let idx = push_unsupported(&mut out, li, gc, &format!("return to reference {}", g_name(c)));
+                    nonmodal_axis_user = Some((c, idx));
+                }
+                680 => {
+                    let idx = push_unsupported(&mut out, li, gc, "coordinate rotation G68");
+                    st.active.rotation = Some((li as u32, idx));
+                }
+                690 => st.active.rotation = None,
+                510 => {
+                    let idx = push_unsupported(&mut out, li, gc, "scaling G51");
+                    st.active.scaling = Some((li as u32, idx));
+                }
+                500 => st.active.scaling = None,
+                160 => {
+                    let idx = push_unsupported(&mut out, li, gc, "polar coordinates G16");
+                    st.active.polar = Some((li as u32, idx));
+                }
+                150 => st.active.polar = None,
+                _ => {
+                    let what = match c {
+                        50 | 51 | 52 | 53 => "spline",
+                        330 | 331 => "spindle-synchronised motion",
+                        382..=385 => "probing",
+                        171 | 181 | 191 => "UVW plane",
+                        700 | 710 | 720 | 711 | 721 => "lathe cycle",
+                        _ => "unknown G code",
+                    };
+                    let idx = push_unsupported(&mut out, li, gc, &format!("{what} {}", g_name(c)));
+                    // these may move the machine somewhere the engine does not trace
+                    untraced = Some(idx);
+                }
+            }
+        }
+        for &(m, mc) in &ms[..nm] {
+            match m {
+                98 | 99 => {
+                    let idx = push_unsupported(&mut out, li, mc, &format!("subprogram M{m}"));
+                    if st.active.flow.is_none() {
+                        st.active.flow = Some((li as u32, idx));
+                    }
+                }
+                _ => {}
+            }
+        }
+        if let Some(inch) = unit_change {
+            st.inch = inch;
+        }
+        if st.inch {
+            out.summary.inch_lines += 1;
+        } else {
+            out.summary.mm_lines += 1;
+        }
+        if let Some((m, mc)) = motion_word {
+            if let Mode::Canned(c) = m {
+                // canned cycles stay modal until G80
+                let idx = push_unsupported(&mut out, li, mc, &format!("canned cycle {}", g_name(c)));
+                st.active.canned = Some((li as u32, idx));
+            } else {
+                st.active.canned = None;
+            }
+            st.mode = m;
+        }
+        if let Some(idx) = untraced {
+            st.pos = [f64::NAN; NAXES];
+            st.mode = Mode::None;
+            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            out.unsupported[idx].blocks += 1;
+            if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                out.summary.end_line = Some(li as u32);
+                break;
+            }
+            continue;
+        }
+
+        let unit = if st.inch { MM_PER_INCH } else { 1.0 };
+        let any_axis = named != 0;
+
+        // non-modal codes that take the axis words
+        if let Some((_c, idx)) = nonmodal_axis_user {
+            if any_axis || matches!(_c, 280 | 300 | 281 | 301) {
+                st.pos = [f64::NAN; NAXES];
+                push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+                out.unsupported[idx].blocks += 1;
+            }
+            continue;
+        }
+        if !any_axis {
+            for &(m, _) in &ms[..nm] {
+                if m == 2 || m == 30 {
+                    out.summary.end_line = Some(li as u32);
+                }
+            }
+            if out.summary.end_line.is_some() {
+                break;
+            }
+            continue;
+        }
+
+        // the target of the axis words
+        let mut end = st.pos;
+        for k in 0..NAXES {
+            if let Some(v) = axis[k] {
+                let scale = if k >= 3 && k < 6 { 1.0 } else { unit };
+                end[k] = if st.incremental && !g53 { st.pos[k] + v * scale } else { v * scale };
+            }
+        }
+
+        if g53 {
+            out.notes.push(Note {
+                line: li as u32,
+                message: "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards".into(),
+            });
+            for k in 0..NAXES {
+                if axis[k].is_some() {
+                    end[k] = f64::NAN;
+                }
+            }
+            st.pos = end;
+            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            continue;
+        }
+
+        let blocker = st.active.first();
+        match st.mode {
+            Mode::None => {
+                let idx = push_unsupported(&mut out, li, axis_col, "axis words with no motion mode (G80 or none yet)");
+                out.unsupported[idx].blocks += 1;
+                st.pos = [f64::NAN; NAXES];
+                push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            }
+            Mode::Canned(c) => {
+                if let Some((_, idx)) = st.active.canned {
+                    out.unsupported[idx].blocks += 1;
+                }
+                // the hole position is known, the height after the cycle is not
+                let _ = c;
+                end[2] = f64::NAN;
+                st.pos = end;
+                push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            }
+            Mode::Motion(m) => {
+                let mut center = [0.0; 2];
+                let mut turns = 1u32;
+                if m.is_arc() {
+                    let [a1, a2, _] = PLANE_AXES[st.plane as usize];
+                    let s = [st.pos[a1], st.pos[a2]];
+                    let e = [end[a1], end[a2]];
+                    // offsets by plane: XY uses I J, ZX uses K I, YZ uses J K
+                    let (o1, o2) = match st.plane {
+                        0 => (ijk[0], ijk[1]),
+                        1 => (ijk[2], ijk[0]),
+                        _ => (ijk[1], ijk[2]),
+                    };
+                    let gcol = motion_word.map_or(axis_col, |(_, c)| c);
+                    if let Some(pv) = p {
+                        if pv < 1.0 || pv.fract() != 0.0 {
+                            return Err(ierr(li, gcol, format!("arc turns P must be a whole number >= 1, got {pv}")));
+                        }
+                        turns = pv as u32;
+                    }
+                    if let Some((rv, rc)) = r {
+                        if o1.is_some() || o2.is_some() {
+                            return Err(ierr(li, rc, "arc with both R and I/J/K; use one form"));
+                        }
+                        let rr = rv * unit;
+                        let dx = e[0] - s[0];
+                        let dy = e[1] - s[1];
+                        let d = (dx * dx + dy * dy).sqrt();
+                        if d.is_nan() {
+                            center = [f64::NAN; 2];
+                        } else {
+                            if d < 1e-9 {
+                                return Err(ierr(li, rc, "R-format arc with the same start and end point; use I/J/K for a full circle"));
+                            }
+                            let half = d / 2.0;
+                            let mut h2 = rr * rr - half * half;
+                            if h2 < 0.0 {
+                                if rr.abs() < half - ARC_ABS_TOL_MM {
+                                    return Err(ierr(li, rc, format!("arc radius {} too small to reach the end point {:.4} away", rv.abs(), d / unit)));
+                                }
+                                h2 = 0.0;
+                            }
+                            let h = h2.sqrt();
+                            let (ux, uy) = (dx / d, dy / d);
+                            let mid = [(s[0] + e[0]) / 2.0, (s[1] + e[1]) / 2.0];
+                            // clockwise minor arcs have their centre to the right of the chord
+                            let right = (m == Motion::ArcCw) == (rr > 0.0);
+                            let (px, py) = if right { (uy, -ux) } else { (-uy, ux) };
+                            center = [mid[0] + h * px, mid[1] + h * py];
+                        }
+                    } else {
+                        if o1.is_none() && o2.is_none() {
+                            return Err(ierr(li, gcol, "arc needs I/J/K (centre) or R (radius) words for its plane"));
+                        }
+                        let scale = unit;
+                        if st.arc_absolute {
+                            center = [o1.unwrap_or(0.0) * scale, o2.unwrap_or(0.0) * scale];
+                        } else {
+                            center = [s[0] + o1.unwrap_or(0.0) * scale, s[1] + o2.unwrap_or(0.0) * scale];
+                        }
+                        let r1 = ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2)).sqrt();
+                        let r2 = ((e[0] - center[0]).powi(2) + (e[1] - center[1]).powi(2)).sqrt();
+                        let abs_err = (r1 - r2).abs();
+                        if abs_err > ARC_ABS_TOL_MM && abs_err / r1.max(r2) > ARC_REL_TOL {
+                            return Err(ierr(li, gcol, format!(
+                                "radius to the end of the arc ({:.4}) differs from radius to its start ({:.4})",
+                                r2 / unit, r1 / unit)));
+                        }
+                        if r1 == 0.0 && r2 == 0.0 {
+                            return Err(ierr(li, gcol, "arc with zero radius"));
+                        }
+                    }
+                }
+                // correctable only when every axis it moves has a known start and end
+                let known = (0..NAXES).all(|k| {
+                    let needed = k < 3 || named & (1 << k) != 0;
+                    !needed || (st.pos[k].is_finite() && end[k].is_finite())
+                }) && center.iter().all(|v| v.is_finite());
+                let supported = blocker.is_none();
+                if let Some(idx) = blocker {
+                    out.unsupported[idx].blocks += 1;
+                }
+                st.pos = end;
+                push_record(&mut out, &st, li, m, supported && known, named, center, turns);
+                let s = &mut out.summary;
+                s.counts[m as usize] += 1;
+                if m.is_arc() {
+                    s.planes[st.plane as usize] += 1;
+                }
+            }
+        }
+        for &(m, _) in &ms[..nm] {
+            if m == 2 || m == 30 {
+                out.summary.end_line = Some(li as u32);
+            }
+        }
+        if out.summary.end_line.is_some() {
+            break;
+        }
+    }
+    let _ = src;
+    Ok(out)
+}
+
+fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) -> usize {
+    out.unsupported.push(Unsupported { line: li as u32, col: col as u32, construct: construct.to_string(), blocks: 0 });
+    out.unsupported.len() - 1
+}
+
+#[allow(clippy::too_many_arguments)]
+fn push_record(out: &mut Interp, st: &State, li: usize, motion: Motion, supported: bool, named: u16, center: [f64; 2], turns: u32) {
+    out.line_record[li] = out.records.len() as u32;
+    out.records.push(Record {
+        line: li as u32,
+        motion,
+        plane: st.plane,
+        inch: st.inch,
+        incremental: st.incremental,
+        arc_absolute: st.arc_absolute,
+        supported,
+        named,
+        end: st.pos,
+        center,
+        turns,
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lex::lex;
+
+    fn run(s: &str) -> Interp {
+        let l = lex(s.as_bytes()).unwrap();
+        interpret(&l, s.as_bytes()).unwrap()
+    }
+
+    #[test]
+    fn incremental_and_inch() {
+        let it = run("G20 G91 G0 X1 Y1 Z1\nG1 X1\n");
+        let r = &it.records[1];
+        assert!(r.end[0].is_nan()); // unknown start stays unknown in G91
+        let it = run("G20 G90 G0 X1 Y1 Z1\nG91 G1 X1\n");
+        assert!((it.records[1].end[0] - 50.8).abs() < 1e-12);
+        assert!(it.records[1].supported);
+    }
+
+    #[test]
+    fn r_arc_centre() {
+        // quarter circle clockwise from (0,0) to (1,1), radius 1: centre (1,0); counter-clockwise: (0,1)
+        let it = run("G17 G90 G0 X0 Y0 Z0\nG2 X1 Y1 R1\n");
+        let c = it.records[1].center;
+        assert!((c[0] - 1.0).abs() < 1e-12 && (c[1] - 0.0).abs() < 1e-12, "{c:?}");
+        let it = run("G17 G90 G0 X0 Y0 Z0\nG3 X1 Y1 R1\n");
+        let c = it.records[1].center;
+        assert!((c[0] - 0.0).abs() < 1e-12 && (c[1] - 1.0).abs() < 1e-12, "{c:?}");
+    }
+
+    #[test]
+    fn unsupported_reported() {
+        let it = run("G0 X0 Y0 Z0\nG41 D1 G1 X1\nG1 X2\nG40 G1 X3\nG81 X1 Y1 Z-1 R1\nX2\nG80\n");
+        let names: Vec<_> = it.unsupported.iter().map(|u| (u.line, u.construct.clone(), u.blocks)).collect();
+        assert_eq!(names[0], (1, "cutter compensation G41".to_string(), 2));
+        assert_eq!(names[1], (4, "canned cycle G81".to_string(), 2));
+        assert!(it.records[3].supported);
+    }
+}

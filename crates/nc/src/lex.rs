@@ -1,0 +1,424 @@
+//! Exact-text lexer: splits a program into lines and words without losing a byte.
+//!
+//! Every line keeps its byte range in the source (content and line ending separately), every word
+//! keeps the byte range of its letter and of its number, so an emitter can copy a block byte for
+//! byte or replace exactly one number in it.
+
+use crate::error::NcError;
+
+/// A letter word such as `X-.5`, `G1.` or `N010`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Word {
+    /// Upper-case letter.
+    pub letter: u8,
+    /// Digits after the decimal point (-1 when the number has no point).
+    pub decimals: i8,
+    /// Byte offset of the letter in the source.
+    pub start: u32,
+    /// Byte offset of the first byte of the number (sign included).
+    pub num_start: u32,
+    /// Byte offset one past the last byte of the number.
+    pub end: u32,
+    /// The number's value as written.
+    pub value: f64,
+}
+
+/// Something in a line that the interpreter cannot follow and the emitter must keep as it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Opaque {
+    /// `#` parameters or `[ ]` expressions.
+    Expression,
+    /// `O` words with a keyword (`sub`, `call`, `if`, `while`, ...) or a named `o<...>`.
+    OWordFlow,
+    /// LinuxCNC polar words `@` and `^`.
+    Polar,
+}
+
+/// One line of the source.
+#[derive(Clone, Debug, Default)]
+pub struct Line {
+    /// Byte offset of the first byte of the line.
+    pub start: u32,
+    /// Byte offset one past the content (the line ending excluded).
+    pub end: u32,
+    /// Byte offset one past the line ending (equal to `end` on a last line without one).
+    pub eol_end: u32,
+    /// Index of the first word of the line in [`Lexed::words`].
+    pub first_word: u32,
+    /// Number of words.
+    pub n_words: u32,
+    /// Starts with `/` (block delete).
+    pub block_delete: bool,
+    /// A `%` line.
+    pub percent: bool,
+    /// Has at least one comment.
+    pub comment: bool,
+    /// Byte offset where the first comment starts (or `end`).
+    pub comment_start: u32,
+    /// The rest of the line from some point on could not be lexed into words.
+    pub opaque: Option<(Opaque, u32)>,
+}
+
+/// Number style of a program, read from its axis words.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NumberStyle {
+    /// Largest number of decimals written in an axis or arc word.
+    pub max_decimals: u8,
+    /// Some number keeps trailing zeros (`1.500`): pad to a fixed number of decimals.
+    pub fixed: bool,
+    /// Some number is written without a leading zero (`.5`, `-.25`).
+    pub no_leading_zero: bool,
+    /// Some number is written with a bare trailing point (`10.`).
+    pub bare_point: bool,
+    /// Words are separated by spaces.
+    pub spaced: bool,
+    /// Motion words are written with a leading zero (`G01`).
+    pub padded_g: bool,
+}
+
+/// A lexed program.
+#[derive(Clone, Debug, Default)]
+pub struct Lexed {
+    pub lines: Vec<Line>,
+    pub words: Vec<Word>,
+    pub style: NumberStyle,
+    /// The most common line ending: `\r\n` when most lines end so.
+    pub crlf: bool,
+}
+
+impl Lexed {
+    /// The words of line `i`.
+    #[inline]
+    pub fn line_words(&self, i: usize) -> &[Word] {
+        let l = &self.lines[i];
+        &self.words[l.first_word as usize..(l.first_word + l.n_words) as usize]
+    }
+}
+
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+const O_KEYWORDS: [&[u8]; 15] = [
+    b"sub", b"endsub", b"call", b"do", b"while", b"endwhile", b"if", b"elseif", b"else", b"endif",
+    b"repeat", b"endrepeat", b"return", b"break", b"continue",
+];
+
+/// Parse a number at `i`: optional sign, digits with at most one point, at least one digit.
+/// Returns (value, decimals, end, leading_zero_missing, trailing_zero, bare_point).
+#[inline]
+fn number(s: &[u8], mut i: usize) -> Option<(f64, i8, usize, bool, bool, bool)> {
+    let mut neg = false;
+    if i < s.len() && (s[i] == b'-' || s[i] == b'+') {
+        neg = s[i] == b'-';
+        i += 1;
+    }
+    let mut mant: u64 = 0;
+    let mut ndig = 0usize; // significant digits accumulated
+    let mut int_digits = 0usize;
+    let mut frac_digits = 0usize;
+    let mut exp_adj: i32 = 0;
+    let mut overflow_digits = false;
+    while i < s.len() && s[i].is_ascii_digit() {
+        if ndig < 19 {
+            mant = mant * 10 + (s[i] - b'0') as u64;
+            if mant != 0 {
+                ndig += 1;
+            }
+        } else {
+            exp_adj += 1;
+            overflow_digits = true;
+        }
+        int_digits += 1;
+        i += 1;
+    }
+    let mut point = false;
+    let mut last_frac = b'1';
+    if i < s.len() && s[i] == b'.' {
+        point = true;
+        i += 1;
+        while i < s.len() && s[i].is_ascii_digit() {
+            if ndig < 19 {
+                mant = mant * 10 + (s[i] - b'0') as u64;
+                if mant != 0 {
+                    ndig += 1;
+                }
+                exp_adj -= 1;
+            }
+            last_frac = s[i];
+            frac_digits += 1;
+            i += 1;
+        }
+    }
+    if int_digits + frac_digits == 0 {
+        return None;
+    }
+    let value = if !overflow_digits && mant < (1u64 << 53) && (-exp_adj) < 23 && exp_adj <= 0 {
+        mant as f64 / POW10[(-exp_adj) as usize]
+    } else {
+        // rare: very long numbers; let the standard library round them
+        let txt = std::str::from_utf8(&s[..i]).ok()?;
+        let start = txt.rfind(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(0, |p| p + 1);
+        txt[start..].parse::<f64>().ok()?
+    };
+    let value = if neg { -value } else { value };
+    let decimals = if point { frac_digits.min(127) as i8 } else { -1 };
+    Some((
+        value,
+        decimals,
+        i,
+        point && int_digits == 0,
+        frac_digits > 1 && last_frac == b'0' || (frac_digits == 1 && last_frac == b'0'),
+        point && frac_digits == 0,
+    ))
+}
+
+fn err(line: usize, col: usize, msg: impl Into<String>) -> NcError {
+    NcError::Parse { line: line + 1, col: col + 1, message: msg.into() }
+}
+
+/// Lex a whole program.
+pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
+    if src.len() >= u32::MAX as usize {
+        return Err(err(0, 0, "program larger than 4 GiB"));
+    }
+    let est = src.len() / 24 + 1;
+    let mut out = Lexed {
+        lines: Vec::with_capacity(est),
+        words: Vec::with_capacity(est * 4),
+        ..Default::default()
+    };
+    let mut style = NumberStyle::default();
+    let mut n_crlf = 0usize;
+    let mut n_lf = 0usize;
+    let mut n_spaced = 0usize;
+    let mut n_compact = 0usize;
+    let mut pos = 0usize;
+    let mut lineno = 0usize;
+    while pos < src.len() {
+        let nl = memchr(b'\n', &src[pos..]).map(|k| pos + k);
+        let (end, eol_end) = match nl {
+            Some(k) => {
+                if k > pos && src[k - 1] == b'\r' {
+                    n_crlf += 1;
+                    (k - 1, k + 1)
+                } else {
+                    n_lf += 1;
+                    (k, k + 1)
+                }
+            }
+            None => (src.len(), src.len()),
+        };
+        let mut line = Line {
+            start: pos as u32,
+            end: end as u32,
+            eol_end: eol_end as u32,
+            first_word: out.words.len() as u32,
+            comment_start: end as u32,
+            ..Default::default()
+        };
+        let s = &src[..end];
+        let mut i = pos;
+        let mut first = true;
+        let mut prev_word_end: Option<usize> = None;
+        while i < end {
+            let c = s[i];
+            match c {
+                b' ' | b'\t' | b'\r' | 0x0c => {
+                    i += 1;
+                    continue;
+                }
+                b'/' if first => {
+                    line.block_delete = true;
+                    i += 1;
+                }
+                b'%' if first => {
+                    line.percent = true;
+                    // anything after % on the line is ignored by controls
+                    if line.comment_start == end as u32 {
+                        line.comment_start = i as u32;
+                    }
+                    i = end;
+                }
+                b'(' => {
+                    match memchr(b')', &s[i..end]) {
+                        Some(k) => {
+                            if !line.comment {
+                                line.comment_start = i as u32;
+                            }
+                            line.comment = true;
+                            i += k + 1;
+                        }
+                        None => return Err(err(lineno, i - pos, "comment '(' is not closed on this line")),
+                    }
+                }
+                b';' => {
+                    if !line.comment {
+                        line.comment_start = i as u32;
+                    }
+                    line.comment = true;
+                    i = end;
+                }
+                b'#' | b'[' => {
+                    line.opaque = Some((Opaque::Expression, i as u32));
+                    i = end;
+                }
+                b'@' | b'^' => {
+                    line.opaque = Some((Opaque::Polar, i as u32));
+                    i = end;
+                }
+                b'a'..=b'z' | b'A'..=b'Z' => {
+                    let letter = c.to_ascii_uppercase();
+                    let wstart = i;
+                    let mut j = i + 1;
+                    while j < end && (s[j] == b' ' || s[j] == b'\t') {
+                        j += 1;
+                    }
+                    if j < end && (s[j] == b'#' || s[j] == b'[') {
+                        line.opaque = Some((Opaque::Expression, wstart as u32));
+                        i = end;
+                        continue;
+                    }
+                    if letter == b'O' && j < end && s[j] == b'<' {
+                        line.opaque = Some((Opaque::OWordFlow, wstart as u32));
+                        i = end;
+                        continue;
+                    }
+                    match number(s, j) {
+                        Some((value, decimals, k, no_lead, trailing, bare)) => {
+                            if letter == b'O' {
+                                // a keyword after the number makes it control flow
+                                let mut m = k;
+                                while m < end && (s[m] == b' ' || s[m] == b'\t') {
+                                    m += 1;
+                                }
+                                let mut e = m;
+                                while e < end && s[e].is_ascii_alphabetic() {
+                                    e += 1;
+                                }
+                                let kw = s[m..e].to_ascii_lowercase();
+                                if e > m && O_KEYWORDS.iter().any(|w| *w == kw.as_slice()) {
+                                    line.opaque = Some((Opaque::OWordFlow, wstart as u32));
+                                    i = end;
+                                    continue;
+                                }
+                            }
+                            if matches!(letter, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R' | b'U' | b'V' | b'W') {
+                                if decimals > 0 {
+                                    style.max_decimals = style.max_decimals.max(decimals.min(8) as u8);
+                                }
+                                style.fixed |= trailing;
+                                style.no_leading_zero |= no_lead;
+                                style.bare_point |= bare;
+                            }
+                            if letter == b'G' && decimals < 0 && k - j == 2 && s[j] == b'0' {
+                                style.padded_g = true;
+                            }
+                            if let Some(pe) = prev_word_end {
+                                if pe == wstart {
+                                    n_compact += 1;
+                                } else {
+                                    n_spaced += 1;
+                                }
+                            }
+                            out.words.push(Word {
+                                letter,
+                                decimals,
+                                start: wstart as u32,
+                                num_start: j as u32,
+                                end: k as u32,
+                                value,
+                            });
+                            line.n_words += 1;
+                            prev_word_end = Some(k);
+                            i = k;
+                        }
+                        None => {
+                            return Err(err(
+                                lineno,
+                                j - pos,
+                                format!("expected a number after '{}'", letter as char),
+                            ))
+                        }
+                    }
+                }
+                _ => {
+                    let shown = if c.is_ascii_graphic() {
+                        format!("'{}'", c as char)
+                    } else {
+                        format!("byte 0x{c:02x}")
+                    };
+                    return Err(err(lineno, i - pos, format!("unexpected {shown}; expected a word such as G1 or X10.5, a comment or a line end")));
+                }
+            }
+            first = false;
+        }
+        out.lines.push(line);
+        pos = eol_end;
+        lineno += 1;
+    }
+    style.spaced = n_spaced >= n_compact;
+    out.style = style;
+    out.crlf = n_crlf > n_lf;
+    Ok(out)
+}
+
+#[inline]
+fn memchr(b: u8, s: &[u8]) -> Option<usize> {
+    s.iter().position(|&c| c == b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_and_forms() {
+        let l = lex(b"N010 G1. X-.5 y+2 (c) ; rest\r\n%\n/G0 Z1").unwrap();
+        assert_eq!(l.lines.len(), 3);
+        let w = l.line_words(0);
+        assert_eq!(w.len(), 4);
+        assert_eq!(w[0].letter, b'N');
+        assert_eq!(w[0].value, 10.0);
+        assert_eq!(w[1].value, 1.0);
+        assert_eq!(w[1].decimals, 0);
+        assert_eq!(w[2].value, -0.5);
+        assert_eq!(w[3].letter, b'Y');
+        assert!(l.lines[0].comment);
+        assert_eq!(l.lines[0].eol_end - l.lines[0].end, 2);
+        assert!(l.lines[1].percent);
+        assert!(l.lines[2].block_delete);
+        assert_eq!(l.lines[2].eol_end, l.lines[2].end);
+        assert!(l.style.no_leading_zero);
+    }
+
+    #[test]
+    fn errors_have_positions() {
+        match lex(b"G1 X1\nG1 X\n") {
+            Err(NcError::Parse { line, col, .. }) => assert_eq!((line, col), (2, 5)),
+            other => panic!("{other:?}"),
+        }
+        match lex(b"G1 (open\n") {
+            Err(NcError::Parse { line, col, .. }) => assert_eq!((line, col), (1, 4)),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn numbers_are_exact() {
+        for (t, v) in [("0.1", 0.1), ("123.456", 123.456), ("-0.0001", -0.0001), (".5", 0.5), ("7.", 7.0)] {
+            let l = lex(format!("X{t}").as_bytes()).unwrap();
+            assert_eq!(l.words[0].value, v, "{t}");
+        }
+    }
+
+    #[test]
+    fn opaque_constructs() {
+        let l = lex(b"#1=2\nG1 X[#1+1]\no100 sub\nO1234\n").unwrap();
+        assert_eq!(l.lines[0].opaque.unwrap().0, Opaque::Expression);
+        assert_eq!(l.lines[1].opaque.unwrap().0, Opaque::Expression);
+        assert_eq!(l.lines[2].opaque.unwrap().0, Opaque::OWordFlow);
+        assert!(l.lines[3].opaque.is_none());
+    }
+}

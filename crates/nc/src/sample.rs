@@ -1,0 +1,248 @@
+//! Toolpath sampler: linear moves split to a maximum segment length, arcs (any plane, helical)
+//! linearised by a chord tolerance, and every piece split again where it crosses a grid line.
+
+use crate::interp::{Interp, Motion, Record, NAXES, PLANE_AXES};
+use std::f64::consts::PI;
+
+/// Sampling options (lengths in mm).
+#[derive(Clone, Debug)]
+pub struct SampleOpts {
+    pub chord_tol: f64,
+    pub max_segment: f64,
+    pub include_rapids: bool,
+    /// Only blocks that can be corrected (else every traceable motion block).
+    pub only_supported: bool,
+    /// Sorted grid lines to split at (x then y); empty for none.
+    pub grid_x: Vec<f64>,
+    pub grid_y: Vec<f64>,
+}
+
+/// Sample points: the end of every piece, in block order.
+#[derive(Clone, Debug, Default)]
+pub struct Samples {
+    /// (n * 3) piece end points, mm.
+    pub xyz: Vec<f64>,
+    /// (n) position of the piece end along its block, 0 < t <= 1.
+    pub t: Vec<f64>,
+    /// (n) record index of each piece.
+    pub rec: Vec<u32>,
+    /// For every record: first sample index and count (count 0: not sampled).
+    pub range: Vec<(u32, u32)>,
+}
+
+/// Start position of record `i`.
+#[inline]
+pub fn start_of(it: &Interp, i: usize) -> [f64; NAXES] {
+    if i == 0 {
+        it.origin
+    } else {
+        it.records[i - 1].end
+    }
+}
+
+/// Arc geometry in its plane: start angle, signed sweep (rad), start and end radius.
+pub fn arc_sweep(rec: &Record, start: &[f64; NAXES]) -> (f64, f64, f64, f64) {
+    let [a1, a2, _] = PLANE_AXES[rec.plane as usize];
+    let c = rec.center;
+    let (sx, sy) = (start[a1] - c[0], start[a2] - c[1]);
+    let (ex, ey) = (rec.end[a1] - c[0], rec.end[a2] - c[1]);
+    let r0 = sx.hypot(sy);
+    let r1 = ex.hypot(ey);
+    let th0 = sy.atan2(sx);
+    let th1 = ey.atan2(ex);
+    let ccw = rec.motion == Motion::ArcCcw;
+    let closed = (rec.end[a1] - start[a1]).hypot(rec.end[a2] - start[a2]) <= 1e-9 * r0.max(1.0);
+    let mut d = th1 - th0;
+    if closed {
+        d = if ccw { 2.0 * PI } else { -2.0 * PI };
+    } else if ccw {
+        while d <= 0.0 {
+            d += 2.0 * PI;
+        }
+    } else {
+        while d >= 0.0 {
+            d -= 2.0 * PI;
+        }
+    }
+    let extra = (rec.turns.max(1) - 1) as f64 * 2.0 * PI;
+    d += if ccw { extra } else { -extra };
+    (th0, d, r0, r1)
+}
+
+/// Point of an arc at fraction t (radius interpolated linearly, as a spiral, so the end is exact).
+#[inline]
+pub fn arc_point(rec: &Record, start: &[f64; NAXES], geom: (f64, f64, f64, f64), t: f64) -> [f64; 3] {
+    let [a1, a2, an] = PLANE_AXES[rec.plane as usize];
+    let (th0, d, r0, r1) = geom;
+    let th = th0 + t * d;
+    let r = r0 + t * (r1 - r0);
+    let mut p = [0.0; 3];
+    p[a1] = rec.center[0] + r * th.cos();
+    p[a2] = rec.center[1] + r * th.sin();
+    p[an] = start[an] + t * (rec.end[an] - start[an]);
+    p
+}
+
+/// Number of pieces for an arc.
+pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> usize {
+    let (_, d, r0, r1) = geom;
+    let r = r0.max(r1);
+    let ad = d.abs();
+    let mut n = (ad / (PI / 2.0)).ceil().max(1.0);
+    if r > opts.chord_tol {
+        let dth = 2.0 * (1.0 - opts.chord_tol / r).acos();
+        if dth > 0.0 {
+            n = n.max((ad / dth).ceil());
+        }
+    }
+    let len = (ad * 0.5 * (r0 + r1)).hypot(dn);
+    if opts.max_segment > 0.0 {
+        n = n.max((len / opts.max_segment).ceil());
+    }
+    n as usize
+}
+
+fn traceable(rec: &Record, start: &[f64; NAXES]) -> bool {
+    rec.motion != Motion::Other
+        && (0..3).all(|k| start[k].is_finite() && rec.end[k].is_finite())
+        && rec.center.iter().all(|v| v.is_finite())
+}
+
+/// Sample the blocks of an interpreted program.
+pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
+    let nrec = it.records.len();
+    let mut s = Samples {
+        xyz: Vec::with_capacity(nrec * 3),
+        t: Vec::with_capacity(nrec),
+        rec: Vec::with_capacity(nrec),
+        range: vec![(0, 0); nrec],
+    };
+    let mut cuts: Vec<f64> = Vec::new();
+    for (i, rec) in it.records.iter().enumerate() {
+        let start = start_of(it, i);
+        if (opts.only_supported && !rec.supported)
+            || (rec.motion == Motion::Rapid && !opts.include_rapids)
+            || !traceable(rec, &start)
+        {
+            s.range[i] = (s.t.len() as u32, 0);
+            continue;
+        }
+        let first = s.t.len();
+        let mut prev = [start[0], start[1], start[2]];
+        let mut prev_t = 0.0;
+        let push = |s: &mut Samples, p: [f64; 3], t: f64, prev: &mut [f64; 3], prev_t: &mut f64, cuts: &mut Vec<f64>| {
+            if !opts.grid_x.is_empty() || !opts.grid_y.is_empty() {
+                cuts.clear();
+                crossings(&opts.grid_x, prev[0], p[0], cuts);
+                crossings(&opts.grid_y, prev[1], p[1], cuts);
+                if cuts.len() > 1 {
+                    cuts.sort_by(|a, b| a.partial_cmp(b).unwrap());
+                }
+                let mut last = -1.0;
+                for &u in cuts.iter() {
+                    if u - last < 1e-12 {
+                        continue;
+                    }
+                    last = u;
+                    s.xyz.extend_from_slice(&[
+                        prev[0] + u * (p[0] - prev[0]),
+                        prev[1] + u * (p[1] - prev[1]),
+                        prev[2] + u * (p[2] - prev[2]),
+                    ]);
+                    s.t.push(*prev_t + u * (t - *prev_t));
+                    s.rec.push(i as u32);
+                }
+            }
+            s.xyz.extend_from_slice(&p);
+            s.t.push(t);
+            s.rec.push(i as u32);
+            *prev = p;
+            *prev_t = t;
+        };
+        let end = [rec.end[0], rec.end[1], rec.end[2]];
+        if rec.motion.is_arc() {
+            let geom = arc_sweep(rec, &start);
+            let an = PLANE_AXES[rec.plane as usize][2];
+            let n = arc_pieces(geom, rec.end[an] - start[an], opts);
+            for k in 1..=n {
+                let t = k as f64 / n as f64;
+                let p = if k == n { end } else { arc_point(rec, &start, geom, t) };
+                push(&mut s, p, t, &mut prev, &mut prev_t, &mut cuts);
+            }
+        } else {
+            let len = ((end[0] - prev[0]).powi(2) + (end[1] - prev[1]).powi(2) + (end[2] - prev[2]).powi(2)).sqrt();
+            let n = if opts.max_segment > 0.0 { (len / opts.max_segment).ceil().max(1.0) as usize } else { 1 };
+            let s0 = prev;
+            for k in 1..=n {
+                let t = k as f64 / n as f64;
+                let p = if k == n {
+                    end
+                } else {
+                    [s0[0] + t * (end[0] - s0[0]), s0[1] + t * (end[1] - s0[1]), s0[2] + t * (end[2] - s0[2])]
+                };
+                push(&mut s, p, t, &mut prev, &mut prev_t, &mut cuts);
+            }
+        }
+        s.range[i] = (first as u32, (s.t.len() - first) as u32);
+    }
+    s
+}
+
+/// Fractions u in (0, 1) where the segment a→b crosses one of the sorted lines.
+#[inline]
+fn crossings(lines: &[f64], a: f64, b: f64, out: &mut Vec<f64>) {
+    if lines.is_empty() || a == b {
+        return;
+    }
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    let i0 = lines.partition_point(|&v| v <= lo);
+    let i1 = lines.partition_point(|&v| v < hi);
+    for &v in &lines[i0..i1] {
+        let u = (v - a) / (b - a);
+        if u > 1e-12 && u < 1.0 - 1e-12 {
+            out.push(u);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::interp::interpret;
+    use crate::lex::lex;
+
+    fn opts() -> SampleOpts {
+        SampleOpts { chord_tol: 0.002, max_segment: 1.0, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] }
+    }
+
+    #[test]
+    fn chord_tolerance_holds() {
+        let src = b"G0 X10 Y0 Z0\nG3 X10 Y0 I-10 J0\n";
+        let l = lex(src).unwrap();
+        let it = interpret(&l, src).unwrap();
+        let s = sample(&it, &opts());
+        let n = s.t.len();
+        // full circle of radius 10: pieces from the chord tolerance 0.002 and the 1 mm length
+        let dth = 2.0 * (1.0f64 - 0.002 / 10.0).acos();
+        let expect = ((2.0 * PI / dth).ceil()).max((2.0 * PI * 10.0f64).ceil()) as usize;
+        assert_eq!(n, expect);
+        for k in 0..n {
+            let (x, y) = (s.xyz[3 * k], s.xyz[3 * k + 1]);
+            assert!((x.hypot(y) - 10.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn grid_lines_split() {
+        let src = b"G0 X0.5 Y0.5 Z0\nG1 X3.5 Y0.5\n";
+        let l = lex(src).unwrap();
+        let it = interpret(&l, src).unwrap();
+        let mut o = opts();
+        o.max_segment = 100.0;
+        o.grid_x = vec![0.0, 1.0, 2.0, 3.0, 4.0];
+        o.grid_y = vec![0.0, 1.0];
+        let s = sample(&it, &o);
+        let xs: Vec<f64> = (0..s.t.len()).map(|k| s.xyz[3 * k]).collect();
+        assert_eq!(xs, vec![1.0, 2.0, 3.0, 3.5]);
+    }
+}

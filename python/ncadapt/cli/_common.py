@@ -1,0 +1,77 @@
+"""What every command shares: error reporting, exit codes, JSON output and progress."""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import sys
+
+import click
+from rich.console import Console
+
+from .._io import atomic_write
+from ..errors import InputError, NcadaptError, RefusedError
+
+#: Exit codes.
+EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT = 0, 1, 2
+
+err_console = Console(stderr=True, highlight=False)
+
+
+def echo_err(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+def handle_errors(f):
+    """Turn ncadapt errors into compiler-style messages and the documented exit codes."""
+
+    @functools.wraps(f)
+    def wrapper(*args, **kwargs):
+        try:
+            return f(*args, **kwargs)
+        except InputError as e:
+            where = e.path or "<input>"
+            if e.line:
+                where += f":{e.line}:{e.col or 1}"
+            echo_err(f"{where}: error: {e.message}")
+            sys.exit(EXIT_BAD_INPUT)
+        except RefusedError as e:
+            echo_err(f"error: {e.message}")
+            for d in e.details[:10]:
+                echo_err("  " + _detail(d))
+            sys.exit(EXIT_REFUSED)
+        except NcadaptError as e:  # pragma: no cover - every error has a subclass above
+            echo_err(f"error: {e}")
+            sys.exit(EXIT_BAD_INPUT)
+
+    return wrapper
+
+
+def _detail(d) -> str:
+    if isinstance(d, dict):
+        if "construct" in d:
+            return f"line {d['line']}:{d['col']}: {d['construct']}" + (
+                f" ({d['blocks']} motion block(s))" if d.get("blocks") else "")
+        parts = [f"line {d['line']}"] if "line" in d else []
+        if "position" in d:
+            parts.append("at " + " ".join(f"{a}{v:.4f}" for a, v in zip("XYZ", d["position"])))
+        if "displacement" in d:
+            parts.append("displacement " + " ".join(f"{a}{v:+.4f}" for a, v in zip(("dX", "dY", "dZ"), d["displacement"])))
+            parts.append(f"|d|={d['magnitude']:.4f} mm")
+        return ", ".join(parts)
+    return str(d)
+
+
+def write_json(path, payload: dict) -> None:
+    atomic_write(path, (json.dumps(payload, indent=2, allow_nan=False) + "\n").encode())
+
+
+@contextlib.contextmanager
+def progress():
+    """A status line on a terminal (quiet otherwise); yields a function taking a message."""
+    if err_console.is_terminal:
+        with err_console.status("") as status:
+            yield lambda msg: status.update(msg)
+    else:
+        yield lambda msg: None

@@ -1,0 +1,102 @@
+"""``ncadapt correct``: apply a correction field to an NC program."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import click
+
+from .. import constants
+from .. import fields as _fields
+from .. import nc
+from ..errors import InputError
+from ._common import echo_err, handle_errors, progress, write_json
+
+
+def _shift(ctx, param, value):
+    if value is None:
+        return None
+    try:
+        parts = [float(v) for v in value.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) != 3:
+        raise click.BadParameter(f"expected DX,DY,DZ (three numbers in mm), got {value!r}")
+    return parts
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    return a.exists() and b.exists() and os.path.samefile(a, b)
+
+
+@click.command()
+@click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--field", "field_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Correction field: grid CSV (x,y,dz), scattered CSV (x,y,z,dx,dy,dz), bCNC .probe or LinuxCNC probe log.")
+@click.option("--shift", callback=_shift, metavar="DX,DY,DZ", help="A constant displacement in mm instead of a field.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Corrected program to write.")
+@click.option("--max-segment", type=click.FloatRange(min=0, min_open=True), default=constants.MAX_SEGMENT, show_default=True, help="Longest corrected piece, mm.")
+@click.option("--chord-tol", type=click.FloatRange(min=0, min_open=True), default=constants.CHORD_TOL, show_default=True, help="Arc chord tolerance, mm.")
+@click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=constants.LIMIT, show_default=True, help="Refuse if any displacement exceeds this, mm.")
+@click.option("--outside", type=click.Choice(_fields.OUTSIDE), default="error", show_default=True, help="Points outside the field's domain.")
+@click.option("--interp", "method", type=click.Choice(["linear", "cubic"]), default="linear", show_default=True, help="Grid interpolation.")
+@click.option("--rapids", is_flag=True, help="Correct rapid (G0) moves too.")
+@click.option("--keep-unsupported", is_flag=True, help="Copy blocks with unsupported constructs unchanged instead of refusing.")
+@click.option("--clearance", type=float, default=None, help="Report uncorrected rapids ending below this Z inside the field.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
+@handle_errors
+def correct(program, field_path, shift, output, max_segment, chord_tol, limit, outside, method, rapids,
+            keep_unsupported, clearance, json_path):
+    """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
+
+    Unchanged blocks are copied byte for byte; nothing is written when a safety check refuses
+    (exit code 1).
+    """
+    if (field_path is None) == (shift is None):
+        raise click.UsageError("give exactly one of --field FILE or --shift DX,DY,DZ")
+    for other, what in ((program, "input program"), (field_path, "field file")):
+        if other is not None and (output.resolve() == other.resolve() or _same_file(output, other)):
+            raise InputError(f"refusing to overwrite the {what}; choose another output", str(output))
+    if json_path is not None and output.resolve() == json_path.resolve():
+        raise click.UsageError("--json and -o name the same file")
+    with progress() as say:
+        say(f"reading {program}")
+        prog = nc.read(program)
+        if field_path is not None:
+            say(f"reading {field_path}")
+            field = _fields.read(field_path, method=method, outside=outside)
+        else:
+            field = _fields.Shift(shift)
+        out = prog.correct(
+            field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
+            keep_unsupported=keep_unsupported, clearance=clearance, progress=say)
+        say(f"writing {output}")
+        out.write(output)
+    c = out.correction
+    echo_err(f"{program} -> {output}")
+    echo_err(f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
+             f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}")
+    echo_err(f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm "
+             f"over {len(c.points):,} points")
+    if c.unsupported_kept:
+        echo_err(f"  unsupported constructs kept unchanged ({len(c.unsupported_kept)}), their blocks not corrected:")
+        for u in c.unsupported_kept[:20]:
+            echo_err(f"    line {u.line}:{u.col}: {u.construct}")
+        if len(c.unsupported_kept) > 20:
+            echo_err(f"    ... and {len(c.unsupported_kept) - 20} more (see --json)")
+    else:
+        echo_err("  unsupported constructs: none")
+    for n_line, msg in prog.notes[:20]:
+        echo_err(f"  note: line {n_line}: {msg}")
+    for w in c.warnings:
+        echo_err(f"  warning: {w}")
+    if json_path is not None:
+        payload = {"input": str(program), "output": str(output),
+                   "field": str(field_path) if field_path else {"shift": shift}}
+        payload.update(c.as_dict())
+        payload["notes"] = [{"line": ln, "message": m} for ln, m in prog.notes]
+        payload["options"] = {"max_segment": max_segment, "chord_tol": chord_tol, "limit": limit,
+                              "outside": outside, "interp": method, "rapids": rapids,
+                              "keep_unsupported": keep_unsupported, "clearance": clearance}
+        write_json(json_path, payload)

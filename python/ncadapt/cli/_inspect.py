@@ -1,0 +1,44 @@
+"""``ncadapt inspect``: what a program contains and what the engine can do with it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .. import nc
+from ._common import handle_errors, write_json
+
+
+@click.command()
+@click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON.")
+@handle_errors
+def inspect(program, json_path):
+    """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
+    info = nc.read(program).inspect()
+    m = info["motions"]
+    click.echo(f"{program}: {info['lines']:,} lines, units {info['units']}")
+    click.echo(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
+    p = info["planes"]
+    click.echo(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")
+    e = info["extents"]["all"]
+    if e:
+        click.echo("  extents (mm): " + ", ".join(f"{a.upper()} {lo:.4f}..{hi:.4f}" for a, (lo, hi) in e.items()))
+    if info["work_offsets"]:
+        click.echo("  work offsets: " + " ".join(info["work_offsets"]))
+    if info["tools"]:
+        click.echo("  tools: " + " ".join(f"T{t}" for t in info["tools"]))
+    if info["block_delete_lines"]:
+        click.echo(f"  block-delete lines: {info['block_delete_lines']:,} (interpreted as executed)")
+    if info["unsupported"]:
+        click.echo(f"  unsupported constructs ({len(info['unsupported'])}):")
+        for u in info["unsupported"]:
+            extra = f" ({u['blocks']} motion block(s))" if u["blocks"] else ""
+            click.echo(f"    line {u['line']}:{u['col']}: {u['construct']}{extra}")
+    else:
+        click.echo("  unsupported constructs: none")
+    for n in info["notes"]:
+        click.echo(f"  note: line {n['line']}: {n['message']}")
+    if json_path is not None:
+        write_json(json_path, info)

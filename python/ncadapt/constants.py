@@ -1,0 +1,21 @@
+"""Tolerances and defaults of ncadapt, with where they come from."""
+
+#: Millimetres per inch (exact, by the 1959 international yard and pound agreement).
+MM_PER_INCH = 25.4
+
+#: Default chord tolerance for linearising arcs, mm. 2 µm is below the form tolerance of
+#: precision milling (IT5 on 10–18 mm is 8 µm, ISO 286-1) and near a probe's repeatability.
+CHORD_TOL = 0.002
+
+#: Default longest segment of a corrected move, mm: a correction field varies little within 1 mm.
+MAX_SEGMENT = 1.0
+
+#: Default largest displacement ``correct`` writes without refusing, mm.
+LIMIT = 0.5
+
+#: Decimals written at least for changed numbers: 4 in millimetres (0.1 µm), 5 in inches.
+DECIMALS_MM = 4
+DECIMALS_INCH = 5
+
+#: Agreement required between our motion and LinuxCNC's canonical motion, mm.
+RS274_TOL_MM = 1e-4

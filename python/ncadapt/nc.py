@@ -1,0 +1,428 @@
+"""NC programs and toolpaths: the Python face of the NC engine.
+
+A :class:`Program` keeps every byte of the file it was read from. :meth:`Program.toolpath` samples
+its motion (arcs linearised by a chord tolerance, moves split to a maximum length) and
+:meth:`Program.correct` applies a correction field and returns a new program in which only the
+blocks the field changes differ from the input.
+
+Examples
+--------
+>>> from ncadapt import nc, fields
+>>> prog = nc.parse("G21 G90 G0 X0 Y0 Z1\\nG1 Z-1 F100\\nG1 X2\\n")
+>>> out = prog.correct(fields.Shift((0, 0, 0.05)))
+>>> print(out.text, end="")
+G21 G90 G0 X0 Y0 Z1
+G1 Z-0.95 F100
+G1 X2
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import constants
+from ._io import atomic_write
+from ._nc import EngineError
+from ._nc import Program as _Native
+from .errors import InputError, RefusedError
+
+__all__ = [
+    "Program",
+    "Toolpath",
+    "Correction",
+    "Unsupported",
+    "read",
+    "parse",
+    "MOTIONS",
+]
+
+#: Names of the motion codes in :attr:`Toolpath.motion`.
+MOTIONS = ("rapid", "feed", "arc_cw", "arc_ccw", "other")
+_AXES = "XYZABCUVW"
+
+
+@dataclass(frozen=True)
+class Unsupported:
+    """A construct the engine does not interpret: where it is and how many motion blocks it affects."""
+
+    line: int
+    col: int
+    construct: str
+    blocks: int
+
+
+@dataclass(frozen=True)
+class Toolpath:
+    """Sampled motion of a program: one row per straight piece.
+
+    Attributes
+    ----------
+    starts, points : (n, 3) float, mm
+        Start and end of every piece (program coordinates, millimetres whatever the program's units).
+    line : (n,) int
+        1-based source line of the block the piece belongs to.
+    motion : (n,) uint8
+        Index into :data:`MOTIONS` (0 rapid, 1 feed, 2 clockwise arc, 3 counter-clockwise arc).
+    block : (n,) int
+        Index of the block among the program's position-changing blocks.
+    """
+
+    starts: np.ndarray
+    points: np.ndarray
+    line: np.ndarray
+    motion: np.ndarray
+    block: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.line)
+
+    @property
+    def length(self) -> float:
+        """Total path length, mm."""
+        return float(np.linalg.norm(self.points - self.starts, axis=1).sum()) if len(self) else 0.0
+
+
+@dataclass(frozen=True)
+class Correction:
+    """What :meth:`Program.correct` did. Lengths in mm.
+
+    ``points``, ``displacements`` (n, 3) and ``line`` (n,) give every corrected sample point, the
+    displacement applied there and the 1-based line of its block.
+    """
+
+    lines_in: int
+    lines_out: int
+    blocks_changed: int
+    lines_added: int
+    arcs_linearised: int
+    max_displacement: float
+    mean_displacement: float
+    points: np.ndarray = field(repr=False)
+    displacements: np.ndarray = field(repr=False)
+    line: np.ndarray = field(repr=False)
+    unsupported_kept: tuple[Unsupported, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict:
+        """The figures as plain JSON-ready values (no arrays)."""
+        d = {k: v for k, v in asdict(self).items() if k not in ("points", "displacements", "line")}
+        d["unsupported_kept"] = [asdict(u) for u in self.unsupported_kept]
+        d["warnings"] = list(self.warnings)
+        return d
+
+
+def _engine_error(e: EngineError, path: str | None) -> InputError:
+    kind, line, col, message = e.args
+    return InputError(message, path, line, col)
+
+
+def parse(text: str | bytes, name: str | None = None) -> "Program":
+    """Read a program from a string or bytes; ``name`` is used in error messages."""
+    data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else bytes(text)
+    return Program(data, name=name or "<string>")
+
+
+def read(path: str | os.PathLike) -> "Program":
+    """Read a program file. Raises :class:`InputError` naming ``path:line:col`` on bad input."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    return Program(data, path=p)
+
+
+class Program:
+    """An NC program: its exact bytes, its interpretation and what can be done with it.
+
+    Create one with :func:`read` or :func:`parse`.
+    """
+
+    def __init__(self, data: bytes, path: Path | None = None, name: str | None = None):
+        self._data = data
+        self.path = Path(path) if path is not None else None
+        self.name = str(path) if path is not None else (name or "<program>")
+        self.correction: Correction | None = None
+        try:
+            self._p = _Native.parse(data)
+        except EngineError as e:
+            raise _engine_error(e, self.name) from None
+        self._rec: dict | None = None
+
+    # ----------------------------------------------------------------------------- contents
+    @property
+    def data(self) -> bytes:
+        """The program's bytes, exactly."""
+        return self._data
+
+    @property
+    def text(self) -> str:
+        """The program as text (bytes that are not UTF-8 are kept as surrogates)."""
+        return self._data.decode("utf-8", "surrogateescape")
+
+    @property
+    def lines(self) -> int:
+        """Number of lines."""
+        return self._p.n_lines()
+
+    @property
+    def unsupported(self) -> tuple[Unsupported, ...]:
+        """Constructs the engine does not interpret, in line order."""
+        return tuple(Unsupported(*u) for u in self._p.unsupported())
+
+    @property
+    def notes(self) -> tuple[tuple[int, str], ...]:
+        """Remarks on blocks kept but not corrected (G53 moves): (line, message)."""
+        return tuple(self._p.notes())
+
+    def _records(self) -> dict:
+        if self._rec is None:
+            r = self._p.records()
+            self._rec = {
+                "line": np.frombuffer(r["line"], dtype="<u4").astype(np.int64) + 1,
+                "motion": np.frombuffer(r["motion"], dtype=np.uint8),
+                "plane": np.frombuffer(r["plane"], dtype=np.uint8),
+                "flags": np.frombuffer(r["flags"], dtype=np.uint8),
+                "end": np.frombuffer(r["end"], dtype="<f8").reshape(-1, 9),
+            }
+        return self._rec
+
+    # ----------------------------------------------------------------------------- sampling
+    def _sample(self, chord_tol, max_segment, rapids, supported_only, grid=None):
+        if not chord_tol > 0:
+            raise ValueError(f"chord_tol must be > 0 mm, got {chord_tol}")
+        if not max_segment > 0:
+            raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
+        gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
+        s = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), gx, gy)
+        xyz, t, rec = s.arrays()
+        pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
+        rec = np.frombuffer(rec, dtype="<u4").astype(np.int64)
+        return s, pts, rec
+
+    def toolpath(
+        self,
+        chord_tol: float = constants.CHORD_TOL,
+        max_segment: float = constants.MAX_SEGMENT,
+        rapids: bool = True,
+        supported_only: bool = False,
+    ) -> Toolpath:
+        """Sample the program's motion.
+
+        Parameters
+        ----------
+        chord_tol : float, mm
+            Largest distance between an arc and its chords.
+        max_segment : float, mm
+            Longest piece.
+        rapids : bool
+            Include rapid (G0) moves.
+        supported_only : bool
+            Only blocks the engine can correct (else every block whose start and end are known).
+        """
+        _, pts, rec = self._sample(chord_tol, max_segment, rapids, supported_only)
+        r = self._records()
+        starts = np.empty_like(pts)
+        if len(pts):
+            starts[1:] = pts[:-1]
+            first = np.ones(len(rec), dtype=bool)
+            first[1:] = rec[1:] != rec[:-1]
+            prev = rec[first] - 1
+            block_start = np.full((len(prev), 3), np.nan)
+            ok = prev >= 0
+            block_start[ok] = r["end"][prev[ok], :3]
+            starts[first] = block_start
+        return Toolpath(starts, pts.copy(), r["line"][rec], r["motion"][rec], rec)
+
+    # ----------------------------------------------------------------------------- summary
+    @property
+    def units(self) -> str:
+        """``"mm"``, ``"inch"`` or ``"mixed"``."""
+        s = self._p.summary()
+        if s["inch_lines"] and s["mm_lines"]:
+            return "mixed"
+        return "inch" if s["inch_lines"] else "mm"
+
+    def inspect(self) -> dict:
+        """Units, planes, motion counts, extents and unsupported constructs, as plain values."""
+        s = self._p.summary()
+        tp = self.toolpath(rapids=True)
+        ext = {}
+        for name, sel in (("all", slice(None)), ("feed", tp.motion != 0)):
+            p = tp.points[sel]
+            p = p[np.isfinite(p).all(axis=1)]
+            ext[name] = (
+                {a: [float(p[:, k].min()), float(p[:, k].max())] for k, a in enumerate("xyz")} if len(p) else None
+            )
+        counts = dict(zip(MOTIONS, s["counts"]))
+        return {
+            "file": self.name,
+            "lines": self.lines,
+            "units": self.units,
+            "planes": {"G17": s["planes"][0], "G18": s["planes"][1], "G19": s["planes"][2]},
+            "motions": counts,
+            "extents": ext,
+            "work_offsets": [_wcs_name(c) for c in s["work_offsets"]],
+            "tools": s["tools"],
+            "block_delete_lines": s["block_delete_lines"],
+            "end_line": s["end_line"],
+            "unsupported": [asdict(u) for u in self.unsupported],
+            "notes": [{"line": ln, "message": m} for ln, m in self.notes],
+        }
+
+    # ----------------------------------------------------------------------------- correction
+    def correct(
+        self,
+        field: Callable[[np.ndarray], np.ndarray],
+        *,
+        chord_tol: float = constants.CHORD_TOL,
+        max_segment: float = constants.MAX_SEGMENT,
+        limit: float = constants.LIMIT,
+        rapids: bool = False,
+        keep_unsupported: bool = False,
+        clearance: float | None = None,
+        progress: Callable[[str], None] | None = None,
+    ) -> "Program":
+        """Apply a correction field and return the corrected program.
+
+        Parameters
+        ----------
+        field : callable, (n, 3) float mm -> (n, 3) float mm
+            The displacement to add at each point, usually an :mod:`ncadapt.fields` field. A field
+            with ``grid_lines`` makes moves split where they cross its cell lines.
+        chord_tol, max_segment : float, mm
+            Sampling of arcs and long moves.
+        limit : float, mm
+            Largest displacement allowed; above it :class:`RefusedError` lists the worst points.
+        rapids : bool
+            Correct rapid moves too (by default they keep their programmed targets).
+        keep_unsupported : bool
+            Copy blocks with unsupported constructs unchanged instead of refusing the program.
+        clearance : float, mm, optional
+            Report uncorrected rapids that end below this Z inside the field's area.
+
+        Returns
+        -------
+        Program
+            The corrected program; its :attr:`correction` says what was done.
+        """
+        say = progress or (lambda msg: None)
+        uns = self.unsupported
+        if uns and not keep_unsupported:
+            raise RefusedError(
+                f"{self.name}: {len(uns)} unsupported construct(s); nothing written "
+                "(keep_unsupported copies those blocks unchanged)",
+                [asdict(u) for u in uns],
+            )
+        if not limit > 0:
+            raise ValueError(f"limit must be > 0 mm, got {limit}")
+        say("sampling")
+        grid = getattr(field, "grid_lines", None)
+        sampled, pts, rec = self._sample(chord_tol, max_segment, rapids, True, grid)
+        r = self._records()
+        lines = r["line"][rec]
+        say(f"evaluating the field at {len(pts):,} points")
+        try:
+            disp = np.asarray(field(pts), dtype=np.float64)
+        except _OutsideError as e:
+            idx = e.indices
+            first = [
+                {"line": int(lines[i]), "position": pts[i].round(4).tolist()} for i in idx[:10]
+            ]
+            raise RefusedError(
+                f"{self.name}: {len(idx):,} point(s) outside the field's domain {e.domain}; nothing written "
+                f"(first at line {first[0]['line']}); use outside='clamp' or 'extrapolate' to allow them",
+                first,
+            ) from None
+        if disp.shape != pts.shape:
+            raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
+        if not np.isfinite(disp).all():
+            bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
+            raise RefusedError(f"{self.name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
+        norms = np.linalg.norm(disp, axis=1) if len(disp) else np.zeros(0)
+        worst = float(norms.max()) if len(norms) else 0.0
+        if worst > limit:
+            order = np.argsort(-norms)[:10]
+            details = [
+                {
+                    "line": int(lines[i]),
+                    "position": pts[i].round(4).tolist(),
+                    "displacement": disp[i].round(4).tolist(),
+                    "magnitude": round(float(norms[i]), 4),
+                }
+                for i in order
+            ]
+            raise RefusedError(
+                f"{self.name}: displacement {worst:.4f} mm at line {details[0]['line']} exceeds the limit "
+                f"{limit:g} mm; nothing written",
+                details,
+            )
+        say("writing")
+        try:
+            out, stats = self._p.emit(sampled, np.ascontiguousarray(disp, dtype="<f8").tobytes())
+        except EngineError as e:  # pragma: no cover - the emitter validates its own input
+            raise _engine_error(e, self.name) from None
+        warnings = list(self._clearance_warnings(field, clearance))
+        if keep_unsupported and uns:
+            warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
+        result = Program(out, name=f"{self.name} (corrected)")
+        result.correction = Correction(
+            lines_in=stats["lines_in"],
+            lines_out=stats["lines_out"],
+            blocks_changed=stats["blocks_changed"],
+            lines_added=stats["lines_added"],
+            arcs_linearised=stats["arcs_linearised"],
+            max_displacement=worst,
+            mean_displacement=float(norms.mean()) if len(norms) else 0.0,
+            points=pts.copy(),
+            displacements=disp,
+            line=lines,
+            unsupported_kept=uns if keep_unsupported else (),
+            warnings=tuple(warnings),
+        )
+        return result
+
+    def _clearance_warnings(self, field, clearance):
+        if clearance is None:
+            return
+        r = self._records()
+        bounds = getattr(field, "bounds", None)
+        rapid = np.flatnonzero(r["motion"] == 0)
+        end = r["end"][rapid]
+        low = end[:, 2] < clearance
+        if bounds is not None:
+            x0, x1, y0, y1 = bounds
+            low &= (end[:, 0] >= x0) & (end[:, 0] <= x1) & (end[:, 1] >= y0) & (end[:, 1] <= y1)
+        for i in np.flatnonzero(low):
+            yield (
+                f"line {r['line'][rapid[i]]}: rapid ends at Z{end[i, 2]:.4f}, below the clearance "
+                f"Z{clearance:g} inside the field's area, and is not corrected"
+            )
+
+    # ----------------------------------------------------------------------------- output
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write the program atomically (temporary file, then rename).
+
+        Refuses to write over the file the program was read from.
+        """
+        p = Path(path)
+        if self.path is not None and p.exists() and os.path.samefile(p, self.path):
+            raise InputError("refusing to overwrite the input program; choose another output", str(p))
+        atomic_write(p, self._data)
+        return p
+
+    def __repr__(self) -> str:
+        return f"<Program {self.name!r}: {self.lines} lines>"
+
+
+def _wcs_name(code: int) -> str:
+    return f"G{code // 10}" if code % 10 == 0 else f"G{code // 10}.{code % 10}"
+
+
+# imported late: fields imports nothing from here, but keeps the outside error type
+from .fields import OutsideError as _OutsideError  # noqa: E402
