@@ -34,6 +34,7 @@ from .errors import InputError, RefusedError
 __all__ = [
     "Program",
     "Toolpath",
+    "Blocks",
     "Correction",
     "Unsupported",
     "read",
@@ -85,6 +86,33 @@ class Toolpath:
     def length(self) -> float:
         """Total path length, mm."""
         return float(np.linalg.norm(self.points - self.starts, axis=1).sum()) if len(self) else 0.0
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """The blocks of a program that change the position, in program order.
+
+    Attributes
+    ----------
+    line : (m,) int
+        1-based source line.
+    motion : (m,) uint8
+        Index into :data:`MOTIONS`; 4 ("other") for moves the engine does not trace (G53, G28,
+        canned cycles, ...).
+    end : (m, 9) float
+        Position after the block: X Y Z U V W in mm, A B C in degrees (order ``XYZABCUVW``);
+        NaN where the program does not determine it.
+    supported : (m,) bool
+        The block can be corrected.
+    """
+
+    line: np.ndarray
+    motion: np.ndarray
+    end: np.ndarray
+    supported: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.line)
 
 
 @dataclass(frozen=True)
@@ -191,6 +219,12 @@ class Program:
                 "end": np.frombuffer(r["end"], dtype="<f8").reshape(-1, 9),
             }
         return self._rec
+
+    @property
+    def blocks(self) -> Blocks:
+        """Every block that changes the position, with where it ends."""
+        r = self._records()
+        return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0)
 
     # ----------------------------------------------------------------------------- sampling
     def _sample(self, chord_tol, max_segment, rapids, supported_only, grid=None):

@@ -329,22 +329,31 @@ impl<'a> Emitter<'a> {
                 p[a] = if a < 3 {
                     xyz[3 * k + a] + disp[3 * k + a]
                 } else if rec.named & (1 << a) != 0 {
-                    start[a] + t * (rec.end[a] - start[a])
+                    if t == 1.0 { rec.end[a] } else { start[a] + t * (rec.end[a] - start[a]) }
                 } else {
                     epos0[a]
                 };
             }
             p
         };
-        let keep_arc = rec.motion.is_arc()
-            && uniform
-            && (0..3).all(|a| (self.epos[a] - (start[a] + d0[a])).abs() < half_mm);
-        if !rec.motion.is_arc() && uniform || keep_arc {
+        // the output starts this block where the corrected path expects it
+        let on_path = (0..3).all(|a| (self.epos[a] - (start[a] + d0[a])).abs() < half_mm);
+        let keep_arc = rec.motion.is_arc() && uniform && on_path;
+        // a straight move whose corrected pieces all lie on one line (within half the last
+        // written digit) is written as one move
+        let only_xyz = rec.named & !0b111 == 0;
+        let straight = !rec.motion.is_arc()
+            && only_xyz
+            && (n == 1 || {
+                let e = target_at(n - 1, 1.0);
+                (0..n - 1).all(|k| {
+                    let p = target_at(k, ts[k]);
+                    dist_to_segment(&p, &self.epos, &e) < half_mm
+                })
+            });
+        if straight || keep_arc {
             self.restore_modal(li, rec, explicit);
-            let mut target = target_at(n - 1, 1.0);
-            for a in 0..3 {
-                target[a] = rec.end[a] + d0[a];
-            }
+            let target = target_at(n - 1, 1.0);
             self.set_axes(li, rec, &target, true);
             if keep_arc && rec.arc_absolute {
                 self.shift_centre(li, rec, d0);
@@ -393,7 +402,9 @@ impl<'a> Emitter<'a> {
         let first = target_at(0, ts[0]);
         self.set_axes(li, rec, &first, true);
         let prefix: &[u8] = if self.lx.lines[li].block_delete { b"/" } else { b"" };
-        for k in 1..n {
+        // a uniform straight move that starts off the corrected path needs one piece to reach it
+        let pieces: Vec<usize> = if !linearise && uniform && only_xyz { vec![n - 1] } else { (1..n).collect() };
+        for &k in &pieces {
             let p = target_at(k, ts[k]);
             let mut text = prefix.to_vec();
             for a in 0..NAXES {
@@ -500,6 +511,16 @@ impl<'a> Emitter<'a> {
             }
         }
     }
+}
+
+/// Distance from p to the segment a-b (XYZ).
+fn dist_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 {
+    let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+    let l2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+    let t = if l2 > 0.0 { ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
+    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
 
 /// Where a block's words begin: after `/`, leading blanks and a leading N word.

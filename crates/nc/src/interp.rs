@@ -360,12 +360,11 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
                     }
                     nonmodal_axis_user = Some((c, idx));
                 }
-                921 => {
-                    push_unsupported(&mut out, li, gc, "coordinate shift reset G92.1");
-                    st.active.shift = None;
-                }
-                922 | 923 => {
-                    push_unsupported(&mut out, li, gc, &format!("coordinate shift {}", g_name(c)));
+                // G92.1 / G92.2 clear or suspend G92 offsets: the frame becomes the plain work offset
+                921 | 922 => st.active.shift = None,
+                923 => {
+                    let idx = push_unsupported(&mut out, li, gc, "coordinate shift G92.3");
+                    st.active.shift = Some((li as u32, idx));
                 }
                 100 => {
                     let l = l_word.unwrap_or(0.0).round() as i32;
@@ -451,7 +450,21 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
         }
 
         let unit = if st.inch { MM_PER_INCH } else { 1.0 };
-        let any_axis = named != 0;
+        // an arc with centre words and no axis words is a full circle back to its start
+        let full_circle = named == 0
+            && matches!(st.mode, Mode::Motion(m) if m.is_arc())
+            && ijk.iter().any(|v| v.is_some());
+        // G0 or G1 written without axis words is a move to where the tool is (LinuxCNC traces it)
+        let standing = named == 0
+            && matches!(motion_word, Some((Mode::Motion(Motion::Rapid | Motion::Feed), _)));
+        if named == 0 && !full_circle && r.is_none() {
+            if let Some((Mode::Motion(m), gc)) = motion_word {
+                if m.is_arc() {
+                    return Err(ierr(li, gc, "arc with no axis words and no I/J/K or R words"));
+                }
+            }
+        }
+        let any_axis = named != 0 || full_circle || standing;
 
         // non-modal codes that take the axis words
         if let Some((_c, idx)) = nonmodal_axis_user {
@@ -589,10 +602,11 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
                         }
                     }
                 }
-                // correctable only when every axis it moves has a known start and end
+                // correctable when every axis it moves has a known end (a straight move from an
+                // unknown start is corrected at its end only); arcs need their centre
                 let known = (0..NAXES).all(|k| {
                     let needed = k < 3 || named & (1 << k) != 0;
-                    !needed || (st.pos[k].is_finite() && end[k].is_finite())
+                    !needed || end[k].is_finite()
                 }) && center.iter().all(|v| v.is_finite());
                 let supported = blocker.is_none();
                 if let Some(idx) = blocker {

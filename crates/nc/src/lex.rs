@@ -268,14 +268,22 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
                     line.opaque = Some((Opaque::Polar, i as u32));
                     i = end;
                 }
-                b'a'..=b'z' | b'A'..=b'Z' => {
+                b'a'..=b'z' | b'A'..=b'Z' | b'$' => {
                     let letter = c.to_ascii_uppercase();
                     let wstart = i;
                     let mut j = i + 1;
                     while j < end && (s[j] == b' ' || s[j] == b'\t') {
                         j += 1;
                     }
-                    if j < end && (s[j] == b'#' || s[j] == b'[') {
+                    // an expression, possibly behind a unary sign: X[...], X#1, Z-[...]
+                    let mut e = j;
+                    if e < end && (s[e] == b'-' || s[e] == b'+') {
+                        e += 1;
+                        while e < end && (s[e] == b' ' || s[e] == b'\t') {
+                            e += 1;
+                        }
+                    }
+                    if e < end && (s[e] == b'#' || s[e] == b'[') {
                         line.opaque = Some((Opaque::Expression, wstart as u32));
                         i = end;
                         continue;

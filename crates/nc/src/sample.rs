@@ -102,10 +102,8 @@ pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> usi
     n as usize
 }
 
-fn traceable(rec: &Record, start: &[f64; NAXES]) -> bool {
-    rec.motion != Motion::Other
-        && (0..3).all(|k| start[k].is_finite() && rec.end[k].is_finite())
-        && rec.center.iter().all(|v| v.is_finite())
+fn traceable(rec: &Record) -> bool {
+    rec.motion != Motion::Other && (0..3).all(|k| rec.end[k].is_finite()) && rec.center.iter().all(|v| v.is_finite())
 }
 
 /// Sample the blocks of an interpreted program.
@@ -122,7 +120,7 @@ pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
         let start = start_of(it, i);
         if (opts.only_supported && !rec.supported)
             || (rec.motion == Motion::Rapid && !opts.include_rapids)
-            || !traceable(rec, &start)
+            || !traceable(rec)
         {
             s.range[i] = (s.t.len() as u32, 0);
             continue;
@@ -160,7 +158,12 @@ pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
             *prev_t = t;
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
-        if rec.motion.is_arc() {
+        if !prev.iter().all(|v| v.is_finite()) {
+            // from an unknown start only the end is known
+            s.xyz.extend_from_slice(&end);
+            s.t.push(1.0);
+            s.rec.push(i as u32);
+        } else if rec.motion.is_arc() {
             let geom = arc_sweep(rec, &start);
             let an = PLANE_AXES[rec.plane as usize][2];
             let n = arc_pieces(geom, rec.end[an] - start[an], opts);

@@ -1,0 +1,35 @@
+"""Shared checks for the NC tests."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol: float) -> None:
+    """Assert that the polyline of segments (starts[i] -> ends[i]) passes through the predicted
+    points in order, and that every segment ends on a predicted point.
+
+    Pieces that lie on one straight line are written as one move, so several predicted points may
+    lie on one segment; every segment end must be one of them. Distances are per axis (the largest
+    coordinate difference), as rounding to written decimals is.
+    """
+    j = 0
+    n = len(predicted)
+    for i, (a, b) in enumerate(zip(starts, ends)):
+        ab = b - a
+        L2 = float(ab @ ab)
+        last = None
+        while j < n:
+            p = predicted[j]
+            t = 0.0 if L2 == 0 else float(np.clip((p - a) @ ab / L2, 0, 1))
+            if np.abs(a + t * ab - p).max() <= tol:
+                last = j
+                j += 1
+                if np.abs(p - b).max() <= tol:
+                    break
+            else:
+                break
+        assert last is not None and np.abs(predicted[last] - b).max() <= tol, (
+            f"segment {i} {a.round(5)} -> {b.round(5)} does not end on the predicted path "
+            f"(next predicted {predicted[min(j, n - 1)].round(5)})")
+    assert j == n, f"{n - j} predicted point(s) not reached, first {predicted[j].round(5)}"
