@@ -350,7 +350,7 @@ class Program:
         if uns and not keep_unsupported:
             raise RefusedError(
                 f"{self.name}: {len(uns)} unsupported construct(s); nothing written "
-                "(keep_unsupported copies those blocks unchanged)",
+                "(--keep-unsupported / keep_unsupported=True copies those blocks unchanged and corrects the rest)",
                 [asdict(u) for u in uns],
             )
         if not limit > 0:

@@ -1,0 +1,97 @@
+"""The ncadapt command: exit codes, messages and JSON, through click's CliRunner."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from click.testing import CliRunner
+
+from ncadapt.cli import main
+
+
+@pytest.fixture
+def plate(tmp_path, examples):
+    for name in ("plate.ngc", "plate_probe.csv"):
+        shutil.copy(examples / "nc" / name, tmp_path / name)
+    return tmp_path
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def test_correct_writes_program_and_json(plate):
+    r = run("correct", plate / "plate.ngc", "--field", plate / "plate_probe.csv", "-o", plate / "out.ngc",
+            "--json", plate / "out.json")
+    assert r.exit_code == 0, r.output
+    d = json.loads((plate / "out.json").read_text())
+    for key in ("lines_in", "lines_out", "blocks_changed", "max_displacement", "mean_displacement"):
+        assert key in d
+    assert d["lines_in"] == 34 and d["lines_out"] == d["lines_in"] + d["lines_added"]
+    assert 0 < d["mean_displacement"] <= d["max_displacement"] <= 0.03
+    assert "blocks changed" in r.stderr
+    assert (plate / "out.ngc").read_text().count("\n") == d["lines_out"]
+
+
+def test_shift_and_exit_codes(plate):
+    r = run("correct", plate / "plate.ngc", "--shift", "0,0,0.8", "-o", plate / "o.ngc")
+    assert r.exit_code == 1
+    assert "exceeds the limit 0.5 mm; nothing written" in r.stderr
+    assert not (plate / "o.ngc").exists()
+    r = run("correct", plate / "plate.ngc", "--shift", "0,0,0.01", "-o", plate / "plate.ngc")
+    assert r.exit_code == 2
+    assert r.stderr.startswith(f"{plate / 'plate.ngc'}: error: refusing to overwrite the input program")
+    r = run("correct", plate / "plate.ngc", "-o", plate / "o.ngc")
+    assert r.exit_code == 2 and "exactly one of --field FILE or --shift" in r.stderr
+    r = run("correct", plate / "plate.ngc", "--shift", "1,2", "-o", plate / "o.ngc")
+    assert r.exit_code == 2 and "expected DX,DY,DZ" in r.stderr
+
+
+def test_parse_error_is_path_line_col(tmp_path):
+    p = tmp_path / "bad.ngc"
+    p.write_text("G0 X0\nG1 Y\n")
+    r = run("correct", p, "--shift", "0,0,0", "-o", tmp_path / "o.ngc")
+    assert r.exit_code == 2
+    assert r.stderr == f"{p}:2:5: error: expected a number after 'Y'\n"
+
+
+def test_refused_construct_then_kept(tmp_path):
+    p = tmp_path / "c.ngc"
+    p.write_text("G0 X0 Y0 Z5\nG41 D1 G1 X5 F100\nG40 G1 X10\n")
+    r = run("correct", p, "--shift", "0,0,0.01", "-o", tmp_path / "o.ngc")
+    assert r.exit_code == 1 and "line 2:1: cutter compensation G41 (1 motion block(s))" in r.stderr
+    r = run("correct", p, "--shift", "0,0,0.01", "-o", tmp_path / "o.ngc", "--keep-unsupported")
+    assert r.exit_code == 0 and "unsupported constructs kept unchanged (1)" in r.stderr
+
+
+def test_outside_field_option(plate):
+    f = plate / "small.csv"
+    f.write_text("x,y,dz\n0,0,0\n10,0,0\n0,10,0\n10,10,0.01\n")
+    r = run("correct", plate / "plate.ngc", "--field", f, "-o", plate / "o.ngc")
+    assert r.exit_code == 1 and "outside the field's domain" in r.stderr
+    r = run("correct", plate / "plate.ngc", "--field", f, "-o", plate / "o.ngc", "--outside", "clamp")
+    assert r.exit_code == 0
+
+
+def test_inspect_json(tmp_path, plate):
+    r = run("inspect", plate / "plate.ngc", "--json", tmp_path / "i.json")
+    assert r.exit_code == 0
+    d = json.loads((tmp_path / "i.json").read_text())
+    assert d["units"] == "mm" and d["lines"] == 34
+    assert d["motions"] == {"rapid": 4, "feed": 15, "arc_cw": 0, "arc_ccw": 4, "other": 0}
+    assert d["extents"]["feed"]["x"] == [-6.0, 66.0]
+    assert d["unsupported"] == []
+    assert d["notes"][0]["line"] == 32
+    p = tmp_path / "u.ngc"
+    p.write_text("G0 X0 Y0 Z0\nG83 X1 Y1 Z-3 R1 Q1 F50\nX2\nG80\n")
+    r = run("inspect", p, "--json", tmp_path / "u.json")
+    d = json.loads((tmp_path / "u.json").read_text())
+    assert d["unsupported"] == [{"line": 2, "col": 1, "construct": "canned cycle G83", "blocks": 2}]
+
+
+def test_demo(tmp_path):
+    r = run("demo", "--out", tmp_path / "d")
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "d" / "plate-corrected.ngc").exists()

@@ -1,0 +1,77 @@
+"""Program.correct: identities, safety checks and output style."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ncadapt import InputError, RefusedError, fields, nc
+
+PART = "G21 G90 G0 X0 Y0 Z5\nG1 Z-1 F300\nG1 X10.0000 Y0.0000 (edge)\nG2 X20 Y0 I5 J0\nG0 Z5\nM30\n"
+
+
+def test_zero_field_is_byte_identical():
+    prog = nc.parse(PART.replace("\n", "\r\n"))
+    out = prog.correct(fields.Shift((0, 0, 0)))
+    assert out.data == prog.data
+    assert out.correction.blocks_changed == 0 and out.correction.lines_added == 0
+
+
+def test_changed_block_keeps_words_order_and_comment():
+    out = nc.parse(PART).correct(lambda p: np.column_stack([0 * p[:, 0], 0 * p[:, 0], 1e-4 * p[:, 0] ** 2]))
+    lines = out.text.splitlines()
+    # the block carries its first 1 mm piece and its comment; the program's 4 fixed decimals kept
+    assert lines[2] == "G1 X1.0000 Y0.0000 Z-0.9999 (edge)"
+    assert lines[3] == "X2.0000 Z-0.9996"
+    assert any(ln.endswith("(edge)") for ln in lines)
+    assert "G2 " not in out.text and out.correction.arcs_linearised == 1
+    assert lines[-2:] == ["G0 Z5", "M30"]
+
+
+def test_limit_refuses_and_lists_worst_points():
+    with pytest.raises(RefusedError, match="exceeds the limit 0.5 mm") as e:
+        nc.parse(PART).correct(lambda p: np.tile([0, 0, 0.0], (len(p), 1)) + [[0, 0, 0.6]] * (p[:, [0]] > 15))
+    worst = e.value.details[0]
+    assert worst["line"] == 4 and worst["magnitude"] == pytest.approx(0.6)
+
+
+def test_unsupported_refused_unless_kept():
+    src = "G0 X0 Y0 Z5\nG81 X5 Y5 Z-1 R1 F100\nG80\nG1 X10 Z-1 F100\n"
+    with pytest.raises(RefusedError, match="1 unsupported construct") as e:
+        nc.parse(src).correct(fields.Shift((0, 0, 0.1)))
+    assert e.value.details[0]["construct"] == "canned cycle G81"
+    out = nc.parse(src).correct(fields.Shift((0, 0, 0.1)), keep_unsupported=True)
+    assert out.text.splitlines()[1] == "G81 X5 Y5 Z-1 R1 F100"
+    assert out.text.splitlines()[3] == "G1 X10 Z-0.9 F100"
+    assert "kept unchanged" in out.correction.warnings[0]
+
+
+def test_outside_field_refused():
+    f = fields.GridField([0, 5], [-1, 1], np.zeros((2, 2)))
+    with pytest.raises(RefusedError, match="outside the field's domain") as e:
+        nc.parse(PART).correct(f)
+    assert e.value.details[0]["line"] == 3
+
+
+def test_write_refuses_the_input_and_is_atomic(tmp_path):
+    p = tmp_path / "part.ngc"
+    p.write_text(PART)
+    prog = nc.read(p)
+    with pytest.raises(InputError, match="refusing to overwrite the input"):
+        prog.write(p)
+    out = prog.correct(fields.Shift((0, 0, 0.01)))
+    out.write(tmp_path / "out.ngc")
+    assert p.read_text() == PART
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["out.ngc", "part.ngc"]
+
+
+def test_rapid_clearance_warning():
+    f = fields.GridField([-5, 25], [-5, 5], np.zeros((2, 2)))
+    out = nc.parse("G0 X0 Y0 Z5\nG0 Z0.5\nG1 Z-1 F10\nX10\nG0 Z5\n").correct(f, clearance=1.0)
+    assert out.correction.warnings == ("line 2: rapid ends at Z0.5000, below the clearance Z1 inside the field's area, and is not corrected",)
+
+
+def test_grid_lines_split_moves():
+    f = fields.GridField([0, 2.5, 5, 7.5, 10], [-1, 1], np.array([[0, 0.01, 0, 0.01, 0]] * 2))
+    out = nc.parse("G0 X0 Y0 Z0\nG1 X10 F100\n").correct(f, max_segment=100)
+    assert out.text.splitlines()[1:] == ["G1 X2.5 Z0.01 F100", "X5.0 Z0.0", "X7.5 Z0.01", "X10.0 Z0.0"]

@@ -1,0 +1,123 @@
+"""Reader and interpreter: every byte kept, words and errors located, constructs reported."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from ncadapt import InputError, nc
+
+
+def test_every_byte_is_kept(tmp_path):
+    data = b"%\r\nO1234 (HEAD)\r\n\r\n/N010 G1. X-.5 y+2\t; tail\r\n  \t\r\n(only a comment)\nG0 Z1 (no newline at end)"
+    p = tmp_path / "a.nc"
+    p.write_bytes(data)
+    prog = nc.read(p)
+    assert prog.data == data
+    assert prog.lines == 7
+    assert prog.text.encode() == data
+
+
+@pytest.mark.parametrize(
+    "text, line, col, message",
+    [
+        ("G0 X1\nG1 X\n", 2, 5, "expected a number after 'X'"),
+        ("G1 (open comment\n", 1, 4, "comment '(' is not closed"),
+        ("G1 X1 & Y2\n", 1, 7, "unexpected '&'"),
+        ("G0 X0 Y0 Z0\nG2 X1 Y1 R0.1\n", 2, 10, "too small"),
+        ("G0 X0 Y0 Z0\nG2 X10 Y0 I3 J0\n", 2, 1, "differs from radius to its start"),
+        ("G0 X0 Y0 Z0\nG2 X1 Y0 I.5 R.5\n", 2, 14, "both R and I/J/K"),
+        ("G0 X0 Y0 Z0\nG3 F10\n", 2, 1, "no axis words"),
+    ],
+)
+def test_errors_name_line_and_column(text, line, col, message):
+    with pytest.raises(InputError, match=re.escape(message)) as e:
+        nc.parse(text, name="part.ngc")
+    assert (e.value.path, e.value.line, e.value.col) == ("part.ngc", line, col)
+    assert str(e.value).startswith(f"part.ngc:{line}:{col}: ")
+
+
+@pytest.mark.parametrize(
+    "text, line, construct",
+    [
+        ("G0 X0 Y0 Z0\nG81 X1 Y1 Z-1 R1 F10\n", 2, "canned cycle G81"),
+        ("G0 X0 Y0 Z0\nG83 X1 Y1 Z-1 R1 Q.5 F10\n", 2, "canned cycle G83"),
+        ("G0 X0 Y0 Z0\nG73 X1 Y1 Z-1 R1 Q.5 F10\n", 2, "canned cycle G73"),
+        ("G0 X0 Y0 Z0\nG76 P0.05 Z-1 I-.075 J0.008 K0.045 Q29.5 L2 E0.045\n", 2, "canned cycle G76"),
+        ("G0 X0 Y0 Z0\nG41 D1 G1 X5\n", 2, "cutter compensation G41"),
+        ("G0 X0 Y0 Z0\nG42.1 D2 G1 X5\n", 2, "cutter compensation G42.1"),
+        ("G0 X0 Y0 Z0\nG92 X0 Y0\n", 2, "coordinate shift G92"),
+        ("G0 X0 Y0 Z0\nG52 X10\n", 2, "coordinate shift G52"),
+        ("G0 X0 Y0 Z0\nG68 X0 Y0 R30\n", 2, "coordinate rotation G68"),
+        ("#1 = 5\nG0 X#1\n", 1, "parameters or expressions (# or [ ])"),
+        ("G0 X[1+2]\n", 1, "parameters or expressions (# or [ ])"),
+        ("o100 sub\nG0 X1\no100 endsub\n", 1, "O-word subroutine or control flow"),
+        ("o<probe> call\n", 1, "O-word subroutine or control flow"),
+        ("G0 X0 Y0 Z0\nM98 P1000\n", 2, "subprogram M98"),
+        ("G7\nG0 X10\n", 1, "lathe diameter mode G7"),
+        ("G0 X0 Y0 Z0\nG16\nG1 X10 Y30\n", 2, "polar coordinates G16"),
+        ("G0 X0 Y0 Z0\nG1 @10 ^30\n", 2, "polar coordinates (@ ^)"),
+        ("G0 X0 Y0 Z0\nG28\n", 2, "return to reference G28"),
+        ("G0 X0 Y0 Z0\nG93 G1 X1 F2\n", 2, "inverse-time feed G93"),
+        ("G0 X0 Y0 Z0\nG38.2 Z-5 F10\n", 2, "probing G38.2"),
+        ("G0 X0 Y0 Z0\nG5.2 X1 Y1 P1 L3\n", 2, "spline G5.2"),
+    ],
+)
+def test_unsupported_constructs_are_reported(text, line, construct):
+    prog = nc.parse(text)
+    assert prog.unsupported, "construct not detected"
+    u = prog.unsupported[0]
+    assert (u.line, u.construct) == (line, construct)
+
+
+def test_modal_blocks_after_a_construct_are_counted():
+    prog = nc.parse("G0 X0 Y0 Z0\nG41 D1 G1 X1\nX2\nY2\nG40 G1 X3\n")
+    (u,) = prog.unsupported
+    assert u.blocks == 3
+    assert prog.blocks.supported.tolist() == [True, False, False, False, True]
+
+
+def test_work_offsets_tools_and_g53():
+    prog = nc.parse("G55 T3 M6\nG0 X1 Y2 Z3\nG53 G0 Z0\nG59.3 G0 X0\n")
+    info = prog.inspect()
+    assert info["work_offsets"] == ["G55", "G59.3"]
+    assert info["tools"] == [3]
+    assert not info["unsupported"]
+    assert info["notes"][0]["line"] == 3 and "G53" in info["notes"][0]["message"]
+    # after G53 the Z the program runs at is not known
+    assert np.isnan(prog.blocks.end[1, 2])
+
+
+def test_inch_and_incremental_positions():
+    prog = nc.parse("G20 G90 G0 X1 Y1 Z0.5\nG91 G1 X0.5 Y-0.25\nG21 X10\n")
+    end = prog.blocks.end[:, :3]
+    np.testing.assert_allclose(end, [[25.4, 25.4, 12.7], [38.1, 19.05, 12.7], [48.1, 19.05, 12.7]], atol=1e-12)
+    assert prog.units == "mixed"
+
+
+def test_arcs_in_every_plane_trace_circles():
+    # counter-clockwise quarter circles of radius 5 in G17, G18 (Z, X) and G19 (Y, Z) with I/J/K
+    prog = nc.parse("G21 G90 G0 X5 Y0 Z0\nG17 G3 X0 Y5 I-5 J0\nG18 G3 X-5 Z5 I0 K5\nG19 G3 Y0 Z0 J-5 K0\n")
+    tp = prog.toolpath(chord_tol=1e-4, max_segment=10, rapids=False)
+    p = {line: tp.points[tp.line == line] for line in (2, 3, 4)}
+    np.testing.assert_allclose(np.hypot(p[2][:, 0], p[2][:, 1]), 5, atol=1e-12)
+    np.testing.assert_allclose(np.hypot(p[3][:, 2] - 5, p[3][:, 0]), 5, atol=1e-12)
+    np.testing.assert_allclose(p[3][:, 1], 5, atol=1e-12)
+    np.testing.assert_allclose(np.hypot(p[4][:, 1], p[4][:, 2] - 5), 5, atol=1e-12)
+    np.testing.assert_allclose(p[4][:, 0], -5, atol=1e-12)
+    np.testing.assert_allclose(p[4][-1], [-5, 0, 0], atol=1e-12)
+    # counter-clockwise quarter turns: each stays in its quadrant (no long way round)
+    assert (p[2][:, 0] >= -1e-12).all() and (p[2][:, 1] >= -1e-12).all()
+    # chord tolerance: the sagitta of each piece stays under 1e-4 mm
+    theta = (np.pi / 2) / len(p[2])
+    assert 5 * (1 - np.cos(theta / 2)) <= 1e-4
+
+
+def test_full_circle_and_turns():
+    prog = nc.parse("G21 G90 G0 X10 Y0 Z0\nG3 X10 Y0 I-10 J0 P2 Z-2\n")
+    tp = prog.toolpath(chord_tol=0.002, max_segment=100, rapids=False)
+    ang = np.unwrap(np.arctan2(tp.points[:, 1], tp.points[:, 0]))
+    assert ang[-1] == pytest.approx(4 * np.pi, abs=1e-9)
+    np.testing.assert_allclose(tp.points[:, 2], -2 * ang / (4 * np.pi), atol=1e-9)
