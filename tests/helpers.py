@@ -21,14 +21,15 @@ def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol:
         last = None
         while j < n:
             p = predicted[j]
-            t = 0.0 if L2 == 0 else float(np.clip((p - a) @ ab / L2, 0, 1))
-            if np.abs(a + t * ab - p).max() <= tol:
+            if np.abs(p - b).max() <= tol:
                 last = j
                 j += 1
-                if np.abs(p - b).max() <= tol:
-                    break
-            else:
                 break
+            t = 0.0 if L2 == 0 else float(np.clip((p - a) @ ab / L2, 0, 1))
+            if np.abs(a + t * ab - p).max() > tol:
+                break
+            last = j
+            j += 1
         assert last is not None and np.abs(predicted[last] - b).max() <= tol, (
             f"segment {i} {a.round(5)} -> {b.round(5)} does not end on the predicted path "
             f"(next predicted {predicted[min(j, n - 1)].round(5)})")

@@ -82,8 +82,9 @@ def _corrected_matches(tmp_path, src: str, field, name="p.ngc", **kw):
     # rs274 prints 4 decimals, we write 4 (mm) or 5 (inch): in mm the two roundings add up to the
     # 1e-4 mm required; in inch programs to 0.00005 + 0.000005 in
     ours = 0.5e-5 * 25.4 if prog.units == "inch" else 0.5e-4
-    tol = canon.resolution_mm + ours + 1e-9
-    assert prog.units == "inch" or tol <= TOL_MM + 1e-9
+    # (+1e-6 mm: pieces that far from a straight line are merged into one move)
+    tol = canon.resolution_mm + ours + 1e-6
+    assert prog.units == "inch" or tol <= TOL_MM + 1e-6
     match_path(predicted, starts[sel], ends[sel], tol)
     return out
 

@@ -10,6 +10,10 @@ use crate::interp::{Interp, Motion, Record, AXES, MM_PER_INCH, NAXES, PLANE_AXES
 use crate::lex::{Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
 
+/// Corrected pieces this close to a straight line (mm) are written as one move. Far below any
+/// written digit, so merging never moves the path by a visible amount.
+pub const MERGE_TOL_MM: f64 = 1e-6;
+
 /// Counts for the summary.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct EmitStats {
@@ -339,8 +343,7 @@ impl<'a> Emitter<'a> {
         // the output starts this block where the corrected path expects it
         let on_path = (0..3).all(|a| (self.epos[a] - (start[a] + d0[a])).abs() < half_mm);
         let keep_arc = rec.motion.is_arc() && uniform && on_path;
-        // a straight move whose corrected pieces all lie on one line (within half the last
-        // written digit) is written as one move
+        // a straight move whose corrected pieces all lie on one line is written as one move
         let only_xyz = rec.named & !0b111 == 0;
         let straight = !rec.motion.is_arc()
             && only_xyz
@@ -348,7 +351,7 @@ impl<'a> Emitter<'a> {
                 let e = target_at(n - 1, 1.0);
                 (0..n - 1).all(|k| {
                     let p = target_at(k, ts[k]);
-                    dist_to_segment(&p, &self.epos, &e) < half_mm
+                    dist_to_segment(&p, &self.epos, &e) <= MERGE_TOL_MM
                 })
             });
         if straight || keep_arc {
