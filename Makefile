@@ -37,8 +37,9 @@ test: install-test
 	PATH="$$HOME/.cargo/bin:$$PATH" cargo test -q --workspace --exclude ncadapt-nc-py
 	$(PY) -m pytest -q
 
+# bCNC is the peer of the benchmark: only its CNC.py is used, so its GUI dependencies are skipped
 bench: install-test
-	$(PIP) install -q -e '.[bench]'
+	$(PIP) install -q --no-deps bCNC==0.9.16 svgelements
 	$(PY) benchmarks/bench_correct.py
 
 clean:

@@ -180,18 +180,30 @@ class GridField(Field):
         return f"GridField({len(self.xs)}x{len(self.ys)}, {self.method}, outside={self.outside!r})"
 
 
+def _cell(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cell index and fraction of x along a grid; the edge cells continue outside."""
+    n = len(grid)
+    step = (grid[-1] - grid[0]) / (n - 1)
+    if np.allclose(np.diff(grid), step, rtol=1e-12, atol=0):
+        u = (x - grid[0]) / step
+        i = np.clip(np.floor(u), 0, n - 2).astype(np.intp)
+        return i, u - i
+    i = np.clip(np.searchsorted(grid, x, side="right") - 1, 0, n - 2)
+    return i, (x - grid[i]) / (grid[i + 1] - grid[i])
+
+
 def _bilinear(xs, ys, v, x, y):
     """Bilinear interpolation of v (ny, nx) at (x, y); outside, the edge cells are extended linearly."""
-    i = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, len(xs) - 2)
-    j = np.clip(np.searchsorted(ys, y, side="right") - 1, 0, len(ys) - 2)
-    a = (x - xs[i]) / (xs[i + 1] - xs[i])
-    b = (y - ys[j]) / (ys[j + 1] - ys[j])
-    return (
-        (1 - a) * (1 - b) * v[j, i]
-        + a * (1 - b) * v[j, i + 1]
-        + (1 - a) * b * v[j + 1, i]
-        + a * b * v[j + 1, i + 1]
-    )
+    i, a = _cell(xs, x)
+    j, b = _cell(ys, y)
+    flat = v.ravel()
+    k = j * len(xs) + i
+    v00, v01 = flat[k], flat[k + 1]
+    k += len(xs)
+    v10, v11 = flat[k], flat[k + 1]
+    lo = v00 + a * (v01 - v00)
+    hi = v10 + a * (v11 - v10)
+    return lo + b * (hi - lo)
 
 
 class ScatteredField(Field):

@@ -398,7 +398,7 @@ class Program:
             )
         say("writing")
         try:
-            out, stats = self._p.emit(sampled, np.ascontiguousarray(disp, dtype="<f8").tobytes())
+            out, stats = self._p.emit(sampled, np.ascontiguousarray(disp, dtype=np.float64))
         except EngineError as e:  # pragma: no cover - the emitter validates its own input
             raise _engine_error(e, self.name) from None
         warnings = list(self._clearance_warnings(field, clearance))

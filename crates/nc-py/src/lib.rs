@@ -5,6 +5,7 @@
 use nc::interp::{Interp, NAXES};
 use nc::sample::{SampleOpts, Samples};
 use nc::NcError;
+use pyo3::buffer::PyBuffer;
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -21,20 +22,23 @@ fn to_py(e: NcError) -> PyErr {
     }
 }
 
+#[cfg(target_endian = "big")]
+compile_error!("the array exchange with numpy assumes a little-endian machine");
+
+/// The bytes of a slice of plain numbers (one copy, into the Python bytes object).
+fn raw_bytes<'py, T: Copy>(py: Python<'py>, v: &[T]) -> Bound<'py, PyBytes> {
+    // SAFETY: f64 and u32 have no padding and every bit pattern is a valid byte sequence.
+    let b = unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) };
+    PyBytes::new(py, b)
+}
+
 fn f64_bytes<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyBytes> {
-    let mut b = Vec::with_capacity(v.len() * 8);
-    for x in v {
-        b.extend_from_slice(&x.to_le_bytes());
-    }
-    PyBytes::new(py, &b)
+    raw_bytes(py, v)
 }
 
 fn u32_bytes<'py>(py: Python<'py>, v: impl Iterator<Item = u32>) -> Bound<'py, PyBytes> {
-    let mut b = Vec::new();
-    for x in v {
-        b.extend_from_slice(&x.to_le_bytes());
-    }
-    PyBytes::new(py, &b)
+    let v: Vec<u32> = v.collect();
+    raw_bytes(py, &v)
 }
 
 /// A parsed program (native handle).
@@ -54,7 +58,7 @@ impl Sampled {
     /// (xyz, t, rec) as bytes of float64, float64 and uint32.
     fn arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
         let s = &self.inner;
-        (f64_bytes(py, &s.xyz), f64_bytes(py, &s.t), u32_bytes(py, s.rec.iter().copied()))
+        (f64_bytes(py, &s.xyz), f64_bytes(py, &s.t), raw_bytes(py, &s.rec))
     }
 
     fn __len__(&self) -> usize {
@@ -144,13 +148,15 @@ impl Program {
         Sampled { inner }
     }
 
-    /// Write the program with displacements (float64 bytes, 3 per sample).
-    fn emit<'py>(&self, py: Python<'py>, samples: &Sampled, disp: &[u8]) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyDict>)> {
-        if disp.len() % 8 != 0 {
-            return Err(PyValueError::new_err("displacements must be float64 bytes"));
+    /// Write the program with displacements: a C-contiguous float64 buffer, 3 per sample.
+    fn emit<'py>(&self, py: Python<'py>, samples: &Sampled, disp: PyBuffer<f64>) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyDict>)> {
+        if !disp.is_c_contiguous() {
+            return Err(PyValueError::new_err("displacements must be a C-contiguous float64 array"));
         }
-        let d: Vec<f64> = disp.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect();
-        let (out, stats) = py.allow_threads(|| self.inner.emit(&samples.inner, &d)).map_err(to_py)?;
+        // SAFETY: a contiguous buffer of item_count f64 values, held alive by `disp` while we read;
+        // the caller passes an array it does not change during the call.
+        let d: &[f64] = unsafe { std::slice::from_raw_parts(disp.buf_ptr() as *const f64, disp.item_count()) };
+        let (out, stats) = py.allow_threads(|| self.inner.emit(&samples.inner, d)).map_err(to_py)?;
         let st = PyDict::new(py);
         st.set_item("lines_in", stats.lines_in)?;
         st.set_item("lines_out", stats.lines_out)?;

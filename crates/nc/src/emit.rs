@@ -53,35 +53,65 @@ impl Format {
         0.5 * 10f64.powi(-(self.decimals(inch) as i32))
     }
 
-    /// Format `v` and return the text and the value it stands for.
+    /// Write `v` in the program's style and return the value the written text stands for.
     pub fn number(&self, v: f64, inch: bool, out: &mut Vec<u8>) -> f64 {
-        let dec = self.decimals(inch);
-        let mut s = format!("{:.*}", dec, v);
-        if s.starts_with('-') && s[1..].bytes().all(|c| c == b'0' || c == b'.') {
-            s.remove(0);
+        const POW10: [u64; 10] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
+        let dec = self.decimals(inch).min(9);
+        let scale = POW10[dec];
+        let scaled = v * scale as f64;
+        if !(scaled.abs() < 9.0e15) {
+            // beyond any machine's travel; keep the text exact all the same
+            let t = format!("{:.*}", dec, v);
+            out.extend_from_slice(t.as_bytes());
+            return t.parse().unwrap_or(v);
         }
-        let value: f64 = s.parse().unwrap_or(v);
-        if !self.style.fixed && s.contains('.') {
-            while s.ends_with('0') {
-                s.pop();
-            }
-            if s.ends_with('.') && !self.style.bare_point {
-                s.push('0');
+        let m = scaled.round() as i64;
+        let a = m.unsigned_abs();
+        let (int, mut frac) = (a / scale, a % scale);
+        if m < 0 {
+            out.push(b'-');
+        }
+        let mut digits = dec;
+        if !self.style.fixed {
+            while digits > 0 && frac % 10 == 0 {
+                frac /= 10;
+                digits -= 1;
             }
         }
-        if self.style.no_leading_zero {
-            if let Some(rest) = s.strip_prefix("0.") {
-                s = format!(".{rest}");
-            } else if let Some(rest) = s.strip_prefix("-0.") {
-                s = format!("-.{rest}");
+        if !(self.style.no_leading_zero && int == 0 && digits > 0) {
+            write_uint(out, int);
+        }
+        out.push(b'.');
+        if digits == 0 {
+            if !self.style.bare_point {
+                out.push(b'0');
             }
-            if s == "." {
-                s = "0.".into();
+        } else {
+            let start = out.len();
+            write_uint(out, frac);
+            let written = out.len() - start;
+            if written < digits {
+                // zero padding after the point: 0.0012 has frac 12 with 4 digits
+                out.splice(start..start, std::iter::repeat(b'0').take(digits - written));
             }
         }
-        out.extend_from_slice(s.as_bytes());
-        value
+        m as f64 / scale as f64
     }
+}
+
+#[inline]
+fn write_uint(out: &mut Vec<u8>, mut v: u64) {
+    let mut buf = [0u8; 20];
+    let mut i = buf.len();
+    loop {
+        i -= 1;
+        buf[i] = b'0' + (v % 10) as u8;
+        v /= 10;
+        if v == 0 {
+            break;
+        }
+    }
+    out.extend_from_slice(&buf[i..]);
 }
 
 /// One edit of a line: replace bytes [start, end) by `text`.
@@ -556,6 +586,32 @@ mod tests {
         }
         let (out, _) = Emitter::new(src.as_bytes(), &l, &it).run(&s, &d).unwrap();
         String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn number_styles() {
+        let mut st = NumberStyle::default();
+        let cases = |st: NumberStyle, v: f64| {
+            let f = Format::new(st);
+            let mut out = Vec::new();
+            let val = f.number(v, false, &mut out);
+            (String::from_utf8(out).unwrap(), val)
+        };
+        assert_eq!(cases(st, 1.23456), ("1.2346".into(), 1.2346));
+        assert_eq!(cases(st, -0.00004), ("0.0".into(), 0.0));
+        assert_eq!(cases(st, 10.0), ("10.0".into(), 10.0));
+        assert_eq!(cases(st, -0.0012), ("-0.0012".into(), -0.0012));
+        st.fixed = true;
+        assert_eq!(cases(st, 10.0), ("10.0000".into(), 10.0));
+        assert_eq!(cases(st, -0.05), ("-0.0500".into(), -0.05));
+        st.fixed = false;
+        st.no_leading_zero = true;
+        st.bare_point = true;
+        assert_eq!(cases(st, -0.5), ("-.5".into(), -0.5));
+        assert_eq!(cases(st, 3.0), ("3.".into(), 3.0));
+        assert_eq!(cases(st, 0.0), ("0.".into(), 0.0));
+        st.max_decimals = 6;
+        assert_eq!(cases(st, 0.1234567), (".123457".into(), 0.123457));
     }
 
     #[test]

@@ -83,6 +83,13 @@ pub fn arc_point(rec: &Record, start: &[f64; NAXES], geom: (f64, f64, f64, f64),
     p
 }
 
+/// Pieces of at most `max` for a length: a length a rounding error over a multiple of `max`
+/// (3.0000000000000004 for 3) does not get an extra piece.
+#[inline]
+fn pieces_for(len: f64, max: f64) -> f64 {
+    (len / max * (1.0 - 1e-12)).ceil()
+}
+
 /// Number of pieces for an arc.
 pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> usize {
     let (_, d, r0, r1) = geom;
@@ -97,7 +104,7 @@ pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> usi
     }
     let len = (ad * 0.5 * (r0 + r1)).hypot(dn);
     if opts.max_segment > 0.0 {
-        n = n.max((len / opts.max_segment).ceil());
+        n = n.max(pieces_for(len, opts.max_segment));
     }
     n as usize
 }
@@ -174,7 +181,7 @@ pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
             }
         } else {
             let len = ((end[0] - prev[0]).powi(2) + (end[1] - prev[1]).powi(2) + (end[2] - prev[2]).powi(2)).sqrt();
-            let n = if opts.max_segment > 0.0 { (len / opts.max_segment).ceil().max(1.0) as usize } else { 1 };
+            let n = if opts.max_segment > 0.0 { pieces_for(len, opts.max_segment).max(1.0) as usize } else { 1 };
             let s0 = prev;
             for k in 1..=n {
                 let t = k as f64 / n as f64;

@@ -1,0 +1,183 @@
+"""Benchmark: `ncadapt correct` beside LinuxCNC's rs274 and bCNC's autolevel, in one run.
+
+1. A generated 1,000,000-line program (G21 G90, 3 axes, about 10 % arcs, comments) corrected with
+   a 101 x 101 grid field: wall time, input lines per second and peak memory of the whole
+   `ncadapt correct` command (read + correct + write), and `rs274 -g` reading the same file.
+2. A generated 200,000-line program with a 21 x 21 probe map: ncadapt beside bCNC's autolevel
+   (its `CNC.py` GCode/Probe classes, without the GUI: load, autolevel, write).
+
+Run with `make bench`. Programs are generated with a fixed seed into benchmarks/out/.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path(__file__).resolve().parent / "out"
+HERE = Path(__file__).resolve().parent
+
+
+def machine() -> str:
+    cpu = platform.processor() or ""
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    return f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB, Python {platform.python_version()}, {platform.system()}"
+
+
+def generate(path: Path, n_lines: int, seed: int, size: float = 100.0) -> None:
+    """A milling-like program: short G1 moves, ~10 % G2/G3 arcs, a comment every ~10 lines."""
+    rng = np.random.default_rng(seed)
+    lines = ["%", "(generated benchmark program)", "G21 G90 G17 G94", "G0 X50.0000 Y50.0000 Z5.0000", "G1 Z-0.5000 F800"]
+    x, y, z = 50.0, 50.0, -0.5
+    kinds = rng.random(n_lines)
+    steps = rng.uniform(-2.5, 2.5, size=(n_lines, 2))
+    dzs = rng.uniform(-0.05, 0.05, n_lines)
+    radii = rng.uniform(1.0, 4.0, n_lines)
+    angles = rng.uniform(0.3, 2.5, n_lines)
+    lo, hi = 5.0, size - 5.0
+    k = 0
+    while len(lines) < n_lines - 2:
+        if kinds[k] < 0.1:
+            # arc: centre to the left of the current point, sweep a random angle
+            r, a = radii[k], angles[k]
+            cx, cy = x - r, y
+            ccw = kinds[k] < 0.05
+            th = a if ccw else -a
+            nx, ny = cx + r * np.cos(th), cy + r * np.sin(th)
+            if lo < nx < hi and lo < ny < hi and lo < cx - r and cx + r < hi:
+                lines.append(f"{'G3' if ccw else 'G2'} X{nx:.4f} Y{ny:.4f} I{-r:.4f} J0.0000")
+                x, y = float(f"{nx:.4f}"), float(f"{ny:.4f}")
+            else:
+                lines.append(f"G1 X{x:.4f} Y{y:.4f}")
+        elif kinds[k] < 0.2:
+            lines.append(f"(pass {k})")
+        else:
+            nx = min(max(x + steps[k, 0], lo), hi)
+            ny = min(max(y + steps[k, 1], lo), hi)
+            nz = min(max(z + dzs[k], -1.0), 0.0)
+            lines.append(f"G1 X{nx:.4f} Y{ny:.4f} Z{nz:.4f}")
+            x, y, z = float(f"{nx:.4f}"), float(f"{ny:.4f}"), float(f"{nz:.4f}")
+        k += 1
+        if k == n_lines:
+            k = 0
+    lines += ["G0 Z5.0000", "M30", "%"]
+    path.write_text("\n".join(lines[:n_lines - 1] + lines[-1:]) + "\n")
+
+
+def grid_csv(path: Path, n: int, size: float = 100.0) -> None:
+    xs = np.linspace(0, size, n)
+    X, Y = np.meshgrid(xs, xs)
+    dz = 0.02 * np.sin(X / 17) * np.cos(Y / 23) + 0.0002 * X
+    rows = ["x,y,dz"] + [f"{a:.4f},{b:.4f},{c:.6f}" for a, b, c in zip(X.ravel(), Y.ravel(), dz.ravel())]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def probe_file(path: Path, n: int, size: float = 100.0) -> None:
+    """The same map as a bCNC .probe file."""
+    xs = np.linspace(0, size, n)
+    rows = [f"0 {size:g} {n}", f"0 {size:g} {n}", "-1 1 100", "", ""]
+    for y in xs:
+        for x in xs:
+            rows.append(f"{x:g} {y:g} {0.02 * np.sin(x / 17) * np.cos(y / 23) + 0.0002 * x:g}")
+        rows.append("")
+    path.write_text("\n".join(rows) + "\n")
+
+
+def timed(cmd: list[str]) -> tuple[float, float]:
+    """Wall time (s) and peak resident memory (MiB) of a child command."""
+    t = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    dt = time.perf_counter() - t
+    return dt, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+
+
+def best_of(n, cmd):
+    runs = [timed(cmd) for _ in range(n)]
+    return min(r[0] for r in runs), max(r[1] for r in runs)
+
+
+BCNC_SCRIPT = r"""
+import os, sys, time
+import bCNC
+d = os.path.dirname(bCNC.__file__)
+sys.path[:0] = [d, os.path.join(d, "lib")]
+import CNC
+prog, probe, out = sys.argv[1:4]
+t = time.perf_counter()
+g = CNC.GCode()
+g.load(prog)
+g.probe.load(probe)
+g.autolevel(range(len(g.blocks)))
+with open(out, "w") as f:
+    for line in g.lines():
+        f.write(line + "\n")
+print(time.perf_counter() - t)
+"""
+
+
+def main() -> int:
+    OUT.mkdir(exist_ok=True)
+    ncadapt = str(Path(sys.executable).with_name("ncadapt"))
+    print(f"machine: {machine()}")
+
+    big = OUT / "bench_1m.ngc"
+    grid = OUT / "grid_101.csv"
+    if not big.exists():
+        print("generating 1,000,000-line program ...", flush=True)
+        generate(big, 1_000_000, seed=1)
+    grid_csv(grid, 101)
+    n_big = sum(1 for _ in open(big, "rb"))
+    cmd = [ncadapt, "correct", str(big), "--field", str(grid), "-o", str(OUT / "bench_1m_c.ngc")]
+    t_nc, mem_nc = best_of(3, cmd)
+    print(f"\n1. {n_big:,} lines, 101x101 grid field")
+    print(f"   ncadapt correct (read+correct+write): {t_nc:7.2f} s  {n_big / t_nc:>12,.0f} lines/s  peak {mem_nc:,.0f} MiB")
+    rs = shutil.which("rs274")
+    if rs:
+        t_rs, _ = best_of(1, [rs, "-g", str(big), str(OUT / "bench_1m.canon")])
+        print(f"   rs274 -g (read only):                 {t_rs:7.2f} s  {n_big / t_rs:>12,.0f} lines/s")
+        print(f"   ratio ncadapt / rs274 (lines/s):      {t_rs / t_nc:7.1f} x")
+    else:
+        print("   rs274 not installed (make test installs linuxcnc-uspace)")
+
+    mid = OUT / "bench_200k.ngc"
+    probe = OUT / "map_21.probe"
+    if not mid.exists():
+        generate(mid, 200_000, seed=2)
+    probe_file(probe, 21)
+    n_mid = sum(1 for _ in open(mid, "rb"))
+    t_nc2, _ = best_of(3, [ncadapt, "correct", str(mid), "--field", str(probe), "-o", str(OUT / "bench_200k_c.ngc")])
+    print(f"\n2. {n_mid:,} lines, 21x21 probe map (bCNC .probe)")
+    print(f"   ncadapt correct:                      {t_nc2:7.2f} s  {n_mid / t_nc2:>12,.0f} lines/s")
+    try:
+        import bCNC  # noqa: F401
+
+        script = OUT / "bcnc_autolevel.py"
+        script.write_text(BCNC_SCRIPT)
+        t = time.perf_counter()
+        subprocess.run([sys.executable, str(script), str(mid), str(probe), str(OUT / "bench_200k_bcnc.ngc")],
+                       check=True, stdout=subprocess.DEVNULL)
+        t_bc = time.perf_counter() - t
+        print(f"   bCNC autolevel (load+level+write):    {t_bc:7.2f} s  {n_mid / t_bc:>12,.0f} lines/s")
+        print(f"   ratio ncadapt / bCNC (lines/s):       {t_bc / t_nc2:7.1f} x")
+    except ImportError:
+        print("   bCNC not installed (make bench installs it)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
