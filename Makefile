@@ -4,6 +4,8 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# rustup installs cargo here; maturin needs it on the PATH
+export PATH := $(HOME)/.cargo/bin:$(PATH)
 
 .PHONY: demo test bench install install-test system-deps rust clean
 
@@ -18,9 +20,9 @@ install: $(VENV)/bin/python rust
 install-test: install system-deps
 	$(PIP) install -q -e '.[test]'
 
-# Rust toolchain: use the one on PATH, else install it from the rustup crate's installer on crates.io
+# Rust toolchain: the one on the PATH (rustup's), else Debian's cargo and rustc
 rust:
-	@command -v cargo >/dev/null || [ -x $$HOME/.cargo/bin/cargo ] || { \
+	@command -v cargo >/dev/null || { \
 	  echo "cargo not found: installing a Rust toolchain"; \
 	  $(SUDO) apt-get update -qq && $(SUDO) DEBIAN_FRONTEND=noninteractive apt-get install -y -qq cargo rustc; }
 
@@ -34,7 +36,7 @@ demo: install
 	$(VENV)/bin/ncadapt demo --out demo-out
 
 test: install-test
-	PATH="$$HOME/.cargo/bin:$$PATH" cargo test -q --workspace --exclude ncadapt-nc-py
+	cargo test -q --workspace --exclude ncadapt-nc-py
 	$(PY) -m pytest -q
 
 # bCNC is the peer of the benchmark: only its CNC.py is used, so its GUI dependencies are skipped

@@ -171,16 +171,25 @@ class Program:
     Create one with :func:`read` or :func:`parse`.
     """
 
-    def __init__(self, data: bytes, path: Path | None = None, name: str | None = None):
+    def __init__(self, data: bytes, path: Path | None = None, name: str | None = None, *, lazy: bool = False):
         self._data = data
         self.path = Path(path) if path is not None else None
         self.name = str(path) if path is not None else (name or "<program>")
         self.correction: Correction | None = None
-        try:
-            self._p = _Native.parse(data)
-        except EngineError as e:
-            raise _engine_error(e, self.name) from None
+        self._native = None
         self._rec: dict | None = None
+        if not lazy:
+            self._p  # noqa: B018 - parse now so errors surface where the program is read
+
+    @property
+    def _p(self):
+        """The native program, parsed on first use."""
+        if self._native is None:
+            try:
+                self._native = _Native.parse(self._data)
+            except EngineError as e:
+                raise _engine_error(e, self.name) from None
+        return self._native
 
     # ----------------------------------------------------------------------------- contents
     @property
@@ -404,7 +413,8 @@ class Program:
         warnings = list(self._clearance_warnings(field, clearance))
         if keep_unsupported and uns:
             warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
-        result = Program(out, name=f"{self.name} (corrected)")
+        # the corrected program is parsed only if it is used as a program again
+        result = Program(out, name=f"{self.name} (corrected)", lazy=True)
         result.correction = Correction(
             lines_in=stats["lines_in"],
             lines_out=stats["lines_out"],
@@ -413,7 +423,7 @@ class Program:
             arcs_linearised=stats["arcs_linearised"],
             max_displacement=worst,
             mean_displacement=float(norms.mean()) if len(norms) else 0.0,
-            points=pts.copy(),
+            points=pts,
             displacements=disp,
             line=lines,
             unsupported_kept=uns if keep_unsupported else (),
