@@ -406,15 +406,8 @@ impl<'a> Emitter<'a> {
                 let at = block_start(self.lx, li);
                 self.edits.push(Edit { start: at, end: at, text });
             }
-            for w in words {
-                if matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P') {
-                    let line = &lx.lines[li];
-                    let mut s = w.start;
-                    while s > line.start && matches!(self.src[s as usize - 1], b' ' | b'\t') {
-                        s -= 1;
-                    }
-                    self.edits.push(Edit { start: s, end: w.end, text: Vec::new() });
-                }
+            for w in words.iter().filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P')) {
+                self.remove_word(li, w);
             }
             self.out_motion = Some(Motion::Feed);
         } else {
@@ -425,12 +418,7 @@ impl<'a> Emitter<'a> {
         for w in words.iter().filter(|w| is_stop_m(w)) {
             stops.extend_from_slice(self.sep());
             stops.extend_from_slice(&self.src[w.start as usize..w.end as usize]);
-            let line = &lx.lines[li];
-            let mut s = w.start;
-            while s > line.start && matches!(self.src[s as usize - 1], b' ' | b'\t') {
-                s -= 1;
-            }
-            self.edits.push(Edit { start: s, end: w.end, text: Vec::new() });
+            self.remove_word(li, w);
         }
         let first = target_at(0, ts[0]);
         self.set_axes(li, rec, &first, true);
@@ -467,6 +455,16 @@ impl<'a> Emitter<'a> {
                 self.tail.push(text);
             }
         }
+    }
+
+    /// Remove a word and the blanks before it.
+    fn remove_word(&mut self, li: usize, w: &Word) {
+        let line_start = self.lx.lines[li].start;
+        let mut s = w.start;
+        while s > line_start && matches!(self.src[s as usize - 1], b' ' | b'\t') {
+            s -= 1;
+        }
+        self.edits.push(Edit { start: s, end: w.end, text: Vec::new() });
     }
 
     /// Aim the block's axis words at `target` (mm), rewriting only what changes.
