@@ -30,6 +30,7 @@ def test_every_byte_is_kept(tmp_path):
         ("G0 X0 Y0 Z0\nG2 X10 Y0 I3 J0\n", 2, 1, "differs from radius to its start"),
         ("G0 X0 Y0 Z0\nG2 X1 Y0 I.5 R.5\n", 2, 14, "both R and I/J/K"),
         ("G0 X0 Y0 Z0\nG3 F10\n", 2, 1, "no axis words"),
+        ("M3 M7 M8 M48 M50 M51 M52 M53 M54\n", 1, 30, "too many M words in one block"),
     ],
 )
 def test_errors_name_line_and_column(text, line, col, message):
@@ -77,6 +78,12 @@ def test_modal_blocks_after_a_construct_are_counted():
     (u,) = prog.unsupported
     assert u.blocks == 3
     assert prog.blocks.supported.tolist() == [True, False, False, False, True]
+
+
+def test_many_g_words_in_one_block_are_all_read():
+    prog = nc.parse("G17 G21 G40 G49 G54 G61 G80 G90 G94 G97 G98 G1 X1 Y2 Z3 F100\n")
+    assert prog.blocks.end[0, :3].tolist() == [1.0, 2.0, 3.0]
+    assert prog.inspect()["motions"]["feed"] == 1
 
 
 def test_work_offsets_tools_and_g53():

@@ -59,7 +59,7 @@ impl Format {
         let dec = self.decimals(inch).min(9);
         let scale = POW10[dec];
         let scaled = v * scale as f64;
-        if !(scaled.abs() < 9.0e15) {
+        if scaled.is_nan() || scaled.abs() >= 9.0e15 {
             // beyond any machine's travel; keep the text exact all the same
             let t = format!("{:.*}", dec, v);
             out.extend_from_slice(t.as_bytes());
@@ -92,7 +92,7 @@ impl Format {
             let written = out.len() - start;
             if written < digits {
                 // zero padding after the point: 0.0012 has frac 12 with 4 digits
-                out.splice(start..start, std::iter::repeat(b'0').take(digits - written));
+                out.splice(start..start, std::iter::repeat_n(b'0', digits - written));
             }
         }
         m as f64 / scale as f64

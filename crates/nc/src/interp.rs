@@ -245,30 +245,29 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
         }
 
         // gather words
-        let mut gs: [(i32, usize); 8] = [(0, 0); 8];
+        let mut gs: [(i32, usize); 32] = [(0, 0); 32];
         let mut ng = 0usize;
         let mut axis: [Option<f64>; NAXES] = [None; NAXES];
         let mut axis_col = 0usize;
         let mut ijk: [Option<f64>; 3] = [None; 3];
         let mut r: Option<(f64, usize)> = None;
         let mut p: Option<f64> = None;
-        let mut ms: [(i32, usize); 4] = [(0, 0); 4];
+        let mut ms: [(i32, usize); 8] = [(0, 0); 8];
         let mut nm = 0usize;
         let mut named: u16 = 0;
         let mut l_word: Option<f64> = None;
         for w in words {
             match w.letter {
-                b'G' => {
-                    if ng < gs.len() {
-                        gs[ng] = (code(w), col(w));
-                        ng += 1;
-                    }
+                b'G' if ng < gs.len() => {
+                    gs[ng] = (code(w), col(w));
+                    ng += 1;
                 }
-                b'M' => {
-                    if nm < ms.len() {
-                        ms[nm] = (w.value.round() as i32, col(w));
-                        nm += 1;
-                    }
+                b'M' if nm < ms.len() => {
+                    ms[nm] = (w.value.round() as i32, col(w));
+                    nm += 1;
+                }
+                b'G' | b'M' => {
+                    return Err(ierr(li, col(w), format!("too many {} words in one block", w.letter as char)));
                 }
                 b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'U' | b'V' | b'W' => {
                     let k = AXES.iter().position(|&a| a == w.letter).unwrap();
@@ -395,7 +394,7 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
                 150 => st.active.polar = None,
                 _ => {
                     let what = match c {
-                        50 | 51 | 52 | 53 => "spline",
+                        50..=53 => "spline",
                         330 | 331 => "spindle-synchronised motion",
                         382..=385 => "probing",
                         171 | 181 | 191 => "UVW plane",
@@ -491,7 +490,7 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
         let mut end = st.pos;
         for k in 0..NAXES {
             if let Some(v) = axis[k] {
-                let scale = if k >= 3 && k < 6 { 1.0 } else { unit };
+                let scale = if (3..6).contains(&k) { 1.0 } else { unit };
                 end[k] = if st.incremental && !g53 { st.pos[k] + v * scale } else { v * scale };
             }
         }

@@ -169,7 +169,7 @@ fn number(s: &[u8], mut i: usize) -> Option<(f64, i8, usize, bool, bool, bool)> 
         decimals,
         i,
         point && int_digits == 0,
-        frac_digits > 1 && last_frac == b'0' || (frac_digits == 1 && last_frac == b'0'),
+        frac_digits >= 1 && last_frac == b'0',
         point && frac_digits == 0,
     ))
 }
@@ -306,7 +306,7 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
                                     e += 1;
                                 }
                                 let kw = s[m..e].to_ascii_lowercase();
-                                if e > m && O_KEYWORDS.iter().any(|w| *w == kw.as_slice()) {
+                                if e > m && O_KEYWORDS.contains(&kw.as_slice()) {
                                     line.opaque = Some((Opaque::OWordFlow, wstart as u32));
                                     i = end;
                                     continue;
