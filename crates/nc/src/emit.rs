@@ -387,7 +387,7 @@ impl<'a> Emitter<'a> {
         if straight || keep_arc {
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
-            self.set_axes(li, rec, &target, true);
+            self.set_axes(li, rec, &target);
             if keep_arc && rec.arc_absolute {
                 self.shift_centre(li, rec, d0);
             }
@@ -421,7 +421,7 @@ impl<'a> Emitter<'a> {
             self.remove_word(li, w);
         }
         let first = target_at(0, ts[0]);
-        self.set_axes(li, rec, &first, true);
+        self.set_axes(li, rec, &first);
         let prefix: &[u8] = if self.lx.lines[li].block_delete { b"/" } else { b"" };
         // a uniform straight move that starts off the corrected path needs one piece to reach it
         let pieces: Vec<usize> = if !linearise && uniform && only_xyz { vec![n - 1] } else { (1..n).collect() };
@@ -467,8 +467,9 @@ impl<'a> Emitter<'a> {
         self.edits.push(Edit { start: s, end: w.end, text: Vec::new() });
     }
 
-    /// Aim the block's axis words at `target` (mm), rewriting only what changes.
-    fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES], add_missing: bool) {
+    /// Aim the block's axis words at `target` (mm), rewriting only what changes and adding the
+    /// axis words it lacks.
+    fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES]) {
         let lx = self.lx;
         let words = lx.line_words(li);
         let half = self.fmt.half(rec.inch);
@@ -487,9 +488,6 @@ impl<'a> Emitter<'a> {
                     self.epos[a] = if rec.incremental { self.epos[a] + v * u } else { v * u };
                 }
             }
-        }
-        if !add_missing {
-            return;
         }
         let at = self.insert_point(li);
         let mut text = Vec::new();
@@ -575,7 +573,7 @@ mod tests {
 
     fn correct(src: &str, f: impl Fn(f64, f64, f64) -> [f64; 3], max_segment: f64) -> String {
         let l = lex(src.as_bytes()).unwrap();
-        let it = interpret(&l, src.as_bytes()).unwrap();
+        let it = interpret(&l).unwrap();
         let o = SampleOpts { chord_tol: 0.002, max_segment, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
         let s = sample(&it, &o);
         let mut d = Vec::new();

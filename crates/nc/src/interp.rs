@@ -179,7 +179,7 @@ const ARC_ABS_TOL_MM: f64 = 0.00005 * MM_PER_INCH;
 const ARC_REL_TOL: f64 = 0.001;
 
 /// Interpret a lexed program.
-pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
+pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
     let nlines = lx.lines.len();
     let mut out = Interp {
         records: Vec::with_capacity(nlines),
@@ -629,7 +629,6 @@ pub fn interpret(lx: &Lexed, src: &[u8]) -> Result<Interp, NcError> {
             break;
         }
     }
-    let _ = src;
     Ok(out)
 }
 
@@ -663,7 +662,7 @@ mod tests {
 
     fn run(s: &str) -> Interp {
         let l = lex(s.as_bytes()).unwrap();
-        interpret(&l, s.as_bytes()).unwrap()
+        interpret(&l).unwrap()
     }
 
     #[test]

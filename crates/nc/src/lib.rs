@@ -22,7 +22,7 @@ impl Program {
     /// Lex and interpret `src`.
     pub fn parse(src: Vec<u8>) -> Result<Self, NcError> {
         let lexed = lex::lex(&src)?;
-        let interp = interp::interpret(&lexed, &src)?;
+        let interp = interp::interpret(&lexed)?;
         Ok(Program { src, lexed, interp })
     }
 

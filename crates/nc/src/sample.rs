@@ -229,7 +229,7 @@ mod tests {
     fn chord_tolerance_holds() {
         let src = b"G0 X10 Y0 Z0\nG3 X10 Y0 I-10 J0\n";
         let l = lex(src).unwrap();
-        let it = interpret(&l, src).unwrap();
+        let it = interpret(&l).unwrap();
         let s = sample(&it, &opts());
         let n = s.t.len();
         // full circle of radius 10: pieces from the chord tolerance 0.002 and the 1 mm length
@@ -246,7 +246,7 @@ mod tests {
     fn grid_lines_split() {
         let src = b"G0 X0.5 Y0.5 Z0\nG1 X3.5 Y0.5\n";
         let l = lex(src).unwrap();
-        let it = interpret(&l, src).unwrap();
+        let it = interpret(&l).unwrap();
         let mut o = opts();
         o.max_segment = 100.0;
         o.grid_x = vec![0.0, 1.0, 2.0, 3.0, 4.0];
