@@ -243,7 +243,7 @@ class Program:
             raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
         gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
         s = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), gx, gy)
-        xyz, t, rec = s.arrays()
+        xyz, rec = s.arrays()
         pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
         rec = np.frombuffer(rec, dtype="<u4").astype(np.int64)
         return s, pts, rec

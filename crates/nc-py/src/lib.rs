@@ -32,10 +32,6 @@ fn raw_bytes<'py, T: Copy>(py: Python<'py>, v: &[T]) -> Bound<'py, PyBytes> {
     PyBytes::new(py, b)
 }
 
-fn f64_bytes<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyBytes> {
-    raw_bytes(py, v)
-}
-
 fn u32_bytes<'py>(py: Python<'py>, v: impl Iterator<Item = u32>) -> Bound<'py, PyBytes> {
     let v: Vec<u32> = v.collect();
     raw_bytes(py, &v)
@@ -55,10 +51,10 @@ struct Sampled {
 
 #[pymethods]
 impl Sampled {
-    /// (xyz, t, rec) as bytes of float64, float64 and uint32.
-    fn arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
+    /// (xyz, rec) as bytes of float64 (3 per sample) and uint32 (record index per sample).
+    fn arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
         let s = &self.inner;
-        (f64_bytes(py, &s.xyz), f64_bytes(py, &s.t), raw_bytes(py, &s.rec))
+        (raw_bytes(py, &s.xyz), raw_bytes(py, &s.rec))
     }
 
     fn __len__(&self) -> usize {
@@ -103,7 +99,7 @@ impl Program {
         for r in &it.records {
             end.extend_from_slice(&r.end);
         }
-        d.set_item("end", f64_bytes(py, &end))?;
+        d.set_item("end", raw_bytes(py, &end))?;
         Ok(d)
     }
 
