@@ -75,3 +75,38 @@ def test_grid_lines_split_moves():
     f = fields.GridField([0, 2.5, 5, 7.5, 10], [-1, 1], np.array([[0, 0.01, 0, 0.01, 0]] * 2))
     out = nc.parse("G0 X0 Y0 Z0\nG1 X10 F100\n").correct(f, max_segment=100)
     assert out.text.splitlines()[1:] == ["G1 X2.5 Z0.01 F100", "X5.0 Z0.0", "X7.5 Z0.01", "X10.0 Z0.0"]
+
+
+def _bowl(p):
+    return np.column_stack([1e-3 * p[:, 1], -1e-3 * p[:, 0], 1e-4 * (p[:, 0] ** 2 + p[:, 1] ** 2)])
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 5, 1 << 16])
+def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, chunk):
+    """Chunked writing (any chunk size) gives the bytes and figures of the in-memory result."""
+    src = (tmp_path / "p.ngc")
+    src.write_text(PART.replace("G0 Z5\nM30", "G91 G1 X2 Y1\nG3 X-4 Y0 I-2 J0\nG90 G0 Z5\nM30"))
+    prog = nc.read(src)
+    whole = prog.correct(_bowl)
+    monkeypatch.setattr(nc, "_CHUNK_LINES", chunk)
+    c = prog.correct_to(tmp_path / "out.ngc", _bowl)
+    assert (tmp_path / "out.ngc").read_bytes() == whole.data
+    assert c.points is None and c.n_points == len(whole.correction.points)
+    for key in ("lines_out", "blocks_changed", "lines_added", "arcs_linearised"):
+        assert getattr(c, key) == getattr(whole.correction, key)
+    assert c.max_displacement == pytest.approx(whole.correction.max_displacement)
+    assert c.mean_displacement == pytest.approx(np.linalg.norm(whole.correction.displacements, axis=1).mean())
+    assert oct((tmp_path / "out.ngc").stat().st_mode & 0o777) != "0o600"  # not mkstemp's private mode
+
+
+def test_correct_to_refusal_leaves_nothing(tmp_path, monkeypatch):
+    monkeypatch.setattr(nc, "_CHUNK_LINES", 1)
+    out = tmp_path / "out.ngc"
+    out.write_text("old\n")
+    with pytest.raises(RefusedError, match="exceeds the limit"):
+        nc.parse(PART).correct_to(out, lambda p: np.tile([0, 0, 0.7], (len(p), 1)))
+    assert out.read_text() == "old\n" and sorted(x.name for x in tmp_path.iterdir()) == ["out.ngc"]
+    field = fields.GridField([0, 5], [0, 5], np.zeros((2, 2)))
+    with pytest.raises(RefusedError, match="outside the field's domain"):
+        nc.parse(PART).correct_to(out, field)
+    assert out.read_text() == "old\n" and sorted(x.name for x in tmp_path.iterdir()) == ["out.ngc"]

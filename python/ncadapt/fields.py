@@ -28,8 +28,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import RectBivariateSpline, RegularGridInterpolator, RBFInterpolator
-from scipy.spatial import Delaunay, cKDTree
 
 from .errors import InputError, RefusedError
 
@@ -168,10 +166,14 @@ class GridField(Field):
         if self.method == "linear":
             d[:, 2] = _bilinear(self.xs, self.ys, self.dz, x, y)
         elif self.outside == "extrapolate" and out.any():
+            from scipy.interpolate import RegularGridInterpolator  # imported where needed: it is slow to import
+
             rgi = RegularGridInterpolator((self.xs, self.ys), self.dz.T, method="cubic", bounds_error=False, fill_value=None)
             d[:, 2] = rgi(np.column_stack([x, y]))
         else:
             if self._spline is None:
+                from scipy.interpolate import RectBivariateSpline
+
                 self._spline = RectBivariateSpline(self.xs, self.ys, self.dz.T, kx=3, ky=3, s=0)
             d[:, 2] = self._spline.ev(x, y)
         return d
@@ -237,6 +239,9 @@ class ScatteredField(Field):
         self.outside = _check_outside(outside)
         if neighbors is None and len(xy) > 2000:
             neighbors = 64
+        from scipy.interpolate import RBFInterpolator
+        from scipy.spatial import Delaunay, cKDTree
+
         self._rbf = RBFInterpolator(xy, self.displacements, kernel="thin_plate_spline", neighbors=neighbors)
         try:
             self._hull = Delaunay(xy)

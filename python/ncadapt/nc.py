@@ -19,6 +19,7 @@ G1 X2
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -26,7 +27,8 @@ from typing import Callable
 import numpy as np
 
 from . import constants
-from ._io import atomic_write
+from ._io import atomic_open, atomic_write
+from ._nc import Corrector as _NativeCorrector
 from ._nc import EngineError
 from ._nc import Program as _Native
 from .errors import InputError, RefusedError
@@ -45,6 +47,8 @@ __all__ = [
 #: Names of the motion codes in :attr:`Toolpath.motion`.
 MOTIONS = ("rapid", "feed", "arc_cw", "arc_ccw", "other")
 _AXES = "XYZABCUVW"
+# lines per chunk of a correction: a few hundred thousand sample points, a few MB at a time
+_CHUNK_LINES = 8192
 
 
 @dataclass(frozen=True)
@@ -120,7 +124,8 @@ class Correction:
     """What :meth:`Program.correct` did. Lengths in mm.
 
     ``points``, ``displacements`` (n, 3) and ``line`` (n,) give every corrected sample point, the
-    displacement applied there and the 1-based line of its block.
+    displacement applied there and the 1-based line of its block (None after
+    :meth:`Program.correct_to`, which does not keep them); ``n_points`` counts them.
     """
 
     lines_in: int
@@ -130,9 +135,10 @@ class Correction:
     arcs_linearised: int
     max_displacement: float
     mean_displacement: float
-    points: np.ndarray = field(repr=False)
-    displacements: np.ndarray = field(repr=False)
-    line: np.ndarray = field(repr=False)
+    n_points: int
+    points: np.ndarray | None = field(repr=False)
+    displacements: np.ndarray | None = field(repr=False)
+    line: np.ndarray | None = field(repr=False)
     unsupported_kept: tuple[Unsupported, ...] = ()
     warnings: tuple[str, ...] = ()
 
@@ -236,17 +242,14 @@ class Program:
         return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0)
 
     # ----------------------------------------------------------------------------- sampling
-    def _sample(self, chord_tol, max_segment, rapids, supported_only, grid=None):
+    def _sample(self, chord_tol, max_segment, rapids, supported_only):
         if not chord_tol > 0:
             raise ValueError(f"chord_tol must be > 0 mm, got {chord_tol}")
         if not max_segment > 0:
             raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
-        gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
-        s = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), gx, gy)
-        xyz, rec = s.arrays()
+        xyz, rec = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), [], [])
         pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
-        rec = np.frombuffer(rec, dtype="<u4").astype(np.int64)
-        return s, pts, rec
+        return pts, np.frombuffer(rec, dtype="<u4").astype(np.int64)
 
     def toolpath(
         self,
@@ -268,7 +271,7 @@ class Program:
         supported_only : bool
             Only blocks the engine can correct (else every block whose start and end are known).
         """
-        _, pts, rec = self._sample(chord_tol, max_segment, rapids, supported_only)
+        pts, rec = self._sample(chord_tol, max_segment, rapids, supported_only)
         r = self._records()
         starts = np.empty_like(pts)
         if len(pts):
@@ -352,7 +355,38 @@ class Program:
         Returns
         -------
         Program
-            The corrected program; its :attr:`correction` says what was done.
+            The corrected program; its :attr:`correction` says what was done, with every sample
+            point and its displacement. :meth:`correct_to` writes a file without holding them.
+        """
+        parts: list[bytes] = []
+        c = self._correct_chunks(parts.append, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit,
+                                 rapids=rapids, keep_unsupported=keep_unsupported, clearance=clearance,
+                                 progress=progress, keep_points=True)
+        # the corrected program is parsed only if it is used as a program again
+        result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True)
+        result.correction = c
+        return result
+
+    def correct_to(self, path: str | os.PathLike, field: Callable[[np.ndarray], np.ndarray], **options) -> Correction:
+        """Correct the program and write it to ``path``, one chunk of lines at a time.
+
+        Takes the options of :meth:`correct`. Memory stays small whatever the program's length:
+        the points and displacements are not kept (``Correction.points`` is None). The file is
+        written atomically: when a check refuses, ``path`` is left as it was.
+        """
+        p = Path(path)
+        if self.path is not None and p.exists() and os.path.samefile(p, self.path):
+            raise InputError("refusing to overwrite the input program; choose another output", str(p))
+        with atomic_open(p) as f, _BackgroundWriter(f) as w:
+            return self._correct_chunks(w.write, field, keep_points=False, **options)
+
+    def _correct_chunks(self, write, field, *, chord_tol=constants.CHORD_TOL, max_segment=constants.MAX_SEGMENT,
+                        limit=constants.LIMIT, rapids=False, keep_unsupported=False, clearance=None,
+                        progress=None, keep_points=True) -> Correction:
+        """Sample, evaluate the field and emit, chunk by chunk; ``write`` takes the output bytes.
+
+        Every check runs over the whole program before the caller's output counts as written: a
+        refusal raises after the last chunk, and the callers discard what ``write`` received.
         """
         say = progress or (lambda msg: None)
         uns = self.unsupported
@@ -362,74 +396,101 @@ class Program:
                 "(--keep-unsupported / keep_unsupported=True copies those blocks unchanged and corrects the rest)",
                 [asdict(u) for u in uns],
             )
+        if not chord_tol > 0:
+            raise ValueError(f"chord_tol must be > 0 mm, got {chord_tol}")
+        if not max_segment > 0:
+            raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
         if not limit > 0:
             raise ValueError(f"limit must be > 0 mm, got {limit}")
-        say("sampling")
         grid = getattr(field, "grid_lines", None)
-        sampled, pts, rec = self._sample(chord_tol, max_segment, rapids, True, grid)
-        r = self._records()
-        lines = r["line"][rec]
-        say(f"evaluating the field at {len(pts):,} points")
-        try:
-            disp = np.asarray(field(pts), dtype=np.float64)
-        except _OutsideError as e:
-            idx = e.indices
-            first = [
-                {"line": int(lines[i]), "position": pts[i].round(4).tolist()} for i in idx[:10]
-            ]
+        gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
+        run = _NativeCorrector(self._p, float(chord_tol), float(max_segment), bool(rapids), gx, gy)
+        rec_line = np.frombuffer(self._p.record_lines(), dtype="<u4")
+        n_lines = self.lines
+        kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        outside: list[dict] = []
+        n_outside, domain = 0, ""
+        worst: list[tuple[float, int, np.ndarray, np.ndarray]] = []  # the largest displacements seen
+        n_pts, total, refused = 0, 0.0, False
+        while (chunk := run.next(_CHUNK_LINES)) is not None:
+            first, end, xyz, rec = chunk
+            say(f"correcting lines {first + 1:,}-{end:,} of {n_lines:,}")
+            pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
+            lines = rec_line[np.frombuffer(rec, dtype="<u4")].astype(np.int64) + 1
+            try:
+                disp = np.ascontiguousarray(field(pts), dtype=np.float64) if len(pts) else np.zeros((0, 3))
+            except _OutsideError as e:
+                refused = True
+                n_outside += len(e.indices)
+                domain = e.domain
+                outside += [{"line": int(lines[i]), "position": pts[i].round(4).tolist()}
+                            for i in e.indices[: max(0, 10 - len(outside))]]
+                run.emit(np.zeros_like(pts))  # keeps the run in step; the output is discarded
+                continue
+            if disp.shape != pts.shape:
+                raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
+            if not np.isfinite(disp).all():
+                bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
+                raise RefusedError(f"{self.name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
+            norms = np.sqrt(np.einsum("ij,ij->i", disp, disp))
+            n_pts += len(norms)
+            total += float(norms.sum())
+            if len(norms):
+                top = np.argpartition(-norms, min(10, len(norms)) - 1)[:10]
+                worst = sorted(worst + [(float(norms[i]), int(lines[i]), pts[i].copy(), disp[i].copy()) for i in top],
+                               key=lambda w: -w[0])[:10]
+                refused |= worst[0][0] > limit
+            if keep_points:
+                kept.append((pts.copy(), disp, lines))
+            if not refused:
+                write(run.emit(disp))
+            else:
+                run.emit(np.zeros_like(pts))  # keeps the run in step; the output is discarded
+        if n_outside:
             raise RefusedError(
-                f"{self.name}: {len(idx):,} point(s) outside the field's domain {e.domain}; nothing written "
-                f"(first at line {first[0]['line']}); use outside='clamp' or 'extrapolate' to allow them",
-                first,
-            ) from None
-        if disp.shape != pts.shape:
-            raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
-        if not np.isfinite(disp).all():
-            bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
-            raise RefusedError(f"{self.name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
-        norms = np.linalg.norm(disp, axis=1) if len(disp) else np.zeros(0)
-        worst = float(norms.max()) if len(norms) else 0.0
-        if worst > limit:
-            order = np.argsort(-norms)[:10]
+                f"{self.name}: {n_outside:,} point(s) outside the field's domain {domain}; nothing written "
+                f"(first at line {outside[0]['line']}); use outside='clamp' or 'extrapolate' to allow them",
+                outside,
+            )
+        worst_norm = worst[0][0] if worst else 0.0
+        if worst_norm > limit:
             details = [
-                {
-                    "line": int(lines[i]),
-                    "position": pts[i].round(4).tolist(),
-                    "displacement": disp[i].round(4).tolist(),
-                    "magnitude": round(float(norms[i]), 4),
-                }
-                for i in order
+                {"line": ln, "position": p.round(4).tolist(), "displacement": d.round(4).tolist(), "magnitude": round(m, 4)}
+                for m, ln, p, d in worst
             ]
             raise RefusedError(
-                f"{self.name}: displacement {worst:.4f} mm at line {details[0]['line']} exceeds the limit "
+                f"{self.name}: displacement {worst_norm:.4f} mm at line {details[0]['line']} exceeds the limit "
                 f"{limit:g} mm; nothing written",
                 details,
             )
-        say("writing")
-        try:
-            out, stats = self._p.emit(sampled, np.ascontiguousarray(disp, dtype=np.float64))
-        except EngineError as e:  # pragma: no cover - the emitter validates its own input
-            raise _engine_error(e, self.name) from None
+        tail = run.finish()
+        if not refused:
+            write(tail)
+        stats = run.stats()
         warnings = list(self._clearance_warnings(field, clearance))
         if keep_unsupported and uns:
             warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
-        # the corrected program is parsed only if it is used as a program again
-        result = Program(out, name=f"{self.name} (corrected)", lazy=True)
-        result.correction = Correction(
+        if keep_points:
+            pts_all, disp_all, line_all = (np.concatenate([k[i] for k in kept]) if kept else
+                                           np.zeros((0, 3) if i < 2 else 0, dtype=np.float64 if i < 2 else np.int64)
+                                           for i in range(3))
+        else:
+            pts_all = disp_all = line_all = None
+        return Correction(
             lines_in=stats["lines_in"],
             lines_out=stats["lines_out"],
             blocks_changed=stats["blocks_changed"],
             lines_added=stats["lines_added"],
             arcs_linearised=stats["arcs_linearised"],
-            max_displacement=worst,
-            mean_displacement=float(norms.mean()) if len(norms) else 0.0,
-            points=pts,
-            displacements=disp,
-            line=lines,
+            max_displacement=worst_norm,
+            mean_displacement=total / n_pts if n_pts else 0.0,
+            n_points=n_pts,
+            points=pts_all,
+            displacements=disp_all,
+            line=line_all,
             unsupported_kept=uns if keep_unsupported else (),
             warnings=tuple(warnings),
         )
-        return result
 
     def _clearance_warnings(self, field, clearance):
         if clearance is None:
@@ -462,6 +523,32 @@ class Program:
 
     def __repr__(self) -> str:
         return f"<Program {self.name!r}: {self.lines} lines>"
+
+
+class _BackgroundWriter:
+    """Writes chunks to a file in a second thread, so the disk works while the next chunk is
+    computed (file writes release the GIL). At most two chunks wait; errors surface on exit."""
+
+    def __init__(self, f):
+        self._f = f
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ncadapt-writer")
+        self._pending: list = []
+
+    def write(self, data: bytes) -> None:
+        if len(self._pending) >= 2:
+            self._pending.pop(0).result()
+        self._pending.append(self._pool.submit(self._f.write, data))
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            for fut in self._pending:
+                fut.result()
+        finally:
+            self._pool.shutdown(wait=True)
+        return False
 
 
 def _wcs_name(code: int) -> str:

@@ -2,6 +2,7 @@
 //!
 //! Arrays cross as little-endian bytes that the Python side views with `numpy.frombuffer`.
 
+use nc::emit::{EmitState, EmitStats, Emitter};
 use nc::interp::{Interp, NAXES};
 use nc::sample::{SampleOpts, Samples};
 use nc::NcError;
@@ -37,35 +38,38 @@ fn u32_bytes<'py>(py: Python<'py>, v: impl Iterator<Item = u32>) -> Bound<'py, P
     raw_bytes(py, &v)
 }
 
+/// The values of a C-contiguous float64 buffer.
+fn f64_slice(buf: &PyBuffer<f64>) -> PyResult<&[f64]> {
+    if !buf.is_c_contiguous() {
+        return Err(PyValueError::new_err("displacements must be a C-contiguous float64 array"));
+    }
+    // SAFETY: a contiguous buffer of item_count f64 values, held alive by `buf` while we read;
+    // the caller passes an array it does not change during the call.
+    Ok(unsafe { std::slice::from_raw_parts(buf.buf_ptr() as *const f64, buf.item_count()) })
+}
+
+fn stats_dict<'py>(py: Python<'py>, s: &EmitStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("lines_in", s.lines_in)?;
+    d.set_item("lines_out", s.lines_out)?;
+    d.set_item("blocks_changed", s.blocks_changed)?;
+    d.set_item("lines_added", s.lines_added)?;
+    d.set_item("arcs_linearised", s.arcs_linearised)?;
+    Ok(d)
+}
+
 /// A parsed program (native handle).
 #[pyclass(module = "ncadapt._nc", frozen)]
 struct Program {
     inner: nc::Program,
 }
 
-/// Samples of a program (native handle), kept to be passed back to `emit`.
-#[pyclass(module = "ncadapt._nc", frozen)]
-struct Sampled {
-    inner: Samples,
-}
-
-#[pymethods]
-impl Sampled {
-    /// (xyz, rec) as bytes of float64 (3 per sample) and uint32 (record index per sample).
-    fn arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
-        let s = &self.inner;
-        (raw_bytes(py, &s.xyz), raw_bytes(py, &s.rec))
-    }
-
-    fn __len__(&self) -> usize {
-        self.inner.t.len()
-    }
-}
-
 #[pymethods]
 impl Program {
     #[staticmethod]
-    fn parse(py: Python<'_>, data: Vec<u8>) -> PyResult<Self> {
+    fn parse(py: Python<'_>, data: &[u8]) -> PyResult<Self> {
+        // a borrowed slice, copied once (a Vec<u8> argument would be extracted byte by byte)
+        let data = data.to_vec();
         let inner = py.allow_threads(|| nc::Program::parse(data)).map_err(to_py)?;
         Ok(Program { inner })
     }
@@ -103,6 +107,11 @@ impl Program {
         Ok(d)
     }
 
+    /// The 0-based line of every record (u32 bytes).
+    fn record_lines<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        u32_bytes(py, self.inner.interp.records.iter().map(|r| r.line))
+    }
+
     /// Unsupported constructs: list of (line 1-based, col 1-based, construct, blocks).
     fn unsupported(&self) -> Vec<(u32, u32, String, u32)> {
         self.inner.interp.unsupported.iter().map(|u| (u.line + 1, u.col + 1, u.construct.clone(), u.blocks)).collect()
@@ -128,45 +137,176 @@ impl Program {
         Ok(d)
     }
 
+    /// Sample the program: (xyz, rec) as bytes of float64 (3 per sample) and uint32 (record
+    /// index per sample).
     #[pyo3(signature = (chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y))]
-    fn sample(
+    #[allow(clippy::too_many_arguments)]
+    fn sample<'py>(
         &self,
-        py: Python<'_>,
+        py: Python<'py>,
         chord_tol: f64,
         max_segment: f64,
         include_rapids: bool,
         only_supported: bool,
         grid_x: Vec<f64>,
         grid_y: Vec<f64>,
-    ) -> Sampled {
+    ) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
         let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y };
-        let inner = py.allow_threads(|| self.inner.sample(&opts));
-        Sampled { inner }
+        let s = py.allow_threads(|| self.inner.sample(&opts));
+        (raw_bytes(py, &s.xyz), raw_bytes(py, &s.rec))
+    }
+}
+
+/// A sampled chunk for Python: first line, end line, xyz bytes, record bytes.
+type ChunkArrays<'py> = (usize, usize, Bound<'py, PyBytes>, Bound<'py, PyBytes>);
+
+/// One chunk handed to the emitting thread: its lines, samples and displacements.
+struct Job {
+    lines: (usize, usize),
+    samples: Samples,
+    disp: Vec<f64>,
+}
+
+/// What the emitting thread gives back: the output bytes and the buffers to reuse.
+type Done = Result<(Vec<u8>, Samples, Vec<f64>), NcError>;
+
+/// A correction run in chunks of lines: `next` samples the next lines, the caller evaluates its
+/// field there, `emit` hands those lines with their displacements to an emitting thread and
+/// returns the output of the chunk before (so emitting one chunk overlaps sampling and
+/// evaluating the next); `finish` returns the last output. Only two chunks are held at a time.
+#[pyclass(module = "ncadapt._nc")]
+struct Corrector {
+    prog: Py<Program>,
+    opts: SampleOpts,
+    /// The chunk sampled by `next` and not yet emitted.
+    current: Option<((usize, usize), Samples)>,
+    next_line: usize,
+    /// Buffers back from the emitting thread.
+    spare: Vec<(Samples, Vec<f64>)>,
+    jobs: Option<std::sync::mpsc::Sender<Job>>,
+    done: std::sync::Mutex<std::sync::mpsc::Receiver<Done>>,
+    in_flight: bool,
+    worker: Option<std::thread::JoinHandle<EmitState>>,
+    stats: Option<EmitStats>,
+}
+
+#[pymethods]
+impl Corrector {
+    #[new]
+    #[pyo3(signature = (program, chord_tol, max_segment, include_rapids, grid_x, grid_y))]
+    fn new(py: Python<'_>, program: Py<Program>, chord_tol: f64, max_segment: f64, include_rapids: bool, grid_x: Vec<f64>, grid_y: Vec<f64>) -> Self {
+        let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported: true, grid_x, grid_y };
+        let (jobs, job_rx) = std::sync::mpsc::channel::<Job>();
+        let (done_tx, done) = std::sync::mpsc::channel::<Done>();
+        let shared = program.clone_ref(py);
+        let worker = std::thread::spawn(move || {
+            // a frozen, Sync pyclass: its Rust data is read without the GIL
+            let p = &shared.get().inner;
+            let mut state = EmitState::new(&p.interp);
+            for job in job_rx {
+                let mut out = Vec::new();
+                let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, state);
+                let r = em.lines(job.lines.0..job.lines.1, &job.samples, &job.disp, &mut out);
+                state = em.into_state();
+                let failed = r.is_err();
+                if done_tx.send(r.map(|_| (out, job.samples, job.disp))).is_err() || failed {
+                    break;
+                }
+            }
+            // dropping `shared` without the GIL is deferred by PyO3 to the next time it is held
+            state
+        });
+        Corrector {
+            prog: program,
+            opts,
+            current: None,
+            next_line: 0,
+            spare: Vec::new(),
+            jobs: Some(jobs),
+            done: std::sync::Mutex::new(done),
+            in_flight: false,
+            worker: Some(worker),
+            stats: None,
+        }
     }
 
-    /// Write the program with displacements: a C-contiguous float64 buffer, 3 per sample.
-    fn emit<'py>(&self, py: Python<'py>, samples: &Sampled, disp: PyBuffer<f64>) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyDict>)> {
-        if !disp.is_c_contiguous() {
-            return Err(PyValueError::new_err("displacements must be a C-contiguous float64 array"));
+    /// Sample the next `max_lines` lines: (first line, end line, xyz bytes, record bytes), or
+    /// None at the end of the program.
+    fn next<'py>(&mut self, py: Python<'py>, max_lines: usize) -> PyResult<Option<ChunkArrays<'py>>> {
+        if self.current.is_some() {
+            return Err(PyValueError::new_err("emit the current chunk before sampling the next"));
         }
-        // SAFETY: a contiguous buffer of item_count f64 values, held alive by `disp` while we read;
-        // the caller passes an array it does not change during the call.
-        let d: &[f64] = unsafe { std::slice::from_raw_parts(disp.buf_ptr() as *const f64, disp.item_count()) };
-        let (out, stats) = py.allow_threads(|| self.inner.emit(&samples.inner, d)).map_err(to_py)?;
-        let st = PyDict::new(py);
-        st.set_item("lines_in", stats.lines_in)?;
-        st.set_item("lines_out", stats.lines_out)?;
-        st.set_item("blocks_changed", stats.blocks_changed)?;
-        st.set_item("lines_added", stats.lines_added)?;
-        st.set_item("arcs_linearised", stats.arcs_linearised)?;
-        Ok((PyBytes::new(py, &out), st))
+        let p = &self.prog.get().inner;
+        let n = p.lexed.lines.len();
+        let a = self.next_line;
+        if a >= n {
+            return Ok(None);
+        }
+        let b = (a + max_lines.max(1)).min(n);
+        let mut samples = self.spare.pop().map(|(s, _)| s).unwrap_or_default();
+        let opts = &self.opts;
+        py.allow_threads(|| nc::sample::sample_range(&p.interp, opts, p.records_of_lines(a..b), &mut samples));
+        self.next_line = b;
+        let r = (a, b, raw_bytes(py, &samples.xyz), raw_bytes(py, &samples.rec));
+        self.current = Some(((a, b), samples));
+        Ok(Some(r))
+    }
+
+    /// Hand the current chunk with its displacements (C-contiguous float64, 3 per sample) to the
+    /// emitting thread; returns the output of the chunk handed before (empty for the first).
+    fn emit<'py>(&mut self, py: Python<'py>, disp: PyBuffer<f64>) -> PyResult<Bound<'py, PyBytes>> {
+        let (lines, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no chunk sampled"))?;
+        let d = f64_slice(&disp)?;
+        if d.len() != samples.xyz.len() {
+            return Err(PyValueError::new_err(format!("displacements have {} values, expected {}", d.len(), samples.xyz.len())));
+        }
+        let mut buf = self.spare.pop().map(|(_, v)| v).unwrap_or_default();
+        buf.clear();
+        buf.extend_from_slice(d);
+        let prev = self.collect(py)?;
+        let jobs = self.jobs.as_ref().ok_or_else(|| PyValueError::new_err("the correction has finished"))?;
+        jobs.send(Job { lines, samples, disp: buf }).map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
+        self.in_flight = true;
+        Ok(PyBytes::new(py, &prev))
+    }
+
+    /// The output of the last chunk; ends the run (its counts are then in `stats`).
+    fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let last = self.collect(py)?;
+        self.jobs = None;
+        if let Some(w) = self.worker.take() {
+            let st = py.allow_threads(|| w.join()).map_err(|_| PyValueError::new_err("the emitting thread failed"))?;
+            self.stats = Some(st.stats);
+        }
+        Ok(PyBytes::new(py, &last))
+    }
+
+    /// The counts of the finished run.
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let st = self.stats.as_ref().ok_or_else(|| PyValueError::new_err("call finish first"))?;
+        stats_dict(py, st)
+    }
+}
+
+impl Corrector {
+    /// Wait for the chunk in flight, keep its buffers, return its output.
+    fn collect(&mut self, py: Python<'_>) -> PyResult<Vec<u8>> {
+        if !self.in_flight {
+            return Ok(Vec::new());
+        }
+        self.in_flight = false;
+        let done = &self.done;
+        let r = py.allow_threads(|| done.lock().map_err(|_| ()).and_then(|rx| rx.recv().map_err(|_| ()))).map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
+        let (out, samples, disp) = r.map_err(to_py)?;
+        self.spare.push((samples, disp));
+        Ok(out)
     }
 }
 
 #[pymodule]
 fn _nc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Program>()?;
-    m.add_class::<Sampled>()?;
+    m.add_class::<Corrector>()?;
     m.add("EngineError", m.py().get_type::<EngineError>())?;
     Ok(())
 }

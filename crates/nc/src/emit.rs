@@ -30,12 +30,16 @@ pub struct Format {
     pub style: NumberStyle,
     pub dec_mm: usize,
     pub dec_inch: usize,
+    half_mm: f64,
+    half_inch: f64,
 }
 
 impl Format {
     pub fn new(style: NumberStyle) -> Self {
         let d = style.max_decimals as usize;
-        Format { style, dec_mm: d.max(4), dec_inch: d.max(5) }
+        let (dec_mm, dec_inch) = (d.max(4), d.max(5));
+        let half = |dec: usize| 0.5 * 10f64.powi(-(dec as i32));
+        Format { style, dec_mm, dec_inch, half_mm: half(dec_mm), half_inch: half(dec_inch) }
     }
 
     #[inline]
@@ -50,7 +54,11 @@ impl Format {
     /// Half of the last written digit, in program units.
     #[inline]
     pub fn half(&self, inch: bool) -> f64 {
-        0.5 * 10f64.powi(-(self.decimals(inch) as i32))
+        if inch {
+            self.half_inch
+        } else {
+            self.half_mm
+        }
     }
 
     /// Write `v` in the program's style and return the value the written text stands for.
@@ -65,12 +73,10 @@ impl Format {
             out.extend_from_slice(t.as_bytes());
             return t.parse().unwrap_or(v);
         }
-        let m = scaled.round() as i64;
+        // round half away from zero with one conversion (f64::round is a library call)
+        let m = if scaled >= 0.0 { (scaled + 0.5) as i64 } else { (scaled - 0.5) as i64 };
         let a = m.unsigned_abs();
-        let (int, mut frac) = (a / scale, a % scale);
-        if m < 0 {
-            out.push(b'-');
-        }
+        let (mut int, mut frac) = (a / scale, a % scale);
         let mut digits = dec;
         if !self.style.fixed {
             while digits > 0 && frac % 10 == 0 {
@@ -78,47 +84,46 @@ impl Format {
                 digits -= 1;
             }
         }
+        // digits are written from the right into a buffer, then copied once
+        let mut buf = [0u8; 48];
+        let mut i = buf.len();
+        for _ in 0..digits {
+            i -= 1;
+            buf[i] = b'0' + (frac % 10) as u8;
+            frac /= 10;
+        }
+        if digits == 0 && !self.style.bare_point {
+            i -= 1;
+            buf[i] = b'0';
+        }
+        i -= 1;
+        buf[i] = b'.';
         if !(self.style.no_leading_zero && int == 0 && digits > 0) {
-            write_uint(out, int);
-        }
-        out.push(b'.');
-        if digits == 0 {
-            if !self.style.bare_point {
-                out.push(b'0');
-            }
-        } else {
-            let start = out.len();
-            write_uint(out, frac);
-            let written = out.len() - start;
-            if written < digits {
-                // zero padding after the point: 0.0012 has frac 12 with 4 digits
-                out.splice(start..start, std::iter::repeat_n(b'0', digits - written));
+            loop {
+                i -= 1;
+                buf[i] = b'0' + (int % 10) as u8;
+                int /= 10;
+                if int == 0 {
+                    break;
+                }
             }
         }
+        if m < 0 {
+            i -= 1;
+            buf[i] = b'-';
+        }
+        out.extend_from_slice(&buf[i..]);
         m as f64 / scale as f64
     }
 }
 
-#[inline]
-fn write_uint(out: &mut Vec<u8>, mut v: u64) {
-    let mut buf = [0u8; 20];
-    let mut i = buf.len();
-    loop {
-        i -= 1;
-        buf[i] = b'0' + (v % 10) as u8;
-        v /= 10;
-        if v == 0 {
-            break;
-        }
-    }
-    out.extend_from_slice(&buf[i..]);
-}
-
-/// One edit of a line: replace bytes [start, end) by `text`.
+/// One edit of a line: replace bytes [start, end) by the arena's bytes [t0, t1).
+#[derive(Clone, Copy, Debug)]
 struct Edit {
     start: u32,
     end: u32,
-    text: Vec<u8>,
+    t0: u32,
+    t1: u32,
 }
 
 fn motion_text(m: Motion, padded: bool) -> &'static str {
@@ -152,6 +157,37 @@ fn axis_index(letter: u8) -> Option<usize> {
     AXES.iter().position(|&a| a == letter)
 }
 
+/// What the emitter carries from one run of lines to the next: the position the output's
+/// numbers give, the output's modal motion, the counts, and buffers reused from line to line.
+#[derive(Clone, Debug)]
+pub struct EmitState {
+    epos: [f64; NAXES],
+    /// Motion mode the output has in force where it differs from the program's.
+    out_motion: Option<Motion>,
+    pub stats: EmitStats,
+    edits: Vec<Edit>,
+    /// Replacement texts of the edits, one after the other.
+    arena: Vec<u8>,
+    /// Lines added after the current line, one after the other, and where each ends.
+    tail: Vec<u8>,
+    tail_ends: Vec<usize>,
+}
+
+impl EmitState {
+    /// The state at the start of a program.
+    pub fn new(it: &Interp) -> Self {
+        EmitState {
+            epos: it.origin,
+            out_motion: None,
+            stats: EmitStats::default(),
+            edits: Vec::new(),
+            arena: Vec::new(),
+            tail: Vec::new(),
+            tail_ends: Vec::new(),
+        }
+    }
+}
+
 /// Emits a corrected program.
 pub struct Emitter<'a> {
     src: &'a [u8],
@@ -159,34 +195,37 @@ pub struct Emitter<'a> {
     it: &'a Interp,
     fmt: Format,
     eol: &'static [u8],
-    epos: [f64; NAXES],
-    /// Motion mode the output has in force where it differs from the program's.
-    out_motion: Option<Motion>,
-    pub stats: EmitStats,
-    out: Vec<u8>,
-    edits: Vec<Edit>,
-    tail: Vec<Vec<u8>>,
+    st: EmitState,
 }
 
 impl<'a> Emitter<'a> {
     pub fn new(src: &'a [u8], lx: &'a Lexed, it: &'a Interp) -> Self {
-        Emitter {
-            src,
-            lx,
-            it,
-            fmt: Format::new(lx.style),
-            eol: if lx.crlf { b"\r\n" } else { b"\n" },
-            epos: it.origin,
-            out_motion: None,
-            stats: EmitStats::default(),
-            out: Vec::with_capacity(src.len() + src.len() / 8),
-            edits: Vec::new(),
-            tail: Vec::new(),
-        }
+        Self::resume(src, lx, it, EmitState::new(it))
     }
 
-    /// Write the program with `disp` (n * 3 mm, one per sample) applied to the sampled blocks.
+    /// Continue with the state a previous emitter left ([`Emitter::into_state`]).
+    pub fn resume(src: &'a [u8], lx: &'a Lexed, it: &'a Interp, st: EmitState) -> Self {
+        Emitter { src, lx, it, fmt: Format::new(lx.style), eol: if lx.crlf { b"\r\n" } else { b"\n" }, st }
+    }
+
+    pub fn into_state(self) -> EmitState {
+        self.st
+    }
+
+    pub fn stats(&self) -> &EmitStats {
+        &self.st.stats
+    }
+
+    /// Write the whole program with `disp` (n * 3 mm, one per sample) applied to the sampled blocks.
     pub fn run(mut self, samples: &Samples, disp: &[f64]) -> Result<(Vec<u8>, EmitStats), NcError> {
+        let mut out = Vec::with_capacity(self.src.len() + self.src.len() / 8);
+        self.lines(0..self.lx.lines.len(), samples, disp, &mut out)?;
+        Ok((out, self.st.stats))
+    }
+
+    /// Write lines `range` to `out`. `samples` must hold every sampled record of those lines
+    /// ([`crate::sample::sample_range`]) and `disp` one displacement per sample.
+    pub fn lines(&mut self, range: std::ops::Range<usize>, samples: &Samples, disp: &[f64], out: &mut Vec<u8>) -> Result<(), NcError> {
         if disp.len() != samples.xyz.len() {
             return Err(NcError::Usage(format!(
                 "displacements have {} values, expected {} (3 per sample)",
@@ -194,71 +233,89 @@ impl<'a> Emitter<'a> {
                 samples.xyz.len()
             )));
         }
-        let nlines = self.lx.lines.len();
-        self.stats.lines_in = nlines as u64;
-        for li in 0..nlines {
+        let nrec = samples.range.len();
+        for li in range {
             let line = &self.lx.lines[li];
             let ri = self.it.line_record[li];
-            self.edits.clear();
-            self.tail.clear();
+            self.st.edits.clear();
+            self.st.arena.clear();
+            self.st.tail.clear();
+            self.st.tail_ends.clear();
+            self.st.stats.lines_in += 1;
             let words = self.lx.line_words(li);
-            let explicit_motion = words.iter().any(is_motion_g);
             if ri != u32::MAX {
                 let ri = ri as usize;
-                let (first, count) = samples.range[ri];
-                if count > 0 {
-                    let f = first as usize;
-                    let c = count as usize;
+                if ri < samples.rec0 || ri >= samples.rec0 + nrec {
+                    return Err(NcError::Usage(format!("line {} has a block that was not sampled", li + 1)));
+                }
+                let (f, c) = samples.of(ri);
+                if c > 0 {
                     self.corrected(li, ri, &samples.xyz[3 * f..3 * (f + c)], &samples.t[f..f + c], &disp[3 * f..3 * (f + c)]);
                 } else {
                     self.uncorrected(li, ri);
                 }
-            } else if explicit_motion {
-                self.out_motion = None;
+            } else if words.iter().any(is_motion_g) {
+                self.st.out_motion = None;
             }
             // copy the line with its edits, then any added lines
             let (ls, le, lee) = (line.start as usize, line.end as usize, line.eol_end as usize);
-            if self.edits.is_empty() {
-                self.out.extend_from_slice(&self.src[ls..lee]);
+            let src = self.src;
+            let st = &mut self.st;
+            let has_tail = !st.tail_ends.is_empty();
+            if st.edits.is_empty() {
+                out.extend_from_slice(&src[ls..lee]);
             } else {
-                self.stats.blocks_changed += 1;
-                self.edits.sort_by_key(|e| (e.start, e.end));
+                st.stats.blocks_changed += 1;
+                st.edits.sort_by_key(|e| (e.start, e.end));
                 let mut at = ls;
-                for e in &self.edits {
+                for e in &st.edits {
                     let (s, t) = (e.start as usize, e.end as usize);
                     if s >= at {
-                        self.out.extend_from_slice(&self.src[at..s]);
+                        out.extend_from_slice(&src[at..s]);
                         at = t;
                     }
-                    self.out.extend_from_slice(&e.text);
+                    out.extend_from_slice(&st.arena[e.t0 as usize..e.t1 as usize]);
                 }
-                self.out.extend_from_slice(&self.src[at..le]);
-                if self.tail.is_empty() {
-                    self.out.extend_from_slice(&self.src[le..lee]);
+                out.extend_from_slice(&src[at..le]);
+                if !has_tail {
+                    out.extend_from_slice(&src[le..lee]);
                 }
             }
-            if !self.tail.is_empty() {
-                let own_eol: &[u8] = if lee > le { &self.src[le..lee] } else { self.eol };
-                if self.edits.is_empty() {
-                    // the line was copied with its ending; nothing to add between
-                    if lee == le {
-                        self.out.extend_from_slice(own_eol);
-                    }
-                } else {
-                    self.out.extend_from_slice(own_eol);
+            if has_tail {
+                let own_eol: &[u8] = if lee > le { &src[le..lee] } else { self.eol };
+                // a copied line came with its ending; an edited one, or a last line without one, needs it
+                if !st.edits.is_empty() || lee == le {
+                    out.extend_from_slice(own_eol);
                 }
-                let n = self.tail.len();
-                for (k, t) in std::mem::take(&mut self.tail).into_iter().enumerate() {
-                    self.out.extend_from_slice(&t);
+                let n = st.tail_ends.len();
+                let mut from = 0;
+                for (k, &to) in st.tail_ends.iter().enumerate() {
+                    out.extend_from_slice(&st.tail[from..to]);
+                    from = to;
                     if k + 1 < n || lee > le {
-                        self.out.extend_from_slice(own_eol);
+                        out.extend_from_slice(own_eol);
                     }
                 }
-                self.stats.lines_added += n as u64;
+                st.stats.lines_added += n as u64;
             }
+            st.stats.lines_out = st.stats.lines_in + st.stats.lines_added;
         }
-        self.stats.lines_out = self.stats.lines_in + self.stats.lines_added;
-        Ok((self.out, self.stats))
+        Ok(())
+    }
+
+    /// Replace source bytes [start, end) by the number `v` in the program's style; the value written.
+    fn edit_number(&mut self, start: u32, end: u32, v: f64, inch: bool) -> f64 {
+        let t0 = self.st.arena.len() as u32;
+        let w = self.fmt.number(v, inch, &mut self.st.arena);
+        self.st.edits.push(Edit { start, end, t0, t1: self.st.arena.len() as u32 });
+        w
+    }
+
+    /// Replace source bytes [start, end) by `text`.
+    fn edit_bytes(&mut self, start: u32, end: u32, text: &[u8]) {
+        let t0 = self.st.arena.len() as u32;
+        self.st.arena.extend_from_slice(text);
+        self.st.edits.push(Edit { start, end, t0, t1: self.st.arena.len() as u32 });
     }
 
     fn unit(rec: &Record, k: usize) -> f64 {
@@ -292,17 +349,18 @@ impl<'a> Emitter<'a> {
     /// Insert the program's own motion word when the output's modal motion differs from it.
     fn restore_modal(&mut self, li: usize, rec: &Record, explicit: bool) {
         if explicit {
-            self.out_motion = None;
+            self.st.out_motion = None;
             return;
         }
-        if let Some(m) = self.out_motion {
+        if let Some(m) = self.st.out_motion {
             if m != rec.motion && rec.motion != Motion::Other {
-                let mut text = motion_text(rec.motion, self.lx.style.padded_g).as_bytes().to_vec();
-                text.extend_from_slice(if self.lx.style.spaced { b" " } else { b"" });
                 let at = block_start(self.lx, li);
-                self.edits.push(Edit { start: at, end: at, text });
+                self.edit_bytes(at, at, motion_text(rec.motion, self.lx.style.padded_g).as_bytes());
+                let sep = self.sep();
+                self.st.arena.extend_from_slice(sep);
+                self.st.edits.last_mut().expect("just pushed").t1 = self.st.arena.len() as u32;
             }
-            self.out_motion = None;
+            self.st.out_motion = None;
         }
     }
 
@@ -317,7 +375,7 @@ impl<'a> Emitter<'a> {
         if rec.motion != Motion::Other {
             self.restore_modal(li, rec, explicit);
         } else if explicit {
-            self.out_motion = None;
+            self.st.out_motion = None;
         }
         let rewrite = rec.supported && rec.incremental && rec.motion != Motion::Other;
         let mut written = [None; NAXES];
@@ -325,11 +383,9 @@ impl<'a> Emitter<'a> {
             for w in words {
                 if let Some(k) = axis_index(w.letter) {
                     let u = Self::unit(rec, k);
-                    let want = (rec.end[k] - self.epos[k]) / u;
+                    let want = (rec.end[k] - self.st.epos[k]) / u;
                     if want.is_finite() && (want - w.value).abs() >= self.fmt.half(rec.inch) {
-                        let mut text = Vec::new();
-                        let v = self.fmt.number(want, rec.inch, &mut text);
-                        self.edits.push(Edit { start: w.num_start, end: w.end, text });
+                        let v = self.edit_number(w.num_start, w.end, want, rec.inch);
                         written[k] = Some(v * u);
                     }
                 }
@@ -337,10 +393,10 @@ impl<'a> Emitter<'a> {
         }
         for k in 0..NAXES {
             let named = rec.named & (1 << k) != 0;
-            self.epos[k] = match written[k] {
-                Some(d) => self.epos[k] + d,
+            self.st.epos[k] = match written[k] {
+                Some(d) => self.st.epos[k] + d,
                 None if named && !rec.incremental => rec.end[k],
-                None => self.epos[k] + (rec.end[k] - start[k]),
+                None => self.st.epos[k] + (rec.end[k] - start[k]),
             };
         }
     }
@@ -352,7 +408,7 @@ impl<'a> Emitter<'a> {
         let start = start_of(it, ri);
         let n = ts.len();
         let words = lx.line_words(li);
-        let epos0 = self.epos;
+        let epos0 = self.st.epos;
         let explicit = words.iter().any(is_motion_g);
         let d0 = [disp[0], disp[1], disp[2]];
         let uniform = disp.chunks_exact(3).all(|d| (0..3).all(|k| (d[k] - d0[k]).abs() <= 1e-9));
@@ -371,7 +427,7 @@ impl<'a> Emitter<'a> {
             p
         };
         // the output starts this block where the corrected path expects it
-        let on_path = (0..3).all(|a| (self.epos[a] - (start[a] + d0[a])).abs() < half_mm);
+        let on_path = (0..3).all(|a| (self.st.epos[a] - (start[a] + d0[a])).abs() < half_mm);
         let keep_arc = rec.motion.is_arc() && uniform && on_path;
         // a straight move whose corrected pieces all lie on one line is written as one move
         let only_xyz = rec.named & !0b111 == 0;
@@ -381,7 +437,7 @@ impl<'a> Emitter<'a> {
                 let e = target_at(n - 1, 1.0);
                 (0..n - 1).all(|k| {
                     let p = target_at(k, ts[k]);
-                    dist_to_segment(&p, &self.epos, &e) <= MERGE_TOL_MM
+                    dist_to_segment(&p, &self.st.epos, &e) <= MERGE_TOL_MM
                 })
             });
         if straight || keep_arc {
@@ -396,20 +452,21 @@ impl<'a> Emitter<'a> {
         // split or linearised: the original line carries the first piece
         let linearise = rec.motion.is_arc();
         if linearise {
-            self.stats.arcs_linearised += 1;
-            let g1 = motion_text(Motion::Feed, self.lx.style.padded_g).as_bytes().to_vec();
+            self.st.stats.arcs_linearised += 1;
+            let g1 = motion_text(Motion::Feed, self.lx.style.padded_g).as_bytes();
             if let Some(w) = words.iter().find(|w| is_motion_g(w)) {
-                self.edits.push(Edit { start: w.start, end: w.end, text: g1 });
+                self.edit_bytes(w.start, w.end, g1);
             } else {
-                let mut text = g1;
-                text.extend_from_slice(self.sep());
                 let at = block_start(self.lx, li);
-                self.edits.push(Edit { start: at, end: at, text });
+                self.edit_bytes(at, at, g1);
+                let sep = self.sep();
+                self.st.arena.extend_from_slice(sep);
+                self.st.edits.last_mut().expect("just pushed").t1 = self.st.arena.len() as u32;
             }
             for w in words.iter().filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P')) {
                 self.remove_word(li, w);
             }
-            self.out_motion = Some(Motion::Feed);
+            self.st.out_motion = Some(Motion::Feed);
         } else {
             self.restore_modal(li, rec, explicit);
         }
@@ -427,32 +484,37 @@ impl<'a> Emitter<'a> {
         let pieces: Vec<usize> = if !linearise && uniform && only_xyz { vec![n - 1] } else { (1..n).collect() };
         for &k in &pieces {
             let p = target_at(k, ts[k]);
-            let mut text = prefix.to_vec();
+            let t0 = self.st.tail.len();
+            let body = t0 + prefix.len();
+            self.st.tail.extend_from_slice(prefix);
             for a in 0..NAXES {
                 if a >= 3 && rec.named & (1 << a) == 0 {
                     continue;
                 }
                 let u = Self::unit(rec, a);
-                let want = if rec.incremental { (p[a] - self.epos[a]) / u } else { p[a] / u };
-                let differs = if rec.incremental { want.abs() >= self.fmt.half(rec.inch) } else { (p[a] - self.epos[a]).abs() / u >= self.fmt.half(rec.inch) };
+                let want = if rec.incremental { (p[a] - self.st.epos[a]) / u } else { p[a] / u };
+                let differs = if rec.incremental { want.abs() >= self.fmt.half(rec.inch) } else { (p[a] - self.st.epos[a]).abs() / u >= self.fmt.half(rec.inch) };
                 if differs {
-                    if text.len() > prefix.len() {
-                        text.extend_from_slice(self.sep());
+                    if self.st.tail.len() > body {
+                        let sep = self.sep();
+                        self.st.tail.extend_from_slice(sep);
                     }
-                    text.push(AXES[a]);
-                    let v = self.fmt.number(want, rec.inch, &mut text);
-                    self.epos[a] = if rec.incremental { self.epos[a] + v * u } else { v * u };
+                    self.st.tail.push(AXES[a]);
+                    let v = self.fmt.number(want, rec.inch, &mut self.st.tail);
+                    self.st.epos[a] = if rec.incremental { self.st.epos[a] + v * u } else { v * u };
                 }
             }
             if k + 1 == n && !stops.is_empty() {
-                if text.len() == prefix.len() {
-                    text.extend_from_slice(&stops[self.sep().len()..]);
+                if self.st.tail.len() == body {
+                    self.st.tail.extend_from_slice(&stops[self.sep().len()..]);
                 } else {
-                    text.extend_from_slice(&stops);
+                    self.st.tail.extend_from_slice(&stops);
                 }
             }
-            if text.len() > prefix.len() {
-                self.tail.push(text);
+            if self.st.tail.len() > body {
+                self.st.tail_ends.push(self.st.tail.len());
+            } else {
+                self.st.tail.truncate(t0);
             }
         }
     }
@@ -464,7 +526,7 @@ impl<'a> Emitter<'a> {
         while s > line_start && matches!(self.src[s as usize - 1], b' ' | b'\t') {
             s -= 1;
         }
-        self.edits.push(Edit { start: s, end: w.end, text: Vec::new() });
+        self.edit_bytes(s, w.end, b"");
     }
 
     /// Aim the block's axis words at `target` (mm), rewriting only what changes and adding the
@@ -478,41 +540,36 @@ impl<'a> Emitter<'a> {
             if let Some(a) = axis_index(w.letter) {
                 seen[a] = true;
                 let u = Self::unit(rec, a);
-                let want = if rec.incremental { (target[a] - self.epos[a]) / u } else { target[a] / u };
+                let want = if rec.incremental { (target[a] - self.st.epos[a]) / u } else { target[a] / u };
                 if (want - w.value).abs() < half {
-                    self.epos[a] = if rec.incremental { self.epos[a] + w.value * u } else { w.value * u };
+                    self.st.epos[a] = if rec.incremental { self.st.epos[a] + w.value * u } else { w.value * u };
                 } else {
-                    let mut text = Vec::new();
-                    let v = self.fmt.number(want, rec.inch, &mut text);
-                    self.edits.push(Edit { start: w.num_start, end: w.end, text });
-                    self.epos[a] = if rec.incremental { self.epos[a] + v * u } else { v * u };
+                    let v = self.edit_number(w.num_start, w.end, want, rec.inch);
+                    self.st.epos[a] = if rec.incremental { self.st.epos[a] + v * u } else { v * u };
                 }
             }
         }
         let at = self.insert_point(li);
-        let mut text = Vec::new();
+        let t0 = self.st.arena.len();
         for a in 0..NAXES {
             if seen[a] || (a >= 3 && rec.named & (1 << a) == 0) {
                 continue;
             }
             let u = Self::unit(rec, a);
-            let delta = (target[a] - self.epos[a]) / u;
+            let delta = (target[a] - self.st.epos[a]) / u;
             if delta.abs() >= half {
-                text.extend_from_slice(self.sep());
-                text.push(AXES[a]);
+                let sep = self.sep();
+                self.st.arena.extend_from_slice(sep);
+                self.st.arena.push(AXES[a]);
                 let want = if rec.incremental { delta } else { target[a] / u };
-                let v = self.fmt.number(want, rec.inch, &mut text);
-                self.epos[a] = if rec.incremental { self.epos[a] + v * u } else { v * u };
+                let v = self.fmt.number(want, rec.inch, &mut self.st.arena);
+                self.st.epos[a] = if rec.incremental { self.st.epos[a] + v * u } else { v * u };
             }
         }
-        if !text.is_empty() {
-            if !self.lx.style.spaced || self.lx.line_words(li).is_empty() {
-                // compact programs get no separator; a block that had no words gets none first
-                if text.first() == Some(&b' ') && self.lx.line_words(li).is_empty() {
-                    text.remove(0);
-                }
-            }
-            self.edits.push(Edit { start: at, end: at, text });
+        if self.st.arena.len() > t0 {
+            // a block that had no words gets no separator first
+            let skip = (self.st.arena[t0] == b' ' && self.lx.line_words(li).is_empty()) as usize;
+            self.st.edits.push(Edit { start: at, end: at, t0: (t0 + skip) as u32, t1: self.st.arena.len() as u32 });
         }
     }
 
@@ -527,16 +584,16 @@ impl<'a> Emitter<'a> {
             let lx = self.lx;
             if let Some(w) = lx.line_words(li).iter().find(|w| w.letter == letter(a)) {
                 if (want - w.value).abs() >= half {
-                    let mut text = Vec::new();
-                    self.fmt.number(want, rec.inch, &mut text);
-                    self.edits.push(Edit { start: w.num_start, end: w.end, text });
+                    self.edit_number(w.num_start, w.end, want, rec.inch);
                 }
             } else if want.abs() >= half {
                 let at = self.insert_point(li);
-                let mut text = self.sep().to_vec();
-                text.push(letter(a));
-                self.fmt.number(want, rec.inch, &mut text);
-                self.edits.push(Edit { start: at, end: at, text });
+                let t0 = self.st.arena.len() as u32;
+                let sep = self.sep();
+                self.st.arena.extend_from_slice(sep);
+                self.st.arena.push(letter(a));
+                self.fmt.number(want, rec.inch, &mut self.st.arena);
+                self.st.edits.push(Edit { start: at, end: at, t0, t1: self.st.arena.len() as u32 });
             }
         }
     }
@@ -621,6 +678,29 @@ mod tests {
         let src = "G21 G90 G0 X0 Y0 Z5\nG1 Z-1.000 F100 (cut)\nG2 X10.000 Y0.000 I5.000 J0.000\n";
         let out = correct(src, |_, _, _| [0.0, 0.0, 0.1], 1.0);
         assert_eq!(out, "G21 G90 G0 X0 Y0 Z5\nG1 Z-0.9000 F100 (cut)\nG2 X10.000 Y0.000 I5.000 J0.000\n");
+    }
+
+    #[test]
+    fn chunks_give_the_whole_output() {
+        let src = "G21 G90 G0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X10 Y0 I5 J0\nG91 G1 X2\nX2 Y3\n(c)\nG3 X-4 Y0 I-2 J0 M30\n";
+        let l = lex(src.as_bytes()).unwrap();
+        let it = interpret(&l).unwrap();
+        let o = SampleOpts { chord_tol: 0.002, max_segment: 0.7, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
+        let field = |s: &Samples| s.xyz.chunks_exact(3).flat_map(|p| [0.01 * p[1], 0.0, 0.02 * p[0]]).collect::<Vec<f64>>();
+        let s = sample(&it, &o);
+        let (whole, stats) = Emitter::new(src.as_bytes(), &l, &it).run(&s, &field(&s)).unwrap();
+        let prog = crate::Program::parse(src.as_bytes().to_vec()).unwrap();
+        for step in 1..4 {
+            let mut em = Emitter::new(src.as_bytes(), &l, &it);
+            let (mut out, mut part) = (Vec::new(), Samples::default());
+            for a in (0..l.lines.len()).step_by(step) {
+                let b = (a + step).min(l.lines.len());
+                crate::sample::sample_range(&it, &o, prog.records_of_lines(a..b), &mut part);
+                em.lines(a..b, &part, &field(&part), &mut out).unwrap();
+            }
+            assert_eq!(String::from_utf8(out).unwrap(), String::from_utf8(whole.clone()).unwrap(), "chunks of {step} lines");
+            assert_eq!(em.stats(), &stats);
+        }
     }
 
     #[test]

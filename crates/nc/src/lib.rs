@@ -31,8 +31,11 @@ impl Program {
         sample::sample(&self.interp, opts)
     }
 
-    /// Write the program with one displacement (mm) per sample of `samples`.
-    pub fn emit(&self, samples: &sample::Samples, disp: &[f64]) -> Result<(Vec<u8>, emit::EmitStats), NcError> {
-        emit::Emitter::new(&self.src, &self.lexed, &self.interp).run(samples, disp)
+    /// The records of lines `lines` (records are in line order).
+    pub fn records_of_lines(&self, lines: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        let r = &self.interp.records;
+        let a = r.partition_point(|x| (x.line as usize) < lines.start);
+        let b = a + r[a..].partition_point(|x| (x.line as usize) < lines.end);
+        a..b
     }
 }

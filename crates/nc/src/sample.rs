@@ -26,8 +26,19 @@ pub struct Samples {
     pub t: Vec<f64>,
     /// (n) record index of each piece.
     pub rec: Vec<u32>,
-    /// For every record: first sample index and count (count 0: not sampled).
+    /// Index of the first record sampled: `range[k]` belongs to record `rec0 + k`.
+    pub rec0: usize,
+    /// For every record sampled: first sample index and count (count 0: not sampled).
     pub range: Vec<(u32, u32)>,
+}
+
+impl Samples {
+    /// First sample index and count of record `ri`.
+    #[inline]
+    pub fn of(&self, ri: usize) -> (usize, usize) {
+        let (f, c) = self.range[ri - self.rec0];
+        (f as usize, c as usize)
+    }
 }
 
 /// Start position of record `i`.
@@ -115,21 +126,27 @@ fn traceable(rec: &Record) -> bool {
 
 /// Sample the blocks of an interpreted program.
 pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
-    let nrec = it.records.len();
-    let mut s = Samples {
-        xyz: Vec::with_capacity(nrec * 3),
-        t: Vec::with_capacity(nrec),
-        rec: Vec::with_capacity(nrec),
-        range: vec![(0, 0); nrec],
-    };
+    let mut s = Samples::default();
+    sample_range(it, opts, 0..it.records.len(), &mut s);
+    s
+}
+
+/// Sample records `recs` into `s`, replacing what it held (its buffers are reused).
+pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>, s: &mut Samples) {
+    s.xyz.clear();
+    s.t.clear();
+    s.rec.clear();
+    s.range.clear();
+    s.rec0 = recs.start;
     let mut cuts: Vec<f64> = Vec::new();
-    for (i, rec) in it.records.iter().enumerate() {
+    for i in recs {
+        let rec = &it.records[i];
         let start = start_of(it, i);
         if (opts.only_supported && !rec.supported)
             || (rec.motion == Motion::Rapid && !opts.include_rapids)
             || !traceable(rec)
         {
-            s.range[i] = (s.t.len() as u32, 0);
+            s.range.push((s.t.len() as u32, 0));
             continue;
         }
         let first = s.t.len();
@@ -177,7 +194,7 @@ pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
             for k in 1..=n {
                 let t = k as f64 / n as f64;
                 let p = if k == n { end } else { arc_point(rec, &start, geom, t) };
-                push(&mut s, p, t, &mut prev, &mut prev_t, &mut cuts);
+                push(s, p, t, &mut prev, &mut prev_t, &mut cuts);
             }
         } else {
             let len = ((end[0] - prev[0]).powi(2) + (end[1] - prev[1]).powi(2) + (end[2] - prev[2]).powi(2)).sqrt();
@@ -190,12 +207,11 @@ pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
                 } else {
                     [s0[0] + t * (end[0] - s0[0]), s0[1] + t * (end[1] - s0[1]), s0[2] + t * (end[2] - s0[2])]
                 };
-                push(&mut s, p, t, &mut prev, &mut prev_t, &mut cuts);
+                push(s, p, t, &mut prev, &mut prev_t, &mut cuts);
             }
         }
-        s.range[i] = (first as u32, (s.t.len() - first) as u32);
+        s.range.push((first as u32, (s.t.len() - first) as u32));
     }
-    s
 }
 
 /// Fractions u in (0, 1) where the segment a→b crosses one of the sorted lines.

@@ -68,17 +68,14 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
             field = _fields.read(field_path, method=method, outside=outside)
         else:
             field = _fields.Shift(shift)
-        out = prog.correct(
-            field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
+        c = prog.correct_to(
+            output, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
             keep_unsupported=keep_unsupported, clearance=clearance, progress=say)
-        say(f"writing {output}")
-        out.write(output)
-    c = out.correction
     echo_err(f"{program} -> {output}")
     echo_err(f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
              f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}")
     echo_err(f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm "
-             f"over {len(c.points):,} points")
+             f"over {c.n_points:,} points")
     if c.unsupported_kept:
         echo_err(f"  unsupported constructs kept unchanged ({len(c.unsupported_kept)}), their blocks not corrected:")
         for u in c.unsupported_kept[:20]:
