@@ -1,0 +1,29 @@
+"""Measured points of a surface and their deviations along the normals.
+
+A measurement is a nominal point p with its unit outward normal n (pointing away from material)
+and either the measured point m or the deviation e directly. The deviation is
+
+    e = (m − p) · n                      e > 0: material left over
+
+(DESIGN.md's sign convention). When the measured points are probe-tip centres, the surface point is
+the centre moved back along the normal by the tip radius: e = (m − p) · n − r.
+
+Readers (:func:`read` picks one from the file's contents):
+
+- CSV with a header: ``x,y,z,i,j,k,mx,my,mz`` or ``x,y,z,i,j,k,dev``, optional ``id``;
+- DMIS output: ``F(name)=FEAT/POINT,CART,x,y,z,i,j,k`` nominals and the ``FA(name)=FEAT/POINT,CART,…``
+  actuals, ``$`` continuing a statement on the next line;
+- PC-DMIS XYZIJK text: ``x y z i j k`` rows (nominal and normal) followed by a ``dev`` column or by
+  ``mx my mz``;
+- QIF 3 results: point features with nominal ``Location``/``Normal`` and measured ``Location``.
+
+Nothing is guessed: NaN, zero or non-unit normals (|n| off 1 by more than 1e-3), duplicate ids and
+mismatched nominal/measured sets are errors naming the file and line.
+"""
+
+from __future__ import annotations
+
+from ._core import Measurements, from_arrays
+from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
+
+__all__ = ["Measurements", "from_arrays", "read", "read_csv", "read_dmis", "read_qif", "read_xyzijk"]

@@ -1,0 +1,220 @@
+"""Readers of measured points: CSV, DMIS, PC-DMIS XYZIJK text, QIF 3."""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ._core import Measurements, from_arrays
+
+NOMINAL = ("x", "y", "z")
+NORMAL = ("i", "j", "k")
+MEASURED = ("mx", "my", "mz")
+
+
+def _text(path) -> tuple[str, str]:
+    p = Path(path)
+    try:
+        return p.read_text(encoding="utf-8-sig"), str(p)
+    except UnicodeDecodeError as e:
+        raise InputError(f"not a text file ({e.reason} at byte {e.start})", str(p)) from None
+
+
+def _number(s: str, src: str, line: int, what: str) -> float:
+    try:
+        return float(s)
+    except ValueError:
+        raise InputError(f"{what}: expected a number, got {s.strip()!r}", src, line) from None
+
+
+def read_csv(path, probe_radius: float = 0.0) -> Measurements:
+    """CSV with a header naming ``x,y,z,i,j,k`` and ``mx,my,mz`` or ``dev`` (optional ``id``)."""
+    text, src = _text(path)
+    rows = csv.reader(io.StringIO(text))
+    try:
+        header = [h.strip().lower() for h in next(rows)]
+    except StopIteration:
+        raise InputError("empty file", src) from None
+    cols = {h: k for k, h in enumerate(header)}
+    missing = [c for c in NOMINAL + NORMAL if c not in cols]
+    has_m = all(c in cols for c in MEASURED)
+    if missing or not (has_m or "dev" in cols):
+        raise InputError(
+            f"header must name x,y,z,i,j,k and mx,my,mz or dev (optional id); got {','.join(header)}", src, 1)
+    if has_m and "dev" in cols:
+        raise InputError("header names both mx,my,mz and dev; give one", src, 1)
+    want = NOMINAL + NORMAL + (MEASURED if has_m else ("dev",))
+    values, ids, lines = [], [], []
+    for row in rows:
+        line = rows.line_num
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise InputError(f"{len(row)} fields, the header has {len(header)}", src, line)
+        values.append([_number(row[cols[c]], src, line, c) for c in want])
+        if "id" in cols:
+            ids.append(row[cols["id"]].strip())
+        lines.append(line)
+    if not values:
+        raise InputError("no points", src)
+    a = np.array(values)
+    return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if has_m else None,
+                       deviation=None if has_m else a[:, 6], ids=ids or None, probe_radius=probe_radius,
+                       lines=lines, source=src)
+
+
+def read_xyzijk(path, probe_radius: float = 0.0) -> Measurements:
+    """PC-DMIS XYZIJK text: ``x y z i j k`` and a deviation (7 numbers) or the measured point
+    (9 numbers) per row, separated by blanks or commas. Lines that do not start with a number
+    (headers, comments) are skipped; every point row must have the same count."""
+    text, src = _text(path)
+    values, lines, width = [], [], None
+    for ln, raw in enumerate(text.splitlines(), 1):
+        parts = [p for p in re.split(r"[\s,;]+", raw.strip()) if p]
+        if not parts or not re.match(r"^[-+]?(\d|\.\d)", parts[0]):
+            continue
+        if len(parts) not in (7, 9):
+            raise InputError(f"expected 7 (x y z i j k dev) or 9 (x y z i j k mx my mz) numbers, got {len(parts)}", src, ln)
+        if width is None:
+            width = len(parts)
+        elif len(parts) != width:
+            raise InputError(f"{len(parts)} numbers where earlier rows have {width}", src, ln)
+        values.append([_number(p, src, ln, "value") for p in parts])
+        lines.append(ln)
+    if not values:
+        raise InputError("no point rows (x y z i j k ...)", src)
+    a = np.array(values)
+    return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if width == 9 else None,
+                       deviation=a[:, 6] if width == 7 else None, probe_radius=probe_radius, lines=lines, source=src)
+
+
+_DMIS = re.compile(r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*POINT\s*,\s*CART\s*,(.*)$", re.I)
+
+
+def read_dmis(path, probe_radius: float = 0.0) -> Measurements:
+    """DMIS: nominal ``F(label)=FEAT/POINT,CART,x,y,z,i,j,k`` and actual ``FA(label)=…`` statements,
+    a trailing ``$`` continuing a statement. Every nominal needs its actual and vice versa."""
+    text, src = _text(path)
+    statements: list[tuple[int, str]] = []
+    buf, start = "", 0
+    for ln, raw in enumerate(text.splitlines(), 1):
+        s = raw.rstrip()
+        if not buf:
+            start = ln
+        if s.endswith("$"):
+            buf += s[:-1]
+            continue
+        statements.append((start, buf + s))
+        buf = ""
+    if buf:
+        raise InputError("statement continued with $ at the end of the file", src, start)
+    nominal: dict[str, tuple[int, list[float]]] = {}
+    actual: dict[str, tuple[int, list[float]]] = {}
+    for ln, st in statements:
+        m = _DMIS.match(st)
+        if not m:
+            continue
+        kind, label, rest = m.group(1).upper(), m.group(2).strip(), m.group(3)
+        nums = [_number(v, src, ln, "coordinate") for v in rest.split(",") if v.strip()]
+        if len(nums) != 6:
+            raise InputError(f"FEAT/POINT needs x,y,z,i,j,k (6 numbers), got {len(nums)}", src, ln)
+        table = nominal if kind == "F" else actual
+        if label in table:
+            raise InputError(f"duplicate id {label!r} (first at line {table[label][0]})", src, ln)
+        table[label] = (ln, nums)
+    if not nominal:
+        raise InputError("no F(label)=FEAT/POINT,CART nominal points", src)
+    for a, b, what in ((nominal, actual, "actual FA"), (actual, nominal, "nominal F")):
+        for label, (ln, _) in a.items():
+            if label not in b:
+                raise InputError(f"point {label!r} has no {what}({label}) statement", src, ln)
+    labels = list(nominal)
+    nom = np.array([nominal[k][1] for k in labels])
+    act = np.array([actual[k][1] for k in labels])
+    return from_arrays(nom[:, :3], nom[:, 3:], measured=act[:, :3], ids=labels, probe_radius=probe_radius,
+                       lines=[nominal[k][0] for k in labels], source=src)
+
+
+def read_qif(path, probe_radius: float = 0.0) -> Measurements:
+    """QIF 3 results: ``PointFeatureNominal`` (``Location``, ``Normal``) and the
+    ``PointFeatureMeasurement`` (``Location``) that refers to it through its feature item."""
+    from lxml import etree
+
+    src = str(path)
+    try:
+        root = etree.parse(str(path)).getroot()
+    except (OSError, etree.XMLSyntaxError) as e:
+        raise InputError(f"not a readable QIF (XML) file: {e}", src) from None
+
+    def local(el):
+        return etree.QName(el).localname
+
+    def child(el, name):
+        for c in el:
+            if isinstance(c.tag, str) and local(c) == name:
+                return c
+        return None
+
+    def vec(el, name, owner):
+        c = child(el, name)
+        if c is None:
+            raise InputError(f"{local(owner)} has no {name}", src, owner.sourceline)
+        parts = (c.text or "").split()
+        if len(parts) != 3:
+            raise InputError(f"{name} needs 3 numbers, got {len(parts)}", src, c.sourceline)
+        return [_number(p, src, c.sourceline, name) for p in parts]
+
+    def ref(el, name):
+        c = child(el, name)
+        return c.text.strip() if c is not None and c.text else None
+
+    nominals, items, measured = {}, {}, {}
+    for el in root.iter():
+        if not isinstance(el.tag, str):
+            continue
+        name = local(el)
+        if name == "PointFeatureNominal":
+            nominals[el.get("id")] = (el.sourceline, vec(el, "Location", el), vec(el, "Normal", el))
+        elif name == "PointFeatureItem":
+            items[el.get("id")] = ref(el, "FeatureNominalId")
+        elif name == "PointFeatureMeasurement":
+            fid = ref(el, "FeatureItemId")
+            if fid in measured:
+                raise InputError(f"feature item {fid} measured twice", src, el.sourceline)
+            measured[fid] = (el.sourceline, vec(el, "Location", el))
+    if not nominals:
+        raise InputError("no PointFeatureNominal elements", src)
+    rows = []
+    for fid, (ln, loc) in measured.items():
+        nid = items.get(fid, fid)
+        if nid not in nominals:
+            raise InputError(f"measurement of feature item {fid} refers to no PointFeatureNominal", src, ln)
+        rows.append((nid, nominals[nid], loc))
+    done = {r[0] for r in rows}
+    for nid, (ln, _, _) in nominals.items():
+        if nid not in done:
+            raise InputError(f"nominal point {nid} has no measurement", src, ln)
+    rows.sort(key=lambda r: r[1][0])
+    return from_arrays([r[1][1] for r in rows], [r[1][2] for r in rows], measured=[r[2] for r in rows],
+                       ids=[r[0] for r in rows], probe_radius=probe_radius, lines=[r[1][0] for r in rows], source=src)
+
+
+def read(path, probe_radius: float = 0.0) -> Measurements:
+    """Read measurements, choosing the reader from the file's contents."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("no such file", str(p))
+    head = p.read_bytes()[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
+    if head.startswith("<"):
+        return read_qif(p, probe_radius)
+    if re.search(r"FEAT\s*/\s*POINT", head, re.I):
+        return read_dmis(p, probe_radius)
+    first = head.splitlines()[0] if head else ""
+    if re.search(r"[A-Za-z]", first) and "," in first and re.search(r"\bx\b", first, re.I):
+        return read_csv(p, probe_radius)
+    return read_xyzijk(p, probe_radius)

@@ -1,0 +1,297 @@
+"""Is a deviation pattern systematic? Global Moran's I and the noise diagnostics.
+
+Moran's I (Moran 1950; moments as in Cliff & Ord 1981, the formulas PySAL ``esda`` uses):
+
+    I = n / S0 · (zᵀ W z) / (zᵀ z),   z = e − mean(e)
+    E[I] = −1 / (n − 1)
+    Var_N[I] = (n² S1 − n S2 + 3 S0²) / ((n² − 1) S0²) − E[I]²                       (normality)
+    Var_R[I] = [n((n² − 3n + 3) S1 − n S2 + 3 S0²) − b2((n² − n) S1 − 2n S2 + 6 S0²)]
+               / ((n − 1)(n − 2)(n − 3) S0²) − E[I]²                                  (randomisation)
+
+with S0 = Σ w_ij, S1 = ½ Σ (w_ij + w_ji)², S2 = Σ_i (w_i· + w_·i)², b2 = n Σ z⁴ / (Σ z²)².
+Weights are row-standardised. ``idw``: w_ij = 1 / d_ij^k for every pair (or, with a threshold, the
+pairs closer than it: a distance band); ``knn``: 1 for the k nearest neighbours.
+
+The decision "systematic" uses the randomisation z (it does not assume normal deviations): the
+pattern is systematic when the two-sided p value is below ``alpha``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import sparse, stats
+from scipy.spatial import cKDTree
+
+from .errors import InputError
+
+WEIGHTS = ("idw", "knn")
+# rows of the all-pairs inverse-distance weights computed at a time (memory: rows x n doubles)
+_DENSE_ROWS = 512
+
+
+@dataclass(frozen=True)
+class Weights:
+    """What a Moran's I used: ``kind`` idw|knn, ``power`` k, ``threshold`` (mm or None), ``neighbors``."""
+
+    kind: str = "idw"
+    power: float = 1.0
+    threshold: float | None = None
+    neighbors: int | None = None
+
+
+@dataclass(frozen=True)
+class Moran:
+    """Global Moran's I of one set of values."""
+
+    I: float  # noqa: E741 - the statistic's name
+    expected: float
+    variance_normality: float
+    variance_randomization: float
+    z_normality: float
+    z_randomization: float
+    p_normality: float
+    p_randomization: float
+    alpha: float
+    n: int
+    weights: Weights
+
+    @property
+    def p_value(self) -> float:
+        """Two-sided p value of the decision (randomisation)."""
+        return self.p_randomization
+
+    @property
+    def systematic(self) -> bool:
+        """Significant spatial autocorrelation at ``alpha``."""
+        return bool(self.p_randomization < self.alpha)
+
+    def as_dict(self) -> dict:
+        d = {k: v for k, v in asdict(self).items() if k != "weights"}
+        d.update(p_value=self.p_value, systematic=self.systematic, weights=asdict(self.weights))
+        return d
+
+
+def _check(points, values) -> tuple[np.ndarray, np.ndarray]:
+    p = np.asarray(points, dtype=float)
+    v = np.asarray(values, dtype=float).ravel()
+    if p.ndim != 2 or p.shape[0] != len(v):
+        raise ValueError(f"points must be (n, d) with n = {len(v)} values, got shape {p.shape}")
+    if not (np.isfinite(p).all() and np.isfinite(v).all()):
+        raise ValueError("points and values must be finite")
+    if len(v) < 4:
+        raise InputError(f"Moran's I needs at least 4 points, got {len(v)}")
+    return p, v
+
+
+def weights_matrix(points, weights: Weights) -> sparse.csr_matrix:
+    """Row-standardised sparse weights for a distance band or k nearest neighbours."""
+    p = np.asarray(points, dtype=float)
+    n = len(p)
+    tree = cKDTree(p)
+    if weights.kind == "knn":
+        k = int(weights.neighbors or 8)
+        if not 1 <= k < n:
+            raise ValueError(f"knn needs 1 <= neighbors < n ({n}), got {k}")
+        d, j = tree.query(p, k=k + 1)
+        # the first hit is the point itself unless a duplicate ties with it: drop self explicitly
+        rows = np.repeat(np.arange(n), k + 1)
+        cols = j.ravel()
+        keep = cols != rows
+        rows, cols = rows[keep], cols[keep]
+        # a point with duplicates may keep k + 1 others: trim each row to k
+        order = np.lexsort((d.ravel()[keep], rows))
+        rows, cols = rows[order], cols[order]
+        rank = np.arange(len(rows)) - np.searchsorted(rows, rows)
+        sel = rank < k
+        w = sparse.csr_matrix((np.ones(sel.sum()), (rows[sel], cols[sel])), shape=(n, n))
+    elif weights.kind == "idw":
+        if weights.threshold is None:
+            raise ValueError("a sparse idw matrix needs a threshold (all pairs are computed densely)")
+        m = tree.sparse_distance_matrix(tree, float(weights.threshold), output_type="coo_matrix")
+        off = m.row != m.col
+        r, c, d = m.row[off], m.col[off], m.data[off]
+        if (d == 0).any():
+            i = int(r[np.flatnonzero(d == 0)[0]])
+            raise InputError(f"points {i} and another coincide: inverse-distance weights are infinite")
+        w = sparse.csr_matrix((d ** -float(weights.power), (r, c)), shape=(n, n))
+    else:
+        raise ValueError(f"weights must be one of {WEIGHTS}, got {weights.kind!r}")
+    rs = np.asarray(w.sum(axis=1)).ravel()
+    inv = np.divide(1.0, rs, out=np.zeros_like(rs), where=rs > 0)
+    return sparse.csr_matrix(sparse.diags(inv) @ w)
+
+
+def _sums_sparse(w: sparse.csr_matrix, z: np.ndarray):
+    s0 = float(w.sum())
+    ws = w + w.T
+    s1 = 0.5 * float(ws.multiply(ws).sum())
+    s2 = float(((np.asarray(w.sum(axis=1)).ravel() + np.asarray(w.sum(axis=0)).ravel()) ** 2).sum())
+    return s0, s1, s2, float(z @ (w @ z))
+
+
+def _sums_dense_idw(p: np.ndarray, z: np.ndarray, power: float):
+    """S0, S1, S2 and zᵀWz of row-standardised all-pairs 1/d^k weights, a block of rows at a time."""
+    from scipy.spatial.distance import cdist
+
+    n = len(p)
+
+    def block(a, b):
+        d = cdist(p[a:b], p)
+        idx = np.arange(a, b)
+        d[idx - a, idx] = np.inf
+        if (d == 0).any():
+            i, j = np.argwhere(d == 0)[0]
+            raise InputError(f"points {a + i} and {j} coincide: inverse-distance weights are infinite")
+        return d ** -power
+
+    raw_rows = np.empty(n)
+    for a in range(0, n, _DENSE_ROWS):
+        b = min(a + _DENSE_ROWS, n)
+        raw_rows[a:b] = block(a, b).sum(axis=1)
+    inv = 1.0 / raw_rows
+    wz = 0.0
+    col = np.zeros(n)
+    sq = 0.0
+    cross = 0.0
+    for a in range(0, n, _DENSE_ROWS):
+        b = min(a + _DENSE_ROWS, n)
+        raw = block(a, b)
+        w = raw * inv[a:b, None]
+        wz += float(z[a:b] @ (w @ z))
+        col += w.sum(axis=0)
+        sq += float((w * w).sum())
+        # w_ji = raw_ij / row_j (distances are symmetric)
+        cross += float((w * (raw * inv[None, :])).sum())
+    s0 = float(n)  # every row sums to one
+    s1 = sq + cross  # ½ Σ (w_ij + w_ji)² = Σ w_ij² + Σ w_ij w_ji
+    s2 = float(((1.0 + col) ** 2).sum())
+    return s0, s1, s2, wz
+
+
+def moran(
+    points,
+    values,
+    *,
+    weights: str = "idw",
+    power: float = 1.0,
+    threshold: float | None = None,
+    neighbors: int | None = None,
+    alpha: float = 0.05,
+) -> Moran:
+    """Global Moran's I of ``values`` at ``points`` (n, d) with row-standardised weights.
+
+    Parameters
+    ----------
+    weights : ``"idw"`` or ``"knn"``
+        ``idw``: w_ij = 1 / d_ij^power over all pairs, or over the pairs closer than ``threshold``;
+        ``knn``: 1 for the ``neighbors`` nearest points (default 8).
+    alpha : float
+        Significance of the decision :attr:`Moran.systematic`.
+    """
+    p, v = _check(points, values)
+    if not power >= 1:
+        raise ValueError(f"power must be >= 1, got {power}")
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    if threshold is not None and not threshold > 0:
+        raise ValueError(f"threshold must be > 0 mm, got {threshold}")
+    wt = Weights(weights, float(power) if weights == "idw" else None, threshold if weights == "idw" else None,
+                 (int(neighbors) if neighbors else 8) if weights == "knn" else None)
+    n = len(v)
+    z = v - v.mean()
+    zz = float(z @ z)
+    if zz == 0:
+        raise InputError("all values are equal: Moran's I is undefined")
+    if weights == "idw" and threshold is None:
+        s0, s1, s2, zwz = _sums_dense_idw(p, z, float(power))
+    else:
+        s0, s1, s2, zwz = _sums_sparse(weights_matrix(p, wt), z)
+    if s0 == 0:
+        raise InputError("no point has a neighbour within the threshold; increase it")
+    i_stat = n / s0 * zwz / zz
+    ei = -1.0 / (n - 1)
+    v_norm = (n * n * s1 - n * s2 + 3 * s0 * s0) / ((n * n - 1) * s0 * s0) - ei * ei
+    b2 = n * float((z ** 4).sum()) / zz ** 2
+    num = n * ((n * n - 3 * n + 3) * s1 - n * s2 + 3 * s0 * s0) - b2 * ((n * n - n) * s1 - 2 * n * s2 + 6 * s0 * s0)
+    v_rand = num / ((n - 1) * (n - 2) * (n - 3) * s0 * s0) - ei * ei
+    z_n = (i_stat - ei) / math.sqrt(v_norm)
+    z_r = (i_stat - ei) / math.sqrt(v_rand) if v_rand > 0 else math.copysign(math.inf, i_stat - ei)
+    return Moran(
+        I=i_stat, expected=ei, variance_normality=v_norm, variance_randomization=v_rand,
+        z_normality=z_n, z_randomization=z_r,
+        p_normality=float(2 * stats.norm.sf(abs(z_n))), p_randomization=float(2 * stats.norm.sf(abs(z_r))),
+        alpha=alpha, n=n, weights=wt,
+    )
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Diagnostics of a residual that should be measurement noise."""
+
+    std: float
+    pearson_chi2: float
+    pearson_dof: int
+    pearson_p: float
+    lag1_r: float
+    student_t: float
+    student_p: float
+    moran_z: float
+    moran_p: float
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def pearson_normality(x) -> tuple[float, int, float]:
+    """Pearson's χ² test of normality: k equiprobable classes under the fitted normal
+    (k = ⌈2 n^(2/5)⌉, Mann & Wald's rule, at least 5), k − 3 degrees of freedom (mean and std
+    estimated). Returns (χ², dof, p)."""
+    x = np.asarray(x, dtype=float).ravel()
+    n = len(x)
+    if n < 8:
+        raise InputError(f"the normality test needs at least 8 values, got {n}")
+    k = max(5, math.ceil(2 * n ** 0.4))
+    mu, sd = x.mean(), x.std(ddof=1)
+    if sd == 0:
+        return math.inf, k - 3, 0.0
+    edges = stats.norm.ppf(np.linspace(0, 1, k + 1)[1:-1], loc=mu, scale=sd)
+    observed = np.bincount(np.searchsorted(edges, x), minlength=k)
+    expected = n / k
+    chi2 = float(((observed - expected) ** 2).sum() / expected)
+    dof = k - 3
+    return chi2, dof, float(stats.chi2.sf(chi2, dof))
+
+
+def lag1_autocorrelation(x) -> tuple[float, float, float]:
+    """Linear correlation of consecutive values (in measurement order) and Student's t test of
+    r = 0: t = r √((m − 2) / (1 − r²)) with m pairs. Returns (r, t, two-sided p)."""
+    x = np.asarray(x, dtype=float).ravel()
+    if len(x) < 4:
+        raise InputError(f"the autocorrelation test needs at least 4 values, got {len(x)}")
+    a, b = x[:-1], x[1:]
+    if a.std() == 0 or b.std() == 0:
+        return 0.0, 0.0, 1.0
+    r = float(np.corrcoef(a, b)[0, 1])
+    m = len(a)
+    t = r * math.sqrt((m - 2) / max(1e-300, 1 - r * r))
+    return r, t, float(2 * stats.t.sf(abs(t), m - 2))
+
+
+def noise(points, residual, **moran_options) -> Noise:
+    """Pearson χ² normality, Student t of lag-1 autocorrelation and Moran's I of a residual."""
+    r = np.asarray(residual, dtype=float).ravel()
+    chi2, dof, pp = pearson_normality(r)
+    r1, t, tp = lag1_autocorrelation(r)
+    m = moran(points, r, **moran_options)
+    return Noise(std=float(r.std(ddof=1)), pearson_chi2=chi2, pearson_dof=dof, pearson_p=pp,
+                 lag1_r=r1, student_t=t, student_p=tp, moran_z=m.z_randomization, moran_p=m.p_randomization)
+
+
+def summary(values) -> dict:
+    """mean, std, min, max, rms of a set of values."""
+    v = np.asarray(values, dtype=float).ravel()
+    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+            "min": float(v.min()), "max": float(v.max()), "rms": float(np.sqrt((v * v).mean()))}
