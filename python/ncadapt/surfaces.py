@@ -100,7 +100,7 @@ class Surface:
         return Surface(self.u, self.v, grid)
 
 
-def extrapolate_border(u, v, values, known, *, fit_points: int = 6) -> np.ndarray:
+def extrapolate_border(u, v, values, known, *, fit_points: int = 12) -> np.ndarray:
     """Fill the grid cells outside ``known`` by cubic extrapolation.
 
     ``values`` (nu, nv) are valid where ``known`` is True, a region that is convex along every grid

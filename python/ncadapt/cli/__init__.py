@@ -10,6 +10,7 @@ import click
 from .. import __version__
 from ._correct import correct
 from ._demo import demo
+from ._freeform import analyze, compensate
 from ._inspect import inspect
 
 __all__ = ["main"]
@@ -23,4 +24,6 @@ def main() -> None:
 
 main.add_command(correct)
 main.add_command(inspect)
+main.add_command(analyze)
+main.add_command(compensate)
 main.add_command(demo)

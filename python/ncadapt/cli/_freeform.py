@@ -1,0 +1,162 @@
+"""``ncadapt analyze`` and ``ncadapt compensate``: freeform surfaces from coordinate measurements."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .. import constants
+from ..errors import InputError
+from ._common import echo_err, handle_errors, progress, write_json
+
+
+def _moran_options(f):
+    opts = [
+        click.option("--weights", type=click.Choice(["idw", "knn"]), default="idw", show_default=True,
+                     help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours."),
+        click.option("--power", type=click.FloatRange(min=1), default=1.0, show_default=True, help="K of idw weights."),
+        click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=None,
+                     help="Distance band for idw weights, mm (default: all pairs)."),
+        click.option("--neighbors", type=click.IntRange(min=1), default=8, show_default=True, help="N of knn weights."),
+        click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.05,
+                     show_default=True, help="Significance of the 'systematic' decision."),
+        click.option("--probe-radius", type=click.FloatRange(min=0), default=0.0, show_default=True,
+                     help="The measured points are probe-tip centres of this radius, mm."),
+        click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."),
+        click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def _moran_kw(weights, power, threshold, neighbors, alpha):
+    return {"weights": weights, "power": power, "threshold": threshold, "neighbors": neighbors, "alpha": alpha}
+
+
+def _print_analysis(a) -> None:
+    m, d = a.moran, a.deviation
+    click.echo(f"points: {a.n_points:,}")
+    click.echo(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
+    click.echo(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
+               f"{m.z_normality:.2f} (normality), p {m.p_value:.3g}")
+    click.echo(f"systematic at alpha {m.alpha:g}: {'yes' if m.systematic else 'no'}")
+
+
+@click.command()
+@click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@_moran_options
+@handle_errors
+def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_radius, json_path, report_path):
+    """Deviations of MEASUREMENTS along the normals and Moran's I: is the error systematic?
+
+    MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3.
+    """
+    from .. import measure
+    from ..processes import freeform as pf
+
+    meas = measure.read(measurements, probe_radius=probe_radius)
+    a = pf.analyze(meas, **_moran_kw(weights, power, threshold, neighbors, alpha))
+    _print_analysis(a)
+    if json_path:
+        write_json(json_path, {"input": str(measurements), **a.as_dict()})
+    if report_path:
+        from ..report import freeform as rep, write
+
+        d = pf.decompose(meas, alpha=alpha)
+        write(report_path, rep.render(title=f"Deviation analysis: {measurements.name}", analysis=a, decomposition=d,
+                                      xy=meas.nominal, deviation=meas.deviation))
+
+
+def _extent(ctx, param, value):
+    if value is None:
+        return None
+    try:
+        v = [float(x) for x in value.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 4 or v[0] >= v[1] or v[2] >= v[3]:
+        raise click.BadParameter(f"expected XMIN,XMAX,YMIN,YMAX in mm, got {value!r}")
+    return tuple(v)
+
+
+@click.command()
+@click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True,
+              help="How the systematic part is separated from noise.")
+@click.option("--sigma-c", type=click.FloatRange(min=0, min_open=True), help="Bilateral spatial sigma, mm (default 1.5 x spacing).")
+@click.option("--sigma-s", type=click.FloatRange(min=0, min_open=True), help="Bilateral range sigma, mm (default 3 x noise).")
+@click.option("--p", "p", type=click.FloatRange(0, 1), help="Smoothing-spline parameter (csaps' p).")
+@click.option("--auto", is_flag=True, help="Smoothest filter whose random part has no significant Moran's I.")
+@click.option("--program", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="NC program to correct.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Corrected NC program.")
+@click.option("--tool-radius", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre).")
+@click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX",
+              help="The part's area, mm; the systematic error is extrapolated into it (default: the measured area).")
+@click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
+              help="Refuse if any program displacement exceeds this, mm.")
+@click.option("--surface", "surface_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Compensated surface, .step/.stp or .igs/.iges.")
+@click.option("--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points.")
+@_moran_options
+@handle_errors
+def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, limit,
+               surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, json_path,
+               report_path):
+    """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
+    surface and compensated points."""
+    from .. import cad, measure
+    from .. import nc as ncmod
+    from .._io import atomic_write
+    from ..processes import freeform as pf
+
+    if (program is None) != (output is None):
+        raise click.UsageError("--program and -o go together")
+    for out in (output, surface_path, points_out, json_path, report_path):
+        if out is not None and (out.resolve() == measurements.resolve() or (program and out.resolve() == program.resolve())):
+            raise InputError("refusing to overwrite an input; choose another output", str(out))
+    kw = _moran_kw(weights, power, threshold, neighbors, alpha)
+    with progress() as say:
+        say(f"reading {measurements}")
+        meas = measure.read(measurements, probe_radius=probe_radius)
+        say("analysing")
+        a = pf.analyze(meas, **kw)
+        say("separating systematic and random error")
+        d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, **kw)
+        surf = pf.fit_height_surface(meas.nominal, extent=extent)
+        c = pf.compensate(surf, meas, d.systematic)
+        corr = None
+        if program is not None:
+            say(f"correcting {program}")
+            corr = ncmod.read(program).correct_to(output, c.field(tool_radius), limit=limit, progress=say)
+        if surface_path is not None:
+            say(f"writing {surface_path}")
+            cad.write(c.compensated, surface_path)
+    _print_analysis(a)
+    sysd = d.as_dict()
+    click.echo(f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
+               f"({d.method}); random part: std {d.noise.std:.4f} mm")
+    if not a.moran.systematic:
+        echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
+    if corr is not None:
+        click.echo(f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
+                   f"max displacement {corr.max_displacement:.4f} mm")
+    if points_out is not None:
+        rows = ["x,y,z,deviation,systematic,random,cx,cy,cz"]
+        for q, e, s, r, cp in zip(meas.nominal, meas.deviation, d.systematic, d.random, c.points_compensated):
+            rows.append(",".join(f"{v:.6f}" for v in (*q, e, s, r, *cp)))
+        atomic_write(points_out, ("\n".join(rows) + "\n").encode())
+    payload = {"input": str(measurements), **a.as_dict(), **sysd}
+    if corr is not None:
+        payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
+    if json_path:
+        write_json(json_path, payload)
+    if report_path:
+        from ..report import freeform as rep, write
+
+        write(report_path, rep.render(title=f"Freeform compensation: {measurements.name}", analysis=a, decomposition=d,
+                                      xy=meas.nominal, deviation=meas.deviation,
+                                      files={k: str(v) for k, v in (("program", output), ("surface", surface_path),
+                                                                    ("points", points_out)) if v}))

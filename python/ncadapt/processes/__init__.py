@@ -1,0 +1,1 @@
+"""One module per published method; each composes the shared pieces."""

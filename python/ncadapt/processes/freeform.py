@@ -1,0 +1,205 @@
+"""Freeform surfaces: compensation from coordinate measurements (Pechenin et al., Vestnik of
+Samara University 15(4), 2016, DOI 10.18287/2541-7533-2016-15-4-252-264).
+
+measure → :func:`analyze` (deviations, Moran's I: is it systematic?) → :func:`decompose`
+(bilateral filter or smoothing spline: systematic + random, noise diagnostics) → :func:`compensate`
+(the systematic part on the part's surface grid, extrapolated cubically into the unmeasured border;
+the mirrored surface P_c = P − dF·n; a correction field −dF·n for the NC program).
+
+The part is a height field parametrised by (u, v) = (x, y): a measured point is placed on the
+surface grid by its nominal (x, y). Ball-end programs: the tool tip at a contact point P with normal
+n is at P + R n − R ẑ, so the NC field is given at those tip positions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .. import filters, stats
+from ..errors import InputError
+from ..fields import ScatteredField
+from ..measure import Measurements
+from ..surfaces import Surface, extrapolate_border
+
+FILTERS = ("bilateral", "spline")
+# fewest points each step needs
+MIN_POINTS = 10
+
+
+@dataclass(frozen=True)
+class Analysis:
+    n_points: int
+    moran: stats.Moran
+    deviation: dict
+
+    def as_dict(self) -> dict:
+        return {"n_points": self.n_points, "moran": self.moran.as_dict(), "deviation": self.deviation}
+
+
+def spacing(points) -> float:
+    """Median distance from a point to its nearest neighbour (in x, y)."""
+    p = np.asarray(points, float)[:, :2]
+    d, _ = cKDTree(p).query(p, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def noise_level(points, values) -> float:
+    """A robust estimate of the noise std: the median absolute difference between nearest
+    neighbours, / (0.6745 √2) (it is the noise of a difference of two independent readings)."""
+    p = np.asarray(points, float)[:, :2]
+    _, j = cKDTree(p).query(p, k=2)
+    d = np.asarray(values)[j[:, 1]] - np.asarray(values)
+    return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2)))
+
+
+def analyze(meas: Measurements, **moran_options) -> Analysis:
+    """Deviation statistics and Moran's I of the deviations (options of :func:`ncadapt.stats.moran`)."""
+    meas.require(MIN_POINTS, "the analysis")
+    m = stats.moran(meas.nominal[:, :2], meas.deviation, **moran_options)
+    return Analysis(len(meas), m, stats.summary(meas.deviation))
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    systematic: np.ndarray
+    random: np.ndarray
+    method: str
+    parameters: dict
+    noise: stats.Noise
+
+    def as_dict(self) -> dict:
+        return {
+            "method": self.method, "parameters": self.parameters,
+            "systematic": {"rms": float(np.sqrt((self.systematic**2).mean())), "max_abs": float(np.abs(self.systematic).max())},
+            "random": {"std": self.noise.std, "pearson_p": self.noise.pearson_p, "student_p": self.noise.student_p,
+                       "moran_z": self.noise.moran_z, "moran_p": self.noise.moran_p},
+        }
+
+
+def _on_grid(points):
+    """(xs, ys, order) when the points form a full rectangular grid, else None."""
+    x = np.round(points[:, 0], 6)
+    y = np.round(points[:, 1], 6)
+    xs, ys = np.unique(x), np.unique(y)
+    if len(xs) * len(ys) != len(points) or len(xs) < 4 or len(ys) < 4:
+        return None
+    ix = np.searchsorted(xs, x)
+    iy = np.searchsorted(ys, y)
+    flat = ix * len(ys) + iy
+    if len(np.unique(flat)) != len(points):
+        return None
+    return xs, ys, flat
+
+
+def _filter(method, xy, e, par):
+    if method == "bilateral":
+        return filters.bilateral(xy, e, par["sigma_c"], par["sigma_s"])
+    grid = _on_grid(xy)
+    if grid is not None:
+        xs, ys, flat = grid
+        g = np.empty(len(xs) * len(ys))
+        g[flat] = e
+        return filters.smoothing_spline_grid((xs, ys), g.reshape(len(xs), len(ys)), par["p"]).ravel()[flat]
+    return filters.smoothing_spline(xy, e, par["p"])
+
+
+def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float | None = None,
+              sigma_s: float | None = None, p: float | None = None, auto: bool = False,
+              **moran_options) -> Decomposition:
+    """Split the deviations into a systematic part and random noise.
+
+    ``bilateral``: σ_c defaults to 1.5 × the point spacing, σ_s to 3 × the estimated noise std.
+    ``spline``: p defaults to MATLAB csaps' choice for the spacing h, 1 / (1 + h³ / 6).
+    ``auto``: the smoothest setting (largest σ_c, or smallest p) of a ladder whose random part has
+    no significant Moran's I at the analysis' ``alpha``.
+    """
+    if method not in FILTERS:
+        raise ValueError(f"filter must be one of {FILTERS}, got {method!r}")
+    meas.require(MIN_POINTS, "the decomposition")
+    xy = meas.nominal[:, :2]
+    e = meas.deviation
+    h = spacing(xy)
+    sig = max(noise_level(xy, e), 1e-6)
+    if method == "bilateral":
+        base = {"sigma_c": sigma_c or 1.5 * h, "sigma_s": sigma_s or 3 * sig}
+        ladder = [dict(base, sigma_c=h * f) for f in (4.0, 3.0, 2.5, 2.0, 1.5, 1.0, 0.75)] if auto else [base]
+    else:
+        p0 = p if p is not None else 1.0 / (1.0 + h**3 / 6.0)
+        ladder = [{"p": q} for q in (1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.3, 0.6, 0.9)] if auto else [{"p": p0}]
+    chosen = None
+    for par in ladder:
+        s = _filter(method, xy, e, par)
+        r = e - s
+        nz = stats.noise(xy, r, **moran_options)
+        chosen = (s, r, par, nz)
+        if not auto or nz.moran_p >= moran_options.get("alpha", 0.05):
+            break
+    s, r, par, nz = chosen
+    return Decomposition(s, r, method, {k: float(v) for k, v in par.items()} | {"auto": auto, "noise_estimate": sig}, nz)
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """The systematic error on the part's surface grid and what is made from it."""
+
+    surface: Surface
+    df_grid: np.ndarray  # (nu, nv) mm, extrapolated into the border
+    measured_region: np.ndarray  # (nu, nv) bool: inside the measured area
+    compensated: Surface  # P_c = P − dF n
+    points_compensated: np.ndarray  # (n, 3) the measured points' nominals moved by −dF n
+
+    def field(self, tool_radius: float = 0.0, outside: str = "clamp") -> ScatteredField:
+        """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R."""
+        s = self.surface
+        U, V = np.meshgrid(s.u, s.v, indexing="ij")
+        p = s.point(U, V).reshape(-1, 3)
+        n = s.normal(U, V).reshape(-1, 3)
+        tip = p + tool_radius * n - tool_radius * np.array([0.0, 0.0, 1.0])
+        return ScatteredField(tip, -self.df_grid.reshape(-1, 1) * n, outside=outside, source="compensation")
+
+
+def compensate(surface: Surface, meas: Measurements, systematic) -> Compensation:
+    """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    sysv = np.asarray(systematic, float)
+    xy = meas.nominal[:, :2]
+    U, V = np.meshgrid(surface.u, surface.v, indexing="ij")
+    lin = LinearNDInterpolator(xy, sysv)
+    inside = lin(U, V)
+    known = np.isfinite(inside)
+    if known.sum() < 16:
+        raise InputError("the measured points cover fewer than 16 nodes of the surface grid", meas.source)
+    df = extrapolate_border(surface.u, surface.v, np.where(known, inside, 0.0), known)
+    n = surface.normal(U, V)
+    comp = surface.with_grid(surface.grid - df[..., None] * n)
+    pc = meas.nominal - sysv[:, None] * meas.normal
+    return Compensation(surface, df, known, comp, pc)
+
+
+def fit_height_surface(points, extent=None, step: float | None = None) -> Surface:
+    """A height-field surface through nominal points (a full grid is interpolated as it is;
+    scattered points through a cubic triangulation, the border beyond them extrapolated)."""
+    p = np.asarray(points, float)
+    grid = _on_grid(p)
+    if grid is not None and extent is None:
+        xs, ys, flat = grid
+        z = np.empty(len(xs) * len(ys))
+        z[flat] = p[:, 2]
+        Z = z.reshape(len(xs), len(ys))
+        X, Y = np.meshgrid(xs, ys, indexing="ij")
+        return Surface(xs, ys, np.stack([X, Y, Z], axis=-1))
+    from scipy.interpolate import CloughTocher2DInterpolator
+
+    h = step or spacing(p)
+    x0, x1, y0, y1 = extent or (p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max())
+    xs = np.linspace(x0, x1, max(4, int(round((x1 - x0) / h)) + 1))
+    ys = np.linspace(y0, y1, max(4, int(round((y1 - y0) / h)) + 1))
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    zi = CloughTocher2DInterpolator(p[:, :2], p[:, 2])(X, Y)
+    known = np.isfinite(zi)
+    Z = extrapolate_border(xs, ys, np.where(known, zi, 0.0), known)
+    return Surface(xs, ys, np.stack([X, Y, Z], axis=-1))

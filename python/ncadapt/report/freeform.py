@@ -1,0 +1,74 @@
+"""The freeform compensation report: deviation maps before and after, histograms, Moran's I, the
+noise diagnostics of the random part."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import figure_png, page, table
+
+
+def _maps(xy, panels, title):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    vmax = max(float(np.abs(v).max()) for _, v in panels) * 1000
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
+    for ax, (name, v) in zip(axes[0], panels):
+        sc = ax.scatter(xy[:, 0], xy[:, 1], c=np.asarray(v) * 1000, cmap="RdBu_r", vmin=-vmax, vmax=vmax, s=14)
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("x, mm")
+        ax.set_aspect("equal")
+    axes[0][0].set_ylabel("y, mm")
+    fig.colorbar(sc, ax=axes[0].tolist(), label="deviation along the normal, µm", shrink=0.9)
+    fig.suptitle(title, fontsize=11)
+    return figure_png(fig)
+
+
+def _hist(series):
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for name, v in series:
+        ax.hist(np.asarray(v) * 1000, bins=40, alpha=0.6, label=name)
+    ax.set_xlabel("deviation, µm")
+    ax.set_ylabel("points")
+    ax.legend()
+    return figure_png(fig)
+
+
+def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None) -> str:
+    """The report as HTML text. ``after``: deviations of the re-machined part at the same points."""
+    m = analysis.moran
+    verdict = (f"<p class='verdict {'yes' if m.systematic else 'no'}'>The deviations are "
+               f"{'<b>systematic</b>' if m.systematic else '<b>not systematic</b>'} "
+               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p = {m.p_value:.2g}, α = {m.alpha:g})</p>")
+    sections = []
+    if summary:
+        cards = "".join(f"<div class='card'><div>{k}</div><div class='big'>{v}</div></div>" for k, v in summary.items())
+        sections.append(("Result", f"<div class='cards'>{cards}</div>"))
+    sections.append(("Is the error systematic?", verdict + table([
+        ("Moran's I", m.I), ("E[I]", m.expected), ("Var[I], normality", m.variance_normality),
+        ("Var[I], randomisation", m.variance_randomization), ("z, normality", m.z_normality),
+        ("z, randomisation", m.z_randomization), ("p (two-sided, randomisation)", m.p_value),
+        ("weights", f"{m.weights.kind}, power {m.weights.power}, threshold {m.weights.threshold}, neighbours {m.weights.neighbors}"),
+        ("points", m.n)], ["statistic", "value"])))
+    d = analysis.deviation
+    sections.append(("Deviations", table([(k, f"{v * 1000:.2f}") for k, v in d.items()], ["", "µm"])
+                     + _maps(xy, [("measured", deviation), ("systematic", decomposition.systematic),
+                                  ("random", decomposition.random)], "Deviation along the outward normal (> 0: material left)")))
+    nz = decomposition.noise
+    sections.append(("Separating systematic from random error", table([
+        ("filter", decomposition.method), *((k, v) for k, v in decomposition.parameters.items()),
+        ("random part: std, mm", nz.std), ("Pearson χ² normality p", nz.pearson_p),
+        ("lag-1 autocorrelation r", nz.lag1_r), ("Student t test p", nz.student_p),
+        ("Moran's I of the random part: z", nz.moran_z), ("... p", nz.moran_p)], ["", "value"])))
+    if after is not None:
+        sections.append(("After compensation", _maps(xy, [("before", deviation), ("after", after)],
+                                                     "Deviation of the first part and of the re-machined part")
+                         + _hist([("before", deviation), ("after", after)])))
+    if files:
+        sections.append(("Files", table([(k, v) for k, v in files.items()], ["", "file"])))
+    return page(title, "ncadapt freeform compensation report", sections)

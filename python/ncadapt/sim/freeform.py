@@ -1,0 +1,202 @@
+"""Virtual 3-axis ball-end finishing of a freeform part, with a systematic machine error.
+
+The testbed plays the machine for the freeform method:
+
+1. **Part.** A height field z = f(x, y) (:func:`demo_part`), a bicubic B-spline surface.
+2. **Program.** A raster finishing program for a ball-end tool of radius R, computed by "drop
+   cutter": the tool tip height at (x, y) is max over surface points q within R of
+   (q_z + √(R² − |q_xy − (x, y)|²)) − R, a grey dilation of the surface grid by the ball
+   (:func:`finishing_program`).
+3. **Machining.** The program's toolpath (read by the NC engine, pieces ≤ ``step`` mm) is cut into a
+   z-map: every cell keeps min over tool positions c of c_z + R − √(R² − d²), d the distance from
+   the cell to c in (x, y) (the ball's lower surface). The machine does not go where it is told: it
+   adds a systematic error E(x, y) along the surface normal at every tool position, c' = c + E n,
+   a function of the surface that repeats on every part cut (:class:`ErrorModel`).
+4. **Measurement.** A nominal point p with outward normal n is measured where the line p + t n meets
+   the z-map (bilinear), plus normal noise of ``noise`` mm along n, seeded.
+
+Error models (the freeform paper's (4)–(9)): uniform dF = A; polynomial of degree n in u, v
+normalised to [−1, 1]; curvature dF = A_m (i_H − 0.5), i_H = (H − H_min) / (H_max − H_min) with H
+the mean curvature. Random parts: uniform or normal. Every function takes a seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from ..surfaces import Surface
+
+
+def demo_part(nx: int = 61, ny: int = 41) -> Surface:
+    """The demo's freeform test part: 80 × 60 mm, a dome on a wave, 0–9 mm high."""
+
+    def f(x, y):
+        dome = 6.0 * np.exp(-((x - 44.0) ** 2) / 500.0 - ((y - 28.0) ** 2) / 300.0)
+        wave = 1.2 * np.sin(x / 9.0) * np.cos(y / 11.0)
+        return 2.0 + dome + wave + 0.02 * x
+
+    return Surface.height(f, (0.0, 80.0), (0.0, 60.0), nx, ny)
+
+
+# --------------------------------------------------------------------------------------- errors
+@dataclass(frozen=True)
+class ErrorModel:
+    """A systematic error dF(x, y) in mm along the outward normal (> 0: material left over).
+
+    ``terms`` is a list of (kind, parameters): ``("uniform", A)``, ``("polynomial", coeffs)`` with
+    ``coeffs[(i, j)]`` the coefficient of u_n^i v_n^j, ``("curvature", A_m)``.
+    """
+
+    surface: Surface
+    terms: tuple = field(default_factory=tuple)
+
+    def __call__(self, x, y) -> np.ndarray:
+        x = np.asarray(x, float)
+        y = np.asarray(y, float)
+        s = self.surface
+        out = np.zeros(np.broadcast(x, y).shape)
+        for kind, par in self.terms:
+            if kind == "uniform":
+                out = out + float(par)
+            elif kind == "polynomial":
+                un = 2 * (x - s.u[0]) / (s.u[-1] - s.u[0]) - 1
+                vn = 2 * (y - s.v[0]) / (s.v[-1] - s.v[0]) - 1
+                for (i, j), c in dict(par).items():
+                    out = out + c * un**i * vn**j
+            elif kind == "curvature":
+                out = out + float(par) * (self._ih(x, y) - 0.5)
+            else:
+                raise ValueError(f"unknown error term {kind!r}")
+        return out
+
+    def _ih(self, x, y):
+        s = self.surface
+        uu, vv = np.meshgrid(np.linspace(s.u[0], s.u[-1], 161), np.linspace(s.v[0], s.v[-1], 121), indexing="ij")
+        h = s.mean_curvature(uu, vv)
+        lo, hi = float(h.min()), float(h.max())
+        return (s.mean_curvature(x, y) - lo) / (hi - lo)
+
+
+def random_error(n: int, amplitude: float, kind: str = "normal", seed: int = 0) -> np.ndarray:
+    """Random error: ``normal`` (std = amplitude) or ``uniform`` (±amplitude)."""
+    rng = np.random.default_rng(seed)
+    if kind == "normal":
+        return rng.normal(0.0, amplitude, n)
+    if kind == "uniform":
+        return rng.uniform(-amplitude, amplitude, n)
+    raise ValueError(f"random kind must be normal or uniform, got {kind!r}")
+
+
+# --------------------------------------------------------------------------------------- program
+def _ball(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+    k = int(np.ceil(radius / h))
+    o = np.arange(-k, k + 1) * h
+    d2 = o[:, None] ** 2 + o[None, :] ** 2
+    inside = d2 <= radius * radius
+    return np.where(inside, np.sqrt(np.maximum(radius * radius - d2, 0.0)), 0.0), inside
+
+
+def finishing_program(surface: Surface, tool_radius: float = 4.0, stepover: float = 0.5, step: float = 0.5,
+                      feed: float = 1200.0, clearance: float = 20.0) -> str:
+    """A zig-zag raster finishing program (G21 G90) along x for a ball-end tool, by drop cutter."""
+    h = min(step, stepover) / 2
+    xs = np.arange(surface.u[0], surface.u[-1] + 1e-9, h)
+    ys = np.arange(surface.v[0], surface.v[-1] + 1e-9, h)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    Z = surface.point(X, Y)[..., 2]
+    cap, inside = _ball(tool_radius, h)
+    # outside the part the surface is continued flat at its border height (mode="nearest")
+    tip = ndimage.grey_dilation(Z, footprint=inside, structure=cap, mode="nearest") - tool_radius
+    ix = np.round(np.arange(surface.u[0], surface.u[-1] + 1e-9, step) / h).astype(int) - int(round(surface.u[0] / h))
+    iy = np.round(np.arange(surface.v[0], surface.v[-1] + 1e-9, stepover) / h).astype(int) - int(round(surface.v[0] / h))
+    ix = ix[ix < len(xs)]
+    lines = ["%", "(ncadapt demo: ball-end finishing, R %.3f mm, stepover %.3f mm)" % (tool_radius, stepover),
+             "G21 G90 G17 G94", "T1 M6", "S12000 M3", f"G0 Z{clearance:.4f}"]
+    for r, j in enumerate(iy):
+        cols = ix if r % 2 == 0 else ix[::-1]
+        x0 = xs[cols[0]]
+        if r == 0:
+            lines.append(f"G0 X{x0:.4f} Y{ys[j]:.4f}")
+            lines.append(f"G1 Z{tip[cols[0], j]:.4f} F{feed / 2:.0f}")
+            lines.append(f"F{feed:.0f}")
+        else:
+            lines.append(f"G1 Y{ys[j]:.4f} Z{tip[cols[0], j]:.4f}")
+        for i in cols[1:]:
+            lines.append(f"X{xs[i]:.4f} Z{tip[i, j]:.4f}")
+    lines += [f"G0 Z{clearance:.4f}", "M5", "M30", "%"]
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------------------- machining
+@dataclass(frozen=True)
+class ZMap:
+    """A machined height field: ``z[i, j]`` at (x0 + i h, y0 + j h)."""
+
+    x0: float
+    y0: float
+    h: float
+    z: np.ndarray
+
+    def height(self, x, y) -> np.ndarray:
+        """Bilinear height at (x, y)."""
+        return ndimage.map_coordinates(self.z, [(np.asarray(x) - self.x0) / self.h, (np.asarray(y) - self.y0) / self.h],
+                                       order=1, mode="nearest")
+
+
+def machine(program, surface: Surface, error: ErrorModel | None, tool_radius: float,
+            cell: float = 0.25, step: float = 0.25) -> ZMap:
+    """Cut ``program`` (an :class:`ncadapt.nc.Program`) into a z-map of the part's area."""
+    tp = program.toolpath(max_segment=step, rapids=False)
+    c = tp.points[np.isfinite(tp.points).all(axis=1)]
+    if error is not None:
+        # the machine's systematic error, along the part's normal where the tool works
+        x = np.clip(c[:, 0], surface.u[0], surface.u[-1])
+        y = np.clip(c[:, 1], surface.v[0], surface.v[-1])
+        c = c + error(x, y)[:, None] * surface.normal(x, y)
+    x0, y0 = surface.u[0], surface.v[0]
+    nx = int(round((surface.u[-1] - x0) / cell)) + 1
+    ny = int(round((surface.v[-1] - y0) / cell)) + 1
+    z = np.full(nx * ny, np.inf)
+    k = int(np.ceil(tool_radius / cell)) + 1
+    ci = np.round((c[:, 0] - x0) / cell).astype(np.int64)
+    cj = np.round((c[:, 1] - y0) / cell).astype(np.int64)
+    r2 = tool_radius * tool_radius
+    for di in range(-k, k + 1):
+        i = ci + di
+        for dj in range(-k, k + 1):
+            j = cj + dj
+            d2 = (x0 + i * cell - c[:, 0]) ** 2 + (y0 + j * cell - c[:, 1]) ** 2
+            ok = (d2 <= r2) & (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
+            if ok.any():
+                np.minimum.at(z, i[ok] * ny + j[ok], c[ok, 2] + tool_radius - np.sqrt(r2 - d2[ok]))
+    z = z.reshape(nx, ny)
+    if np.isinf(z).any():
+        raise ValueError("the program does not cover the whole part; widen the raster")
+    return ZMap(x0, y0, cell, z)
+
+
+def measure(zmap: ZMap, nominal, normal, noise: float = 0.0, seed: int = 0, iterations: int = 6) -> np.ndarray:
+    """Measured points: where p + t n meets the z-map (Newton on t), plus noise along n."""
+    p = np.asarray(nominal, float)
+    n = np.asarray(normal, float)
+    t = np.zeros(len(p))
+    for _ in range(iterations):
+        q = p + t[:, None] * n
+        g = zmap.height(q[:, 0], q[:, 1]) - q[:, 2]
+        # d/dt of (height − z) ≈ −n_z for the small slopes between cells
+        t = t + g / np.maximum(n[:, 2], 0.2)
+    if noise > 0:
+        t = t + np.random.default_rng(seed).normal(0.0, noise, len(t))
+    return p + t[:, None] * n
+
+
+def probe_points(surface: Surface, border: float = 5.0, spacing: float = 2.5):
+    """A grid of nominal points and normals inside the part, leaving an unmeasured border strip."""
+    xs = np.arange(surface.u[0] + border, surface.u[-1] - border + 1e-9, spacing)
+    ys = np.arange(surface.v[0] + border, surface.v[-1] - border + 1e-9, spacing)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    x, y = X.ravel(), Y.ravel()
+    return surface.point(x, y), surface.normal(x, y)
