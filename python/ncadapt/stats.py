@@ -200,15 +200,32 @@ def moran(
         raise ValueError(f"threshold must be > 0 mm, got {threshold}")
     wt = Weights(weights, float(power) if weights == "idw" else None, threshold if weights == "idw" else None,
                  (int(neighbors) if neighbors else 8) if weights == "knn" else None)
-    n = len(v)
     z = v - v.mean()
-    zz = float(z @ z)
-    if zz == 0:
+    if float(z @ z) == 0:
         raise InputError("all values are equal: Moran's I is undefined")
     if weights == "idw" and threshold is None:
         s0, s1, s2, zwz = _sums_dense_idw(p, z, float(power))
     else:
         s0, s1, s2, zwz = _sums_sparse(weights_matrix(p, wt), z)
+    return _moran(v, s0, s1, s2, zwz, alpha, wt)
+
+
+def moran_matrix(w, values, alpha: float = 0.05) -> Moran:
+    """Moran's I with any weights matrix ``w`` (n, n), row-standardised here."""
+    from scipy import sparse as sp
+
+    v = np.asarray(values, dtype=float).ravel()
+    m = sp.csr_matrix(w, dtype=float)
+    rs = np.asarray(m.sum(axis=1)).ravel()
+    m = sp.csr_matrix(sp.diags(np.divide(1.0, rs, out=np.zeros_like(rs), where=rs > 0)) @ m)
+    z = v - v.mean()
+    return _moran(v, *_sums_sparse(m, z), alpha, Weights("matrix", None, None, None))
+
+
+def _moran(v, s0, s1, s2, zwz, alpha, wt) -> Moran:
+    n = len(v)
+    z = v - v.mean()
+    zz = float(z @ z)
     if s0 == 0:
         raise InputError("no point has a neighbour within the threshold; increase it")
     i_stat = n / s0 * zwz / zz

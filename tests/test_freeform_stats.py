@@ -1,0 +1,151 @@
+"""Moran's I against PySAL esda, filters against OpenCV and csaps, surfaces against closed forms."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from ncadapt import filters, stats, surfaces
+
+esda = pytest.importorskip("esda")
+libpysal = pytest.importorskip("libpysal")
+
+
+def _data(n=300, seed=0):
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(0, 10, (n, 2))
+    return p, np.sin(p[:, 0]) + 0.3 * rng.normal(size=n)
+
+
+def _esda(values, w):
+    w.transform = "r"
+    return esda.Moran(values, w, permutations=0)
+
+
+def _same(ours, ref):
+    for a, b in ((ours.I, ref.I), (ours.expected, ref.EI), (ours.variance_normality, ref.VI_norm),
+                 (ours.variance_randomization, ref.VI_rand), (ours.z_normality, ref.z_norm),
+                 (ours.z_randomization, ref.z_rand), (ours.p_normality, ref.p_norm), (ours.p_randomization, ref.p_rand)):
+        assert a == pytest.approx(b, rel=1e-10, abs=1e-10)
+
+
+def test_moran_knn_equals_esda():
+    p, v = _data()
+    _same(stats.moran(p, v, weights="knn", neighbors=6), _esda(v, libpysal.weights.KNN(p, k=6)))
+
+
+@pytest.mark.parametrize("power", [1.0, 2.0])
+def test_moran_distance_band_equals_esda(power):
+    p, v = _data(seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # libpysal's own divide-by-zero on the diagonal
+        w = libpysal.weights.DistanceBand(p, threshold=2.0, binary=False, alpha=-power, silence_warnings=True)
+    _same(stats.moran(p, v, weights="idw", threshold=2.0, power=power), _esda(v, w))
+
+
+def test_moran_all_pairs_idw_equals_esda():
+    from scipy.spatial.distance import cdist
+
+    p, v = _data(n=400, seed=5)
+    d = cdist(p, p)
+    np.fill_diagonal(d, np.inf)
+    _same(stats.moran(p, v), _esda(v, libpysal.weights.full2W(1 / d)))
+
+
+def test_moran_st_louis_published_value():
+    """esda's documented result on the St. Louis homicide rates 1988-93 (libpysal example
+    ``stl``, its contiguity weights)."""
+    import csv
+
+    with open(libpysal.examples.get_path("stl_hom.txt"), newline="") as f:
+        rows = list(csv.reader(f))[1:]
+    y = np.array([float(r[rows[0].index("HR8893")]) for r in rows[1:]])
+    gal = libpysal.io.open(libpysal.examples.get_path("stl.gal"))
+    w = gal.read()
+    gal.close()
+    ours = stats.moran_matrix(w.full()[0], y)
+    # esda's Moran docstring: round(I, 3) = 0.244, EI = -1/77, p_norm = 0.00027147862770937614
+    assert round(ours.I, 3) == 0.244
+    assert ours.expected == pytest.approx(-0.012987012987012988, rel=1e-12)
+    assert ours.p_normality == pytest.approx(0.00027147862770937614, rel=1e-6)
+    _same(ours, _esda(y, w))
+
+
+def test_moran_decision_rate_on_noise():
+    """Pure noise: 'systematic' at most about alpha of the time (40 seeds, alpha 0.05)."""
+    rng = np.random.default_rng(11)
+    p = rng.uniform(0, 50, (400, 2))
+    hits = sum(stats.moran(p, np.random.default_rng(s).normal(size=400), weights="knn").systematic for s in range(40))
+    assert hits <= 5
+
+
+def test_moran_rejects_bad_input():
+    p, v = _data(n=10)
+    with pytest.raises(ValueError):
+        stats.moran(p, v, power=0.5)
+    with pytest.raises(ValueError, match="equal"):
+        stats.moran(p, np.ones(10))
+    q = p.copy()
+    q[1] = q[0]
+    with pytest.raises(ValueError, match="coincide"):
+        stats.moran(q, v)
+
+
+def test_bilateral_equals_opencv_away_from_borders():
+    cv2 = pytest.importorskip("cv2")
+    rng = np.random.default_rng(1)
+    ny, nx = 30, 40
+    img = (np.sin(np.arange(nx) / 5)[None, :] * np.cos(np.arange(ny) / 7)[:, None]
+           + 0.2 * rng.normal(size=(ny, nx))).astype(np.float32)
+    sc, ss = 1.5, 0.5
+    d = 2 * int(np.ceil(2 * sc)) + 1
+    ref = cv2.bilateralFilter(img, d, ss, sc)
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    ours = filters.bilateral(np.column_stack([xx.ravel(), yy.ravel()]), img.ravel().astype(float), sc, ss,
+                             radius=d // 2).reshape(ny, nx)
+    m = d // 2
+    # OpenCV computes in float32
+    np.testing.assert_allclose(ours[m:-m, m:-m], ref[m:-m, m:-m], atol=2e-6)
+
+
+@pytest.mark.parametrize("p", [0.05, 0.3, 0.8, 0.99])
+def test_smoothing_spline_grid_equals_csaps(p):
+    csaps = pytest.importorskip("csaps")
+    rng = np.random.default_rng(2)
+    x = np.sort(rng.uniform(0, 5, 12))
+    y = np.linspace(0, 3, 9)
+    z = rng.normal(size=(12, 9))
+    ref = csaps.NdGridCubicSmoothingSpline((x, y), z, smooth=p)((x, y))
+    np.testing.assert_allclose(filters.smoothing_spline_grid((x, y), z, p), ref, atol=1e-12)
+
+
+def test_smoothing_spline_limits():
+    x = np.linspace(0, 1, 15)
+    y = np.random.default_rng(0).normal(size=15)
+    np.testing.assert_allclose(filters.smoothing_spline_grid((x,), y, 1.0), y, atol=1e-12)  # interpolant
+    line = np.polyval(np.polyfit(x, y, 1), x)
+    np.testing.assert_allclose(filters.smoothing_spline_grid((x,), y, 0.0), line, atol=1e-12)  # LSQ line
+
+
+def test_mean_curvature_sphere_and_cylinder():
+    r = 10.0
+    sph = surfaces.Surface.from_function(
+        lambda u, v: (r * np.sin(u) * np.cos(v), r * np.sin(u) * np.sin(v), r * np.cos(u)), (0.5, 2.5), (0.1, 3), 81, 81)
+    assert abs(sph.mean_curvature(1.2, 1.5)) == pytest.approx(1 / r, rel=1e-4)
+    cyl = surfaces.Surface.from_function(lambda u, v: (5 * np.cos(u), 5 * np.sin(u), v), (0, 3), (0, 10), 81, 21)
+    assert abs(cyl.mean_curvature(1.5, 5.0)) == pytest.approx(1 / (2 * 5), rel=1e-3)
+    plane = surfaces.Surface.height(lambda x, y: 0.3 * x - 0.1 * y, (0, 10), (0, 10), 6, 6)
+    np.testing.assert_allclose(plane.normal(3.0, 4.0), np.array([-0.3, 0.1, 1]) / np.sqrt(1.1), atol=1e-12)
+    assert plane.mean_curvature(3.0, 4.0) == pytest.approx(0, abs=1e-12)
+
+
+def test_border_extrapolation_is_exact_for_cubics():
+    u = np.linspace(0, 10, 21)
+    v = np.linspace(0, 8, 17)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    f = 0.01 * uu**3 - 0.2 * uu + 0.05 * vv**2
+    known = (uu > 2) & (uu < 8) & (vv > 1.5) & (vv < 6.5)
+    out = surfaces.extrapolate_border(u, v, np.where(known, f, 0.0), known)
+    np.testing.assert_allclose(out, f, atol=1e-9)
