@@ -105,23 +105,30 @@ def extrapolate_border(u, v, values, known, *, fit_points: int = 12) -> np.ndarr
 
     ``values`` (nu, nv) are valid where ``known`` is True, a region that is convex along every grid
     row and column (the measured area of a part). Each row is extended by a least-squares cubic
-    through its ``fit_points`` known values nearest each end, then each column likewise; cells that
-    neither reaches keep the nearest filled value.
+    through its known values nearest each end (``fit_points``, or half the row's known values if
+    more), then each column likewise; cells that neither reaches keep the nearest filled value.
+    Extrapolated values are held within the known values' range widened by a quarter of its span
+    on each side: a cubic through noisy data can run away a few cells out, and a compensation must
+    not invent errors larger than any it measured.
     """
     out = np.array(values, dtype=float)
     have = np.array(known, dtype=bool)
     out[~have] = np.nan
+    lo_v, hi_v = float(np.min(out[have])), float(np.max(out[have]))
+    pad = 0.25 * (hi_v - lo_v)
+    lo_v, hi_v = lo_v - pad, hi_v + pad
 
     def line_fill(coord, vals, ok):
         idx = np.flatnonzero(ok)
         if len(idx) < 4:
             return vals, ok
         vals = vals.copy()
-        lo, hi = idx[:fit_points], idx[-fit_points:]
+        m = max(fit_points, len(idx) // 2)
+        lo, hi = idx[:m], idx[-m:]
         for sel, side in ((lo, coord < coord[idx[0]]), (hi, coord > coord[idx[-1]])):
             if side.any():
                 c = np.polyfit(coord[sel], vals[sel], 3)
-                vals[side] = np.polyval(c, coord[side])
+                vals[side] = np.clip(np.polyval(c, coord[side]), lo_v, hi_v)
         return vals, np.isfinite(vals)
 
     for i in range(out.shape[0]):

@@ -189,17 +189,17 @@ def read_qif(path, probe_radius: float = 0.0) -> Measurements:
             measured[fid] = (el.sourceline, vec(el, "Location", el))
     if not nominals:
         raise InputError("no PointFeatureNominal elements", src)
-    rows = []
+    by_nominal = {}
     for fid, (ln, loc) in measured.items():
         nid = items.get(fid, fid)
         if nid not in nominals:
             raise InputError(f"measurement of feature item {fid} refers to no PointFeatureNominal", src, ln)
-        rows.append((nid, nominals[nid], loc))
-    done = {r[0] for r in rows}
-    for nid, (ln, _, _) in nominals.items():
-        if nid not in done:
-            raise InputError(f"nominal point {nid} has no measurement", src, ln)
-    rows.sort(key=lambda r: r[1][0])
+        by_nominal[nid] = loc
+    rows = []  # in the document order of the nominals
+    for nid, nom in nominals.items():
+        if nid not in by_nominal:
+            raise InputError(f"nominal point {nid} has no measurement", src, nom[0])
+        rows.append((nid, nom, by_nominal[nid]))
     return from_arrays([r[1][1] for r in rows], [r[1][2] for r in rows], measured=[r[2] for r in rows],
                        ids=[r[0] for r in rows], probe_radius=probe_radius, lines=[r[1][0] for r in rows], source=src)
 

@@ -1,0 +1,250 @@
+"""Freeform compensation: measurement readers, the process on the virtual testbed, the CLI, the demo."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from ncadapt import InputError, cad, measure, nc
+from ncadapt.cli import main
+from ncadapt.processes import freeform as pf
+from ncadapt.sim import freeform as ff
+
+NOM = np.array([[0, 0, 1.0], [1, 0, 1.1], [0, 1, 0.9], [1, 1, 1.0]])
+NRM = np.array([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0, 1.0], [0, -0.6, 0.8]])
+MEAS = NOM + np.array([0.01, -0.02, 0.03, 0.0])[:, None] * NRM + np.array([[0.001, 0, 0]] * 4)
+DEV = np.einsum("ij,ij->i", MEAS - NOM, NRM)
+
+
+def _csv(tmp_path, rows, header="id,x,y,z,i,j,k,mx,my,mz"):
+    p = tmp_path / "m.csv"
+    p.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return p
+
+
+def _rows():
+    return [f"P{k},{','.join(map(str, (*NOM[k], *NRM[k], *MEAS[k])))}" for k in range(4)]
+
+
+def test_csv_deviation_sign_and_probe_radius(tmp_path):
+    m = measure.read(_csv(tmp_path, _rows()))
+    np.testing.assert_allclose(m.deviation, DEV, atol=1e-12)
+    assert m.ids == ("P0", "P1", "P2", "P3")
+    # probe-tip centres: the surface point is r back along the normal
+    r = measure.read(_csv(tmp_path, _rows()), probe_radius=0.5)
+    np.testing.assert_allclose(r.deviation, DEV - 0.5, atol=1e-12)
+
+
+@pytest.mark.parametrize("bad, line, what", [
+    (lambda r: r.__setitem__(2, r[2].replace("0.9", "nan", 1)), 4, "not a number"),
+    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0,0,0,1,0,1.1"), 3, "zero"),
+    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.9,1,0,1.1"), 3, "not a unit vector"),
+    (lambda r: r.__setitem__(3, r[3].replace("P3", "P0")), 5, "duplicate id"),
+    (lambda r: r.__setitem__(0, r[0] + ",7"), 2, "fields"),
+])
+def test_csv_errors_name_the_line(tmp_path, bad, line, what):
+    rows = _rows()
+    bad(rows)
+    with pytest.raises(InputError, match=what) as e:
+        measure.read(_csv(tmp_path, rows))
+    assert e.value.line == line and e.value.path.endswith("m.csv")
+
+
+def test_dev_column_and_xyzijk(tmp_path):
+    rows = [",".join(map(str, (*NOM[k], *NRM[k], DEV[k]))) for k in range(4)]
+    m = measure.read(_csv(tmp_path, rows, "x,y,z,i,j,k,dev"))
+    np.testing.assert_allclose(m.deviation, DEV)
+    p = tmp_path / "pts.txt"
+    p.write_text("PC-DMIS XYZIJK export\n" + "\n".join(" ".join(map(str, (*NOM[k], *NRM[k], *MEAS[k]))) for k in range(4)) + "\n")
+    np.testing.assert_allclose(measure.read(p).deviation, DEV, atol=1e-12)
+    p.write_text(p.read_text() + "1 2 3 0 0 1\n")
+    with pytest.raises(InputError, match="7 .* or 9") as e:
+        measure.read(p)
+    assert e.value.line == 6
+
+
+def test_dmis_with_continuations(tmp_path):
+    lines = []
+    for k in range(4):
+        n, m = ",".join(map(str, (*NOM[k], *NRM[k]))), ",".join(map(str, (*MEAS[k], *NRM[k])))
+        lines += [f"F(PT{k})=FEAT/POINT,CART,$", f"  {n}", f"FA(PT{k})=FEAT/POINT,CART,{m}"]
+    p = tmp_path / "out.dmo"
+    p.write_text("DMISMN/'report',05.0\n" + "\n".join(lines) + "\nENDFIL\n")
+    m = measure.read(p)
+    np.testing.assert_allclose(m.deviation, DEV, atol=1e-12)
+    assert m.ids == ("PT0", "PT1", "PT2", "PT3") and m.line_of(1) == 5
+    p.write_text("\n".join(lines[:-1]) + "\n")
+    with pytest.raises(InputError, match="no actual FA") as e:
+        measure.read(p)
+    assert e.value.line == 10
+
+
+def test_qif_results(tmp_path):
+    nominals = "".join(
+        f'<PointFeatureNominal id="{10 + k}"><Location>{" ".join(map(str, NOM[k]))}</Location>'
+        f'<Normal>{" ".join(map(str, NRM[k]))}</Normal></PointFeatureNominal>' for k in range(4))
+    items = "".join(f'<PointFeatureItem id="{20 + k}"><FeatureNominalId>{10 + k}</FeatureNominalId></PointFeatureItem>'
+                    for k in range(4))
+    meas = "".join(f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{20 + k}</FeatureItemId>'
+                   f'<Location>{" ".join(map(str, MEAS[k]))}</Location></PointFeatureMeasurement>' for k in (3, 1, 0, 2))
+    p = tmp_path / "r.qif"
+    p.write_text(f'<?xml version="1.0"?>\n<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">\n'
+                 f"<Features><FeatureNominals>{nominals}</FeatureNominals><FeatureItems>{items}</FeatureItems>\n"
+                 f"</Features><MeasurementsResults><FeatureMeasurements>{meas}</FeatureMeasurements>"
+                 f"</MeasurementsResults></QIFDocument>\n")
+    m = measure.read(p)
+    np.testing.assert_allclose(m.deviation, DEV, atol=1e-12)
+    assert m.ids == ("10", "11", "12", "13")
+
+
+# --------------------------------------------------------------------------------- the testbed
+@pytest.fixture(scope="module")
+def bench():
+    """The demo's part and program with another error model and probe grid."""
+    part = ff.demo_part()
+    prog = nc.parse(ff.finishing_program(part, 4.0, 0.25, 0.5))
+    err = ff.ErrorModel(part, (("curvature", 0.10), ("polynomial", {(1, 0): 0.02, (0, 2): -0.015})))
+    first = ff.machine(prog, part, err, 4.0)
+    clean = ff.machine(prog, part, None, 4.0)
+    p, n = ff.probe_points(part, 5.0, 2.5)
+    return part, prog, err, first, clean, p, n
+
+
+def test_machining_reproduces_the_error_model(bench):
+    """Cut with the error model, the part's deviation along the normal is the model (to the
+    scallop height of the raster, s²/8R = 0.25²/32 = 2 µm, plus the z-map's bilinear cells) and
+    without it nearly zero."""
+    part, prog, err, first, clean, p, n = bench
+    e0 = np.einsum("ij,ij->i", ff.measure(clean, p, n) - p, n)
+    e1 = np.einsum("ij,ij->i", ff.measure(first, p, n) - p, n)
+    assert np.abs(e0).max() < 0.002 + 0.002
+    # the machine errs where its tool is: the ball centre over p is at p + R n
+    c = p + 4.0 * n
+    np.testing.assert_allclose(e1 - e0, err(c[:, 0], c[:, 1]), atol=0.003)
+
+
+def test_curvature_model_follows_the_papers_formula(bench):
+    part, *_ = bench
+    e = ff.ErrorModel(part, (("curvature", 0.1),))
+    x, y = np.meshgrid(np.linspace(0, 80, 81), np.linspace(0, 60, 61))
+    v = e(x.ravel(), y.ravel())
+    assert v.min() >= -0.05 - 1e-9 and v.max() <= 0.05 + 1e-9  # A_m (i_H − 0.5), i_H ∈ [0, 1]
+    uni = ff.ErrorModel(part, (("uniform", 0.02),))
+    assert np.allclose(uni(x, y), 0.02)
+
+
+def test_compensation_closes_the_loop(bench):
+    """One compensation leaves at most 10 % of the systematic RMS (5 µm noise, seeded)."""
+    part, prog, err, first, _, p, n = bench
+    m = measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=0.005, seed=3))
+    a = pf.analyze(m)
+    assert a.moran.systematic
+    d = pf.decompose(m)
+    c = pf.compensate(part, m, d.systematic)
+    out = prog.correct(c.field(4.0))
+    second = ff.machine(out, part, err, 4.0)
+    before = np.einsum("ij,ij->i", ff.measure(first, p, n) - p, n)
+    after = np.einsum("ij,ij->i", ff.measure(second, p, n) - p, n)
+    ratio = np.sqrt((after**2).mean() / (before**2).mean())
+    assert ratio <= 0.10, ratio
+
+
+def test_noise_alone_is_not_systematic(bench):
+    part, *_, p, n = bench
+    hits = 0
+    for seed in range(20):
+        e = np.random.default_rng(seed).normal(0, 0.005, len(p))
+        hits += pf.analyze(measure.from_arrays(p, n, deviation=e)).moran.systematic
+    assert hits <= 3  # nominal 5 % of 20 = 1
+
+
+def test_compensated_surface_step_and_iges(bench, tmp_path):
+    part, *_, p, n = bench
+    m = measure.from_arrays(p, n, deviation=0.01 + 0.001 * p[:, 0])
+    c = pf.compensate(part, m, m.deviation)
+    u, v = np.array([10.0, 40.0, 70.0]), np.array([10.0, 30.0, 50.0])
+    expect = part.point(u, v) - (0.01 + 0.001 * u)[:, None] * part.normal(u, v)
+    for name in ("s.step", "s.igs"):
+        cad.write(c.compensated, tmp_path / name)
+        np.testing.assert_allclose(cad.read_surface_points(tmp_path / name, u, v), expect, atol=2e-4)
+
+
+# --------------------------------------------------------------------------------- CLI and demo
+def test_analyze_and_compensate_cli(tmp_path, bench):
+    part, prog, err, first, _, p, n = bench
+    mp = ff.measure(first, p, n, noise=0.005, seed=4)
+    rows = ["x,y,z,i,j,k,mx,my,mz"] + [",".join(f"{v:.6f}" for v in (*a, *b, *c)) for a, b, c in zip(p, n, mp)]
+    (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "p.ngc").write_bytes(prog.data)
+    r = CliRunner().invoke(main, ["analyze", str(tmp_path / "m.csv"), "--json", str(tmp_path / "a.json")])
+    assert r.exit_code == 0, r.output
+    a = json.loads((tmp_path / "a.json").read_text())
+    assert a["n_points"] == len(p) and a["moran"]["systematic"] is True
+    assert set(a["moran"]) >= {"I", "expected", "variance_normality", "variance_randomization", "z_normality",
+                               "z_randomization", "p_value", "systematic", "weights"}
+    assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None}
+    r = CliRunner().invoke(main, [
+        "compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
+        "--tool-radius", "4", "--extent", "0,80,0,60", "--surface", str(tmp_path / "c.step"),
+        "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"])
+    assert r.exit_code == 0, r.output
+    j = json.loads((tmp_path / "c.json").read_text())
+    assert {"n_points", "moran", "deviation", "systematic", "random"} <= set(j)
+    assert set(j["random"]) >= {"std", "pearson_p", "student_p", "moran_z"}
+    assert j["moran"]["weights"]["kind"] == "knn" and j["moran"]["weights"]["neighbors"] == 8
+    pts = np.genfromtxt(tmp_path / "pts.csv", delimiter=",", names=True)
+    assert pts.dtype.names[:9] == ("x", "y", "z", "deviation", "systematic", "random", "cx", "cy", "cz")
+    np.testing.assert_allclose(pts["systematic"] + pts["random"], pts["deviation"], atol=2e-6)
+    np.testing.assert_allclose(pts["cz"], p[:, 2] - pts["systematic"] * n[:, 2], atol=2e-6)
+    assert (tmp_path / "c.ngc").stat().st_size > 0 and (tmp_path / "c.step").stat().st_size > 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y,z,i,j,k,dev\n0,0,0,0,0,0,0.1\n")
+    r = CliRunner().invoke(main, ["analyze", str(bad)])
+    assert r.exit_code == 2 and "bad.csv:2:1: error: normal of point 1 is zero" in r.output
+
+
+@pytest.fixture(scope="module")
+def demo_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    r = CliRunner().invoke(main, ["demo", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    return out, r.output
+
+
+def test_demo_meets_the_accuracy_target(demo_out):
+    out, text = demo_out
+    s = json.loads((out / "summary.json").read_text())
+    assert s["systematic_rms_after"] <= 0.10 * s["systematic_rms_before"]
+    assert s["moran"]["systematic"] is True
+    assert "systematic error RMS before" in text
+    for name in ("corrected.ngc", "compensated.step", "report.html", "measurements.csv"):
+        assert (out / name).stat().st_size > 0
+    # the shipped program is the generator's output
+    from ncadapt import demo
+
+    assert demo.program_text() == ff.finishing_program(ff.demo_part(), demo.TOOL_RADIUS, demo.STEPOVER, demo.STEP)
+
+
+def test_demo_report_renders_in_chromium(demo_out, tmp_path):
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("chromium not installed (make test installs it)")
+    out, _ = demo_out
+    shot = tmp_path / "report.png"
+    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                    "--window-size=1200,2400", f"--screenshot={shot}", (out / "report.html").as_uri()],
+                   check=True, capture_output=True, timeout=120)
+    from matplotlib.image import imread
+
+    img = imread(shot)
+    assert img.shape[:2] == (2400, 1200)
+    # the page is drawn: the colour maps put saturated red and blue pixels on the white page
+    rgb = img[..., :3]
+    red = (rgb[..., 0] > 0.6) & (rgb[..., 2] < 0.35)
+    blue = (rgb[..., 2] > 0.5) & (rgb[..., 0] < 0.3)
+    assert red.sum() > 500 and blue.sum() > 200
