@@ -26,11 +26,15 @@ rust:
 	  echo "cargo not found: installing a Rust toolchain"; \
 	  $(SUDO) apt-get update -qq && $(SUDO) DEBIAN_FRONTEND=noninteractive apt-get install -y -qq cargo rustc; }
 
-# LinuxCNC's interpreter (rs274) is the peer the tests compare against
+# LinuxCNC's interpreter (rs274) is the peer the NC tests compare against; Chromium renders the
+# freeform report in a test
 system-deps:
-	@command -v rs274 >/dev/null || { \
+	@missing=""; \
+	command -v rs274 >/dev/null || missing="$$missing linuxcnc-uspace"; \
+	command -v chromium >/dev/null || missing="$$missing chromium"; \
+	if [ -n "$$missing" ]; then \
 	  $(SUDO) apt-get update -qq && \
-	  $(SUDO) DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends linuxcnc-uspace; }
+	  $(SUDO) DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; fi
 
 demo: install
 	$(VENV)/bin/ncadapt demo --out demo-out

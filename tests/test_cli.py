@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import shutil
 
 import pytest
@@ -91,7 +92,9 @@ def test_inspect_json(tmp_path, plate):
     assert d["unsupported"] == [{"line": 2, "col": 1, "construct": "canned cycle G83", "blocks": 2}]
 
 
-def test_demo(tmp_path):
-    r = run("demo", "--out", tmp_path / "d")
+def test_plate_example(tmp_path):
+    """The README's `correct` example on the files in examples/nc."""
+    ex = Path(__file__).resolve().parents[1] / "examples" / "nc"
+    r = run("correct", ex / "plate.ngc", "--field", ex / "plate_probe.csv", "-o", tmp_path / "c.ngc")
     assert r.exit_code == 0, r.output
-    assert (tmp_path / "d" / "plate-corrected.ngc").exists()
+    assert (tmp_path / "c.ngc").read_text() != (ex / "plate.ngc").read_text()

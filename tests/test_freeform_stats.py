@@ -141,11 +141,18 @@ def test_mean_curvature_sphere_and_cylinder():
     assert plane.mean_curvature(3.0, 4.0) == pytest.approx(0, abs=1e-12)
 
 
-def test_border_extrapolation_is_exact_for_cubics():
+def test_border_extrapolation_is_exact_for_cubics_and_bounded():
     u = np.linspace(0, 10, 21)
     v = np.linspace(0, 8, 17)
     uu, vv = np.meshgrid(u, v, indexing="ij")
-    f = 0.01 * uu**3 - 0.2 * uu + 0.05 * vv**2
-    known = (uu > 2) & (uu < 8) & (vv > 1.5) & (vv < 6.5)
+    known = (uu > 1) & (uu < 9) & (vv > 0.6) & (vv < 7.4)
+    f = 0.002 * uu**3 - 0.03 * uu + 0.4 * vv
     out = surfaces.extrapolate_border(u, v, np.where(known, f, 0.0), known)
-    np.testing.assert_allclose(out, f, atol=1e-9)
+    lo, hi = f[known].min(), f[known].max()
+    np.testing.assert_allclose(out, np.clip(f, lo - (hi - lo) / 4, hi + (hi - lo) / 4), atol=1e-9)
+    assert (np.abs(out - f) < 1e-9).mean() > 0.95  # exact nearly everywhere
+    g = 0.05 * uu**3  # runs away beyond the measured area: held within a quarter span of the known range
+    out = surfaces.extrapolate_border(u, v, np.where(known, g, 0.0), known)
+    lo, hi = g[known].min(), g[known].max()
+    assert out.max() == pytest.approx(hi + (hi - lo) / 4) and out.min() >= lo - (hi - lo) / 4 - 1e-12
+    np.testing.assert_allclose(out[known], g[known])
