@@ -42,9 +42,15 @@ def _hist(series):
 def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None) -> str:
     """The report as HTML text. ``after``: deviations of the re-machined part at the same points."""
     m = analysis.moran
+    p_txt = f"{m.p_value:.2g}" if m.p_value > 0 else "< 1e-300"
+    w = m.weights
+    w_txt = (f"k nearest neighbours, k = {w.neighbors}" if w.kind == "knn" else
+             f"1/d^{w.power:g}, " + (f"pairs closer than {w.threshold:g} mm" if w.threshold else "all pairs")
+             if w.kind == "idw" else w.kind) + ", row-standardised"
     verdict = (f"<p class='verdict {'yes' if m.systematic else 'no'}'>The deviations are "
                f"{'<b>systematic</b>' if m.systematic else '<b>not systematic</b>'} "
-               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p = {m.p_value:.2g}, α = {m.alpha:g})</p>")
+               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt.startswith('<') else '= ' + p_txt}, "
+               f"α = {m.alpha:g})</p>")
     sections = []
     if summary:
         cards = "".join(f"<div class='card'><div>{k}</div><div class='big'>{v}</div></div>" for k, v in summary.items())
@@ -53,7 +59,7 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
         ("Moran's I", m.I), ("E[I]", m.expected), ("Var[I], normality", m.variance_normality),
         ("Var[I], randomisation", m.variance_randomization), ("z, normality", m.z_normality),
         ("z, randomisation", m.z_randomization), ("p (two-sided, randomisation)", m.p_value),
-        ("weights", f"{m.weights.kind}, power {m.weights.power}, threshold {m.weights.threshold}, neighbours {m.weights.neighbors}"),
+        ("weights", w_txt),
         ("points", m.n)], ["statistic", "value"])))
     d = analysis.deviation
     sections.append(("Deviations", table([(k, f"{v * 1000:.2f}") for k, v in d.items()], ["", "µm"])
