@@ -63,6 +63,17 @@ def _detail(d) -> str:
     return str(d)
 
 
+def comma_floats(value: str, n: int, what: str) -> list[float]:
+    """``n`` comma-separated numbers of an option, or a click usage error saying ``what``."""
+    try:
+        parts = [float(v) for v in value.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) != n:
+        raise click.BadParameter(f"expected {what}, got {value!r}")
+    return parts
+
+
 def write_json(path, payload: dict) -> None:
     atomic_write(path, (json.dumps(payload, indent=2, allow_nan=False) + "\n").encode())
 

@@ -11,19 +11,11 @@ from .. import constants
 from .. import fields as _fields
 from .. import nc
 from ..errors import InputError
-from ._common import echo_err, handle_errors, progress, write_json
+from ._common import comma_floats, echo_err, handle_errors, progress, write_json
 
 
 def _shift(ctx, param, value):
-    if value is None:
-        return None
-    try:
-        parts = [float(v) for v in value.split(",")]
-    except ValueError:
-        parts = []
-    if len(parts) != 3:
-        raise click.BadParameter(f"expected DX,DY,DZ (three numbers in mm), got {value!r}")
-    return parts
+    return None if value is None else comma_floats(value, 3, "DX,DY,DZ (three numbers in mm)")
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -8,7 +8,7 @@ import click
 
 from .. import constants
 from ..errors import InputError
-from ._common import echo_err, handle_errors, progress, write_json
+from ._common import comma_floats, echo_err, handle_errors, progress, write_json
 
 
 def _moran_options(f):
@@ -72,12 +72,9 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
 def _extent(ctx, param, value):
     if value is None:
         return None
-    try:
-        v = [float(x) for x in value.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 4 or v[0] >= v[1] or v[2] >= v[3]:
-        raise click.BadParameter(f"expected XMIN,XMAX,YMIN,YMAX in mm, got {value!r}")
+    v = comma_floats(value, 4, "XMIN,XMAX,YMIN,YMAX in mm")
+    if v[0] >= v[1] or v[2] >= v[3]:
+        raise click.BadParameter(f"expected XMIN < XMAX and YMIN < YMAX, got {value!r}")
     return tuple(v)
 
 
