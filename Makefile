@@ -47,6 +47,7 @@ test: install-test
 bench: install-test
 	$(PIP) install -q --no-deps bCNC==0.9.16 svgelements
 	$(PY) benchmarks/bench_correct.py
+	$(PY) benchmarks/bench_freeform.py
 
 clean:
 	rm -rf $(VENV) target demo-out

@@ -110,9 +110,10 @@ def weights_matrix(points, weights: Weights) -> sparse.csr_matrix:
     elif weights.kind == "idw":
         if weights.threshold is None:
             raise ValueError("a sparse idw matrix needs a threshold (all pairs are computed densely)")
-        m = tree.sparse_distance_matrix(tree, float(weights.threshold), output_type="coo_matrix")
-        off = m.row != m.col
-        r, c, d = m.row[off], m.col[off], m.data[off]
+        pairs = tree.query_pairs(float(weights.threshold), output_type="ndarray")
+        r = np.concatenate([pairs[:, 0], pairs[:, 1]])
+        c = np.concatenate([pairs[:, 1], pairs[:, 0]])
+        d = np.sqrt(((p[r] - p[c]) ** 2).sum(axis=1))
         if (d == 0).any():
             i = int(r[np.flatnonzero(d == 0)[0]])
             raise InputError(f"points {i} and another coincide: inverse-distance weights are infinite")
