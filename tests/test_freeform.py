@@ -139,6 +139,14 @@ def test_curvature_model_follows_the_papers_formula(bench):
     assert np.allclose(uni(x, y), 0.02)
 
 
+def test_random_error_models():
+    """Uniform ±A has std A/√3, normal has std A; the same seed gives the same numbers."""
+    u = ff.random_error(200_000, 0.006, "uniform", seed=5)
+    assert np.abs(u).max() <= 0.006 and u.std() == pytest.approx(0.006 / np.sqrt(3), rel=0.01)
+    assert ff.random_error(200_000, 0.005, seed=5).std() == pytest.approx(0.005, rel=0.01)
+    np.testing.assert_array_equal(ff.random_error(10, 0.005, seed=9), ff.random_error(10, 0.005, seed=9))
+
+
 def test_compensation_closes_the_loop(bench):
     """One compensation leaves at most 10 % of the systematic RMS (5 µm noise, seeded)."""
     part, prog, err, first, _, p, n = bench

@@ -9,24 +9,31 @@ from pathlib import Path
 
 
 @contextlib.contextmanager
-def atomic_open(path: str | os.PathLike):
-    """A binary file to write that replaces ``path`` only when the block ends without an error;
-    on any failure the temporary file is removed and the target is left as it was."""
+def atomic_path(path: str | os.PathLike):
+    """A temporary path beside ``path`` (same suffix) for a writer that wants a file name; it
+    replaces ``path`` only when the block ends without an error, else it is removed and the
+    target is left as it was. The result gets the mode any new file would get."""
     p = Path(path)
     d = p.parent if str(p.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=d)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix or ".tmp", dir=d)
+    os.close(fd)
     try:
-        # mkstemp makes the file private; the result gets the mode any new file would get
+        yield tmp
+        # mkstemp makes the file private
         umask = os.umask(0)
         os.umask(umask)
-        os.chmod(fd, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as f:
-            yield f
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, p)
-    except BaseException:
+    finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-        raise
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike):
+    """A binary file to write that replaces ``path`` only when the block ends without an error."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        yield f
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> Path:

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ._io import atomic_path
 from .errors import InputError
 
 FORMATS = {".step": "step", ".stp": "step", ".igs": "iges", ".iges": "iges"}
@@ -76,9 +76,7 @@ def write(surface, path: str | os.PathLike) -> Path:
     if kind is None:
         raise InputError(f"unknown CAD format {p.suffix!r}; use .step, .stp, .igs or .iges", str(p))
     f = face(surface)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix, dir=p.parent if str(p.parent) else ".")
-    os.close(fd)
-    try:
+    with atomic_path(p) as tmp:
         if kind == "step":
             from OCP.IFSelect import IFSelect_RetDone
             from OCP.Interface import Interface_Static
@@ -99,13 +97,6 @@ def write(surface, path: str | os.PathLike) -> Path:
                 ok = w.Write(tmp)
         if not ok:
             raise OSError(f"OpenCASCADE could not write {p}")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return p
 
 

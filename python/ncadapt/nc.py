@@ -242,11 +242,15 @@ class Program:
         return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0)
 
     # ----------------------------------------------------------------------------- sampling
-    def _sample(self, chord_tol, max_segment, rapids, supported_only):
+    @staticmethod
+    def _check_sampling(chord_tol, max_segment) -> None:
         if not chord_tol > 0:
             raise ValueError(f"chord_tol must be > 0 mm, got {chord_tol}")
         if not max_segment > 0:
             raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
+
+    def _sample(self, chord_tol, max_segment, rapids, supported_only):
+        self._check_sampling(chord_tol, max_segment)
         xyz, rec = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), [], [])
         pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
         return pts, np.frombuffer(rec, dtype="<u4").astype(np.int64)
@@ -396,10 +400,7 @@ class Program:
                 "(--keep-unsupported / keep_unsupported=True copies those blocks unchanged and corrects the rest)",
                 [asdict(u) for u in uns],
             )
-        if not chord_tol > 0:
-            raise ValueError(f"chord_tol must be > 0 mm, got {chord_tol}")
-        if not max_segment > 0:
-            raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
+        self._check_sampling(chord_tol, max_segment)
         if not limit > 0:
             raise ValueError(f"limit must be > 0 mm, got {limit}")
         grid = getattr(field, "grid_lines", None)
@@ -425,7 +426,7 @@ class Program:
                 domain = e.domain
                 outside += [{"line": int(lines[i]), "position": pts[i].round(4).tolist()}
                             for i in e.indices[: max(0, 10 - len(outside))]]
-                run.emit(np.zeros_like(pts))  # keeps the run in step; the output is discarded
+                run.discard()
                 continue
             if disp.shape != pts.shape:
                 raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
@@ -442,10 +443,10 @@ class Program:
                 refused |= worst[0][0] > limit
             if keep_points:
                 kept.append((pts.copy(), disp, lines))
-            if not refused:
-                write(run.emit(disp))
+            if refused:
+                run.discard()  # the output is no longer wanted; the checks still see every chunk
             else:
-                run.emit(np.zeros_like(pts))  # keeps the run in step; the output is discarded
+                write(run.emit(disp))
         if n_outside:
             raise RefusedError(
                 f"{self.name}: {n_outside:,} point(s) outside the field's domain {domain}; nothing written "
@@ -470,12 +471,11 @@ class Program:
         warnings = list(self._clearance_warnings(field, clearance))
         if keep_unsupported and uns:
             warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
+        pts_all = disp_all = line_all = None
         if keep_points:
-            pts_all, disp_all, line_all = (np.concatenate([k[i] for k in kept]) if kept else
-                                           np.zeros((0, 3) if i < 2 else 0, dtype=np.float64 if i < 2 else np.int64)
-                                           for i in range(3))
-        else:
-            pts_all = disp_all = line_all = None
+            pts_all = np.concatenate([k[0] for k in kept]) if kept else np.zeros((0, 3))
+            disp_all = np.concatenate([k[1] for k in kept]) if kept else np.zeros((0, 3))
+            line_all = np.concatenate([k[2] for k in kept]) if kept else np.zeros(0, dtype=np.int64)
         return Correction(
             lines_in=stats["lines_in"],
             lines_out=stats["lines_out"],

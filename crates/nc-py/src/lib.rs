@@ -270,6 +270,14 @@ impl Corrector {
         Ok(PyBytes::new(py, &prev))
     }
 
+    /// Drop the current chunk without emitting it: the run's output is no longer wanted (a check
+    /// refused it), but sampling goes on so the check can see the whole program.
+    fn discard(&mut self) -> PyResult<()> {
+        let (_, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no chunk sampled"))?;
+        self.spare.push((samples, Vec::new()));
+        Ok(())
+    }
+
     /// The output of the last chunk; ends the run (its counts are then in `stats`).
     fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
         let last = self.collect(py)?;

@@ -311,6 +311,15 @@ impl<'a> Emitter<'a> {
         w
     }
 
+    /// Insert a motion word (and a separator) where the block's words begin.
+    fn insert_motion(&mut self, li: usize, m: Motion) {
+        let at = block_start(self.lx, li);
+        let t0 = self.st.arena.len() as u32;
+        self.st.arena.extend_from_slice(motion_text(m, self.lx.style.padded_g).as_bytes());
+        self.st.arena.extend_from_slice(self.sep());
+        self.st.edits.push(Edit { start: at, end: at, t0, t1: self.st.arena.len() as u32 });
+    }
+
     /// Replace source bytes [start, end) by `text`.
     fn edit_bytes(&mut self, start: u32, end: u32, text: &[u8]) {
         let t0 = self.st.arena.len() as u32;
@@ -354,11 +363,7 @@ impl<'a> Emitter<'a> {
         }
         if let Some(m) = self.st.out_motion {
             if m != rec.motion && rec.motion != Motion::Other {
-                let at = block_start(self.lx, li);
-                self.edit_bytes(at, at, motion_text(rec.motion, self.lx.style.padded_g).as_bytes());
-                let sep = self.sep();
-                self.st.arena.extend_from_slice(sep);
-                self.st.edits.last_mut().expect("just pushed").t1 = self.st.arena.len() as u32;
+                self.insert_motion(li, rec.motion);
             }
             self.st.out_motion = None;
         }
@@ -457,11 +462,7 @@ impl<'a> Emitter<'a> {
             if let Some(w) = words.iter().find(|w| is_motion_g(w)) {
                 self.edit_bytes(w.start, w.end, g1);
             } else {
-                let at = block_start(self.lx, li);
-                self.edit_bytes(at, at, g1);
-                let sep = self.sep();
-                self.st.arena.extend_from_slice(sep);
-                self.st.edits.last_mut().expect("just pushed").t1 = self.st.arena.len() as u32;
+                self.insert_motion(li, Motion::Feed);
             }
             for w in words.iter().filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P')) {
                 self.remove_word(li, w);
