@@ -15,6 +15,7 @@ from ncadapt import InputError, cad, measure, nc
 from ncadapt.cli import main
 from ncadapt.processes import freeform as pf
 from ncadapt.sim import freeform as ff
+from ncadapt.surfaces import Frame
 
 NOM = np.array([[0, 0, 1.0], [1, 0, 1.1], [0, 1, 0.9], [1, 1, 1.0]])
 NRM = np.array([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0, 1.0], [0, -0.6, 0.8]])
@@ -170,6 +171,69 @@ def test_noise_alone_is_not_systematic(bench):
         e = np.random.default_rng(seed).normal(0, 0.005, len(p))
         hits += pf.analyze(measure.from_arrays(p, n, deviation=e)).moran.systematic
     assert hits <= 3  # nominal 5 % of 20 = 1
+
+
+def test_frame_from_normals():
+    """The viewing axis: a machine axis when the mean normal is within 10° of it, else the mean."""
+    rng = np.random.default_rng(1)
+    tilt = rng.normal(0, 0.2, (50, 3))
+    up = tilt + [0, 0, 5.0]
+    f = Frame.fit(up)
+    np.testing.assert_array_equal(f.axes, np.eye(3))
+    assert f.names == ("x", "y")
+    assert Frame.fit(up[:, [2, 0, 1]]).names == ("y", "z")  # a wall seen from +x
+    assert Frame.fit(-up).names == ("x", "-y")  # from below: still right-handed
+    assert np.linalg.det(Frame.fit(-up).axes) == pytest.approx(1.0)
+    m = np.array([np.sin(0.7), 0.0, np.cos(0.7)])
+    g = Frame.fit(np.tile(m, (5, 1)))
+    np.testing.assert_allclose(g.axes[2], m, atol=1e-15)
+    np.testing.assert_allclose(g.axes @ g.axes.T, np.eye(3), atol=1e-15)
+    assert g.names == ("y", "v")  # e_u: the axis least parallel to w
+    pts = rng.normal(size=(7, 3))
+    np.testing.assert_allclose(g.to_world(*g.uv(pts).T, g.w(pts)), pts, atol=1e-14)
+    with pytest.raises(InputError, match="not a height field"):
+        Frame.fit([[1.0, 0, 0.1], [-1.0, 0, 0.1], [0, 0, 1.0]])  # a half cylinder: 84° from the mean
+    with pytest.raises(InputError, match="cancel"):
+        Frame.fit([[0, 0, 1.0], [0, 0, -1.0]])
+
+
+def _rotated(m, rot):
+    return measure.from_arrays(m.nominal @ rot.T, m.normal @ rot.T, deviation=m.deviation)
+
+
+def test_a_wall_seen_from_x_gives_the_same_compensation(bench):
+    """The testbed's measurement turned so the part faces +x: (u, v) = (y, z) are the old (x, y),
+    so every number is the same and the surfaces are the same, turned."""
+    part, *_, p, n = bench
+    m = measure.from_arrays(p, n, deviation=0.02 * np.sin(p[:, 0] / 9) + np.random.default_rng(4).normal(0, 0.005, len(p)))
+    perm = np.eye(3)[[2, 0, 1]]  # (x, y, z) -> (z, x, y)
+    w = _rotated(m, perm)
+    f = pf.frame_of(w)
+    assert f.names == ("y", "z")
+    assert pf.analyze(w).moran.I == pf.analyze(m).moran.I
+    d0, d1 = pf.decompose(m), pf.decompose(w)
+    np.testing.assert_array_equal(d1.systematic, d0.systematic)
+    c0 = pf.compensate(pf.fit_height_surface(m.nominal), m, d0.systematic)
+    c1 = pf.compensate(pf.fit_height_surface(w.nominal, frame=f), w, d1.systematic)
+    np.testing.assert_allclose(c1.surface.grid, c0.surface.grid @ perm.T, atol=1e-12)
+    np.testing.assert_allclose(c1.compensated.grid, c0.compensated.grid @ perm.T, atol=1e-12)
+    np.testing.assert_allclose(c1.points_compensated, c0.points_compensated @ perm.T, atol=1e-12)
+
+
+def test_a_tilted_part_is_analysed_in_its_own_plane(bench):
+    """Turned 40° about y, the part is seen along its mean normal: the same Moran's I and the same
+    systematic part as the upright part seen along its own mean normal (an isometry of (u, v))."""
+    part, *_, p, n = bench
+    m = measure.from_arrays(p, n, deviation=0.02 * np.cos(p[:, 1] / 7) + np.random.default_rng(5).normal(0, 0.005, len(p)))
+    c, s = np.cos(0.7), np.sin(0.7)
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    t = _rotated(m, rot)
+    f = pf.frame_of(t)
+    mean = m.normal.sum(axis=0) / np.linalg.norm(m.normal.sum(axis=0))
+    np.testing.assert_allclose(f.axes[2], rot @ mean, atol=1e-12)  # not snapped to an axis
+    own = Frame.along(mean)
+    assert pf.analyze(t).moran.I == pytest.approx(pf.analyze(m, frame=own).moran.I, rel=1e-9)
+    np.testing.assert_allclose(pf.decompose(t).systematic, pf.decompose(m, frame=own).systematic, atol=1e-9)
 
 
 def test_compensated_surface_step_and_iges(bench, tmp_path):

@@ -73,6 +73,23 @@ def test_moran_st_louis_published_value():
     _same(ours, _esda(y, w))
 
 
+def test_moran_sids_published_value():
+    """esda's documented result on the North Carolina SIDS rates 1974 (libpysal example
+    ``sids2``, its contiguity weights), which esda notes replicates OpenGeoda."""
+    dbf = libpysal.io.open(libpysal.examples.get_path("sids2.dbf"))
+    y = np.array(dbf.by_col("SIDR74"), dtype=float)
+    dbf.close()
+    gal = libpysal.io.open(libpysal.examples.get_path("sids2.gal"))
+    w = gal.read()
+    gal.close()
+    ours = stats.moran_matrix(w.full()[0], y)
+    # esda's Moran docstring: round(I, 3) = 0.248, p_norm = 0.0001158330781489969
+    assert round(ours.I, 3) == 0.248
+    assert ours.expected == pytest.approx(-1.0 / (len(y) - 1), rel=1e-12)
+    assert ours.p_normality == pytest.approx(0.0001158330781489969, rel=1e-6)
+    _same(ours, _esda(y, w))
+
+
 def test_moran_decision_rate_on_noise():
     """Pure noise: 'systematic' at most about alpha of the time (40 seeds, alpha 0.05)."""
     rng = np.random.default_rng(11)

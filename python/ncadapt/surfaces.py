@@ -9,6 +9,9 @@ Mean curvature (the sign follows the normal Q_u × Q_v):
     H = (A |Q_v|² − 2 B Q_u·Q_v + C |Q_u|²) / (2 |Q_u × Q_v|³),
     A = (Q_u × Q_v)·Q_uu,  B = (Q_u × Q_v)·Q_uv,  C = (Q_u × Q_v)·Q_vv.
 
+:class:`Frame` places a part that is a height field over some plane in (u, v, w): w along the
+measured normals' mean direction, (u, v) in the plane across it.
+
 Also here: :func:`extrapolate_border`, the cubic extrapolation of values known inside a region of a
 (u, v) grid into the rest of the grid (the unmeasured border strip of a part).
 """
@@ -19,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import RectBivariateSpline
+
+from .errors import InputError
 
 
 @dataclass(frozen=True)
@@ -98,6 +103,73 @@ class Surface:
     def with_grid(self, grid) -> "Surface":
         """The same parametrisation through other grid points (a compensated surface)."""
         return Surface(self.u, self.v, grid)
+
+
+# a normal further than this from the frame's w axis makes the part not a height field over (u, v)
+MAX_TILT_DEG = 80.0
+# a mean normal this close to a machine axis takes the axis as w (a measured grid stays a grid)
+AXIS_SNAP_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Right-handed orthonormal axes (rows ``eu``, ``ev``, ``ew``) through the origin.
+
+    (u, v, w) = (p·e_u, p·e_v, p·e_w). :meth:`fit` takes w from the outward normals of measured
+    points: their mean direction, or the machine axis (±x, ±y, ±z) nearest to it when it is within
+    :data:`AXIS_SNAP_DEG` — then (u, v) are two machine coordinates and a measured grid stays a
+    grid. Every normal must be within :data:`MAX_TILT_DEG` of w. e_u is the machine axis least
+    parallel to w (x before y before z on ties) made orthogonal to w, and e_v = e_w × e_u: a part
+    seen from +z has (u, v) = (x, y), a wall seen from +x has (u, v) = (y, z).
+    """
+
+    axes: np.ndarray  # (3, 3) rows e_u, e_v, e_w
+
+    @classmethod
+    def along(cls, w) -> "Frame":
+        w = np.asarray(w, float)
+        w = w / np.linalg.norm(w)
+        k = int(np.argmin(np.abs(w)))
+        u = np.eye(3)[k] - w[k] * w
+        u /= np.linalg.norm(u)
+        return cls(np.array([u, np.cross(w, u), w]))
+
+    @classmethod
+    def fit(cls, normals, source: str | None = None) -> "Frame":
+        n = np.asarray(normals, float)
+        m = n.sum(axis=0)
+        if np.linalg.norm(m) < 1e-9 * max(len(n), 1):
+            raise InputError("the normals cancel out: the part is not a height field over one plane; "
+                             "measure and compensate it in patches", source)
+        m /= np.linalg.norm(m)
+        k = int(np.argmax(np.abs(m)))
+        w = m if abs(m[k]) < np.cos(np.radians(AXIS_SNAP_DEG)) else np.sign(m[k]) * np.eye(3)[k]
+        worst = float(np.min(n @ w))
+        if worst <= np.cos(np.radians(MAX_TILT_DEG)):
+            deg = float(np.degrees(np.arccos(np.clip(worst, -1, 1))))
+            raise InputError(f"a normal is {deg:.0f}° from the viewing direction (more than {MAX_TILT_DEG:.0f}°): the "
+                             "part is not a height field over one plane; measure and compensate it in patches", source)
+        return cls.along(w)
+
+    @property
+    def names(self) -> tuple[str, str]:
+        """Axis names of (u, v) for plots: "x", "-z" … when along a machine axis, else "u", "v"."""
+        out = []
+        for e, other in zip(self.axes[:2], ("u", "v")):
+            k = int(np.argmax(np.abs(e)))
+            out.append(("-" if e[k] < 0 else "") + "xyz"[k] if abs(abs(e[k]) - 1) < 1e-12 else other)
+        return out[0], out[1]
+
+    def uv(self, points) -> np.ndarray:
+        """(n, 2) coordinates across w."""
+        return np.asarray(points, float) @ self.axes[:2].T
+
+    def w(self, points) -> np.ndarray:
+        return np.asarray(points, float) @ self.axes[2]
+
+    def to_world(self, u, v, w) -> np.ndarray:
+        """Points (…, 3) from frame coordinates."""
+        return np.stack([u, v, w], axis=-1) @ self.axes
 
 
 def extrapolate_border(u, v, values, known, *, fit_points: int = 12) -> np.ndarray:

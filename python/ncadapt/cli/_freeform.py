@@ -57,16 +57,17 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     from ..processes import freeform as pf
 
     meas = measure.read(measurements, probe_radius=probe_radius)
-    a = pf.analyze(meas, **_moran_kw(weights, power, threshold, neighbors, alpha))
+    frame = pf.frame_of(meas)
+    a = pf.analyze(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
     _print_analysis(a)
     if json_path:
         write_json(json_path, {"input": str(measurements), **a.as_dict()})
     if report_path:
         from ..report import freeform as rep, write
 
-        d = pf.decompose(meas, alpha=alpha)
+        d = pf.decompose(meas, alpha=alpha, frame=frame)
         write(report_path, rep.render(title=f"Deviation analysis: {measurements.name}", analysis=a, decomposition=d,
-                                      xy=meas.nominal, deviation=meas.deviation))
+                                      xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation))
 
 
 def _extent(ctx, param, value):
@@ -91,7 +92,8 @@ def _extent(ctx, param, value):
 @click.option("--tool-radius", type=click.FloatRange(min=0), default=0.0, show_default=True,
               help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre).")
 @click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX",
-              help="The part's area, mm; the systematic error is extrapolated into it (default: the measured area).")
+              help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
+                   "extrapolated into it (default: the measured area).")
 @click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any program displacement exceeds this, mm.")
 @click.option("--surface", "surface_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -119,11 +121,12 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius)
         say("analysing")
-        a = pf.analyze(meas, **kw)
+        frame = pf.frame_of(meas)
+        a = pf.analyze(meas, frame=frame, **kw)
         say("separating systematic and random error")
-        d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, **kw)
-        surf = pf.fit_height_surface(meas.nominal, extent=extent)
-        c = pf.compensate(surf, meas, d.systematic)
+        d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, frame=frame, **kw)
+        surf = pf.fit_height_surface(meas.nominal, extent=extent, frame=frame)
+        c = pf.compensate(surf, meas, d.systematic, frame=frame)
         corr = None
         if program is not None:
             say(f"correcting {program}")
@@ -154,6 +157,6 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         from ..report import freeform as rep, write
 
         write(report_path, rep.render(title=f"Freeform compensation: {measurements.name}", analysis=a, decomposition=d,
-                                      xy=meas.nominal, deviation=meas.deviation,
+                                      xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation,
                                       files={k: str(v) for k, v in (("program", output), ("surface", surface_path),
                                                                     ("points", points_out)) if v}))

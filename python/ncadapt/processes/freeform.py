@@ -6,8 +6,10 @@ measure → :func:`analyze` (deviations, Moran's I: is it systematic?) → :func
 (the systematic part on the part's surface grid, extrapolated cubically into the unmeasured border;
 the mirrored surface P_c = P − dF·n; a correction field −dF·n for the NC program).
 
-The part is a height field parametrised by (u, v) = (x, y): a measured point is placed on the
-surface grid by its nominal (x, y). Ball-end programs: the tool tip at a contact point P with normal
+The part is a height field over some plane: :class:`~ncadapt.surfaces.Frame` puts w along the
+measured normals (the nearest machine axis when every normal is within 80° of it, else their mean)
+and a measured point is placed by its nominal (u, v) across w — (x, y) for a part seen from +z,
+(y, z) for a wall seen from +x. Moran's I, the filters and the surface grid all work in (u, v). Ball-end programs: the tool tip at a contact point P with normal
 n is at P + R n − R ẑ, so the NC field is given at those tip positions.
 """
 
@@ -22,7 +24,7 @@ from .. import filters, stats
 from ..errors import InputError
 from ..fields import ScatteredField
 from ..measure import Measurements
-from ..surfaces import Surface, extrapolate_border
+from ..surfaces import Frame, Surface, extrapolate_border
 
 FILTERS = ("bilateral", "spline")
 # fewest points each step needs
@@ -55,10 +57,16 @@ def noise_level(points, values) -> float:
     return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2)))
 
 
-def analyze(meas: Measurements, **moran_options) -> Analysis:
-    """Deviation statistics and Moran's I of the deviations (options of :func:`ncadapt.stats.moran`)."""
+def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
+    """``frame``, or the one :meth:`Frame.fit` chooses from the measured normals."""
+    return frame if frame is not None else Frame.fit(meas.normal, meas.source)
+
+
+def analyze(meas: Measurements, *, frame: Frame | None = None, **moran_options) -> Analysis:
+    """Deviation statistics and Moran's I of the deviations over (u, v) (options of
+    :func:`ncadapt.stats.moran`)."""
     meas.require(MIN_POINTS, "the analysis")
-    m = stats.moran(meas.nominal[:, :2], meas.deviation, **moran_options)
+    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, **moran_options)
     return Analysis(len(meas), m, stats.summary(meas.deviation))
 
 
@@ -108,7 +116,7 @@ def _filter(method, xy, e, par):
 
 def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float | None = None,
               sigma_s: float | None = None, p: float | None = None, auto: bool = False,
-              **moran_options) -> Decomposition:
+              frame: Frame | None = None, **moran_options) -> Decomposition:
     """Split the deviations into a systematic part and random noise.
 
     ``bilateral``: σ_c defaults to 1.5 × the point spacing, σ_s to 3 × the estimated noise std.
@@ -119,7 +127,7 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
     if method not in FILTERS:
         raise ValueError(f"filter must be one of {FILTERS}, got {method!r}")
     meas.require(MIN_POINTS, "the decomposition")
-    xy = meas.nominal[:, :2]
+    xy = frame_of(meas, frame).uv(meas.nominal)
     e = meas.deviation
     h = spacing(xy)
     sig = max(noise_level(xy, e), 1e-6)
@@ -150,6 +158,7 @@ class Compensation:
     measured_region: np.ndarray  # (nu, nv) bool: inside the measured area
     compensated: Surface  # P_c = P − dF n
     points_compensated: np.ndarray  # (n, 3) the measured points' nominals moved by −dF n
+    frame: Frame  # the (u, v) of the surface grid
 
     def field(self, tool_radius: float = 0.0, outside: str = "clamp") -> ScatteredField:
         """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R."""
@@ -161,12 +170,16 @@ class Compensation:
         return ScatteredField(tip, -self.df_grid.reshape(-1, 1) * n, outside=outside, source="compensation")
 
 
-def compensate(surface: Surface, meas: Measurements, systematic) -> Compensation:
-    """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface."""
+def compensate(surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None) -> Compensation:
+    """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface.
+
+    The surface's (u, v) must be the frame's (u, v) of the measured points (as
+    :func:`fit_height_surface` makes it with the same frame)."""
     from scipy.interpolate import LinearNDInterpolator
 
     sysv = np.asarray(systematic, float)
-    xy = meas.nominal[:, :2]
+    frame = frame_of(meas, frame)
+    xy = frame.uv(meas.nominal)
     U, V = np.meshgrid(surface.u, surface.v, indexing="ij")
     lin = LinearNDInterpolator(xy, sysv)
     inside = lin(U, V)
@@ -177,13 +190,16 @@ def compensate(surface: Surface, meas: Measurements, systematic) -> Compensation
     n = surface.normal(U, V)
     comp = surface.with_grid(surface.grid - df[..., None] * n)
     pc = meas.nominal - sysv[:, None] * meas.normal
-    return Compensation(surface, df, known, comp, pc)
+    return Compensation(surface, df, known, comp, pc, frame)
 
 
-def fit_height_surface(points, extent=None, step: float | None = None) -> Surface:
-    """A height-field surface through nominal points (a full grid is interpolated as it is;
-    scattered points through a cubic triangulation, the border beyond them extrapolated)."""
-    p = np.asarray(points, float)
+def fit_height_surface(points, extent=None, step: float | None = None, frame: Frame | None = None) -> Surface:
+    """A surface w(u, v) through nominal points, parametrised by the frame's (u, v) (default
+    (x, y)); a full grid is interpolated as it is, scattered points through a cubic triangulation,
+    the border beyond them extrapolated. ``extent`` (u0, u1, v0, v1) widens it to the part's edges."""
+    frame = frame or Frame(np.eye(3))
+    q = np.asarray(points, float)
+    p = np.column_stack([frame.uv(q), frame.w(q)])
     grid = _on_grid(p)
     if grid is not None and extent is None:
         xs, ys, flat = grid
@@ -191,7 +207,7 @@ def fit_height_surface(points, extent=None, step: float | None = None) -> Surfac
         z[flat] = p[:, 2]
         Z = z.reshape(len(xs), len(ys))
         X, Y = np.meshgrid(xs, ys, indexing="ij")
-        return Surface(xs, ys, np.stack([X, Y, Z], axis=-1))
+        return Surface(xs, ys, frame.to_world(X, Y, Z))
     from scipy.interpolate import CloughTocher2DInterpolator
 
     h = step or spacing(p)
@@ -202,4 +218,4 @@ def fit_height_surface(points, extent=None, step: float | None = None) -> Surfac
     zi = CloughTocher2DInterpolator(p[:, :2], p[:, 2])(X, Y)
     known = np.isfinite(zi)
     Z = extrapolate_border(xs, ys, np.where(known, zi, 0.0), known)
-    return Surface(xs, ys, np.stack([X, Y, Z], axis=-1))
+    return Surface(xs, ys, frame.to_world(X, Y, Z))

@@ -8,7 +8,7 @@ import numpy as np
 from . import figure_png, page, table
 
 
-def _maps(xy, panels, title):
+def _maps(xy, panels, title, names=("x", "y")):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -19,9 +19,9 @@ def _maps(xy, panels, title):
     for ax, (name, v) in zip(axes[0], panels):
         sc = ax.scatter(xy[:, 0], xy[:, 1], c=np.asarray(v) * 1000, cmap="RdBu_r", vmin=-vmax, vmax=vmax, s=14)
         ax.set_title(name, fontsize=10)
-        ax.set_xlabel("x, mm")
+        ax.set_xlabel(f"{names[0]}, mm")
         ax.set_aspect("equal")
-    axes[0][0].set_ylabel("y, mm")
+    axes[0][0].set_ylabel(f"{names[1]}, mm")
     fig.colorbar(sc, ax=axes[0].tolist(), label="deviation along the normal, µm", shrink=0.9)
     fig.suptitle(title, fontsize=11)
     return figure_png(fig)
@@ -39,8 +39,10 @@ def _hist(series):
     return figure_png(fig)
 
 
-def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None) -> str:
-    """The report as HTML text. ``after``: deviations of the re-machined part at the same points."""
+def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None,
+           names=("x", "y")) -> str:
+    """The report as HTML text. ``xy``: the points' (u, v), named ``names`` on the maps; ``after``:
+    deviations of the re-machined part at the same points."""
     m = analysis.moran
     p_txt = f"{m.p_value:.2g}" if m.p_value > 0 else "< 1e-300"
     w = m.weights
@@ -64,7 +66,7 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     d = analysis.deviation
     sections.append(("Deviations", table([(k, f"{v * 1000:.2f}") for k, v in d.items()], ["", "µm"])
                      + _maps(xy, [("measured", deviation), ("systematic", decomposition.systematic),
-                                  ("random", decomposition.random)], "Deviation along the outward normal (> 0: material left)")))
+                                  ("random", decomposition.random)], "Deviation along the outward normal (> 0: material left)", names)))
     nz = decomposition.noise
     sections.append(("Separating systematic from random error", table([
         ("filter", decomposition.method), *((k, v) for k, v in decomposition.parameters.items()),
@@ -73,7 +75,7 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
         ("Moran's I of the random part: z", nz.moran_z), ("... p", nz.moran_p)], ["", "value"])))
     if after is not None:
         sections.append(("After compensation", _maps(xy, [("before", deviation), ("after", after)],
-                                                     "Deviation of the first part and of the re-machined part")
+                                                     "Deviation of the first part and of the re-machined part", names)
                          + _hist([("before", deviation), ("after", after)])))
     if files:
         sections.append(("Files", table([(k, v) for k, v in files.items()], ["", "file"])))
