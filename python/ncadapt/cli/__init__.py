@@ -8,6 +8,7 @@ from __future__ import annotations
 import click
 
 from .. import __version__
+from ._bore import bore
 from ._correct import correct
 from ._demo import demo
 from ._freeform import analyze, compensate
@@ -27,3 +28,4 @@ main.add_command(inspect)
 main.add_command(analyze)
 main.add_command(compensate)
 main.add_command(demo)
+main.add_command(bore)
