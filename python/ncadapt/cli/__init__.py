@@ -13,6 +13,7 @@ from ._correct import correct
 from ._demo import demo
 from ._freeform import analyze, compensate
 from ._inspect import inspect
+from ._skin import skin
 
 __all__ = ["main"]
 
@@ -29,3 +30,4 @@ main.add_command(analyze)
 main.add_command(compensate)
 main.add_command(demo)
 main.add_command(bore)
+main.add_command(skin)

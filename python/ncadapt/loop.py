@@ -1,0 +1,194 @@
+"""The real-time loop: thickness readings in, W1 offsets out.
+
+:func:`run` reads thickness samples from a *source*, steps a compensator on δ = T − T_g and
+writes its ``w1_offset`` to a *sink*. Adapters:
+
+- in-process: :class:`MachineLink` wraps the virtual machine of :mod:`ncadapt.sim.skin`;
+- CSV replay: :class:`CsvSource` (a recorded ``thickness`` column) and :class:`CsvSink`;
+- OPC UA (asyncua): :func:`run_opcua` — the compensator as an OPC UA client that reads a thickness
+  variable and writes a W1-offset variable on the controller's server; :func:`serve_machine`
+  plays such a controller with the virtual machine (for tests and demonstrations).
+
+OPC UA exchange (namespace ``urn:ncadapt:skin``, object ``Controller``): the controller publishes
+``Thickness`` (mm; NaN when the gauge's limit filter rejected the reading) and then increments
+``Sequence``; the client answers each sequence number by writing ``W1Offset`` (mm; only when it
+stepped) and then ``Ack`` = that number. The controller applies the offset and cuts on to the
+next reading only after the Ack, so a run over OPC UA is step for step the in-process run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import math
+import time
+
+NAMESPACE = "urn:ncadapt:skin"
+
+
+def run(source, sink, compensator, target_thickness: float, *, on_step=None) -> int:
+    """Read until the source is exhausted; return the number of compensator steps."""
+    n = 0
+    for t in source:
+        if t is None or compensator is None or not math.isfinite(t):
+            sink.skip()
+            continue
+        compensator.step(t - target_thickness)
+        sink.write(compensator.w1_offset)
+        n += 1
+        if on_step:
+            on_step(n, t, compensator.w1_offset)
+    return n
+
+
+class MachineLink:
+    """Source and sink on an in-process virtual machine."""
+
+    def __init__(self, machine, target_depth: float):
+        self.machine, self.target_depth = machine, target_depth
+
+    def __iter__(self):
+        while not self.machine.done:
+            yield self.machine.advance()
+
+    def write(self, offset: float) -> None:
+        self.machine.command(self.target_depth + offset)
+
+    def skip(self) -> None:
+        pass
+
+
+def run_in_process(machine, compensator) -> int:
+    from .sim.skin import A_G, T_TARGET
+
+    link = MachineLink(machine, A_G)
+    return run(link, link, compensator, T_TARGET)
+
+
+class CsvSource:
+    """Thickness readings from a CSV column ``thickness`` (empty or NaN: a rejected reading)."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __iter__(self):
+        from .errors import InputError
+
+        with open(self.path, newline="", encoding="utf-8-sig") as f:
+            r = csv.reader(f)
+            head = [h.strip().lower() for h in next(r, [])]
+            if "thickness" not in head:
+                raise InputError("missing column 'thickness'", self.path, 1)
+            k = head.index("thickness")
+            for ln, row in enumerate(r, start=2):
+                v = row[k].strip() if k < len(row) else ""
+                if not v:
+                    yield None
+                    continue
+                try:
+                    yield float(v)
+                except ValueError:
+                    raise InputError(f"thickness is not a number: {v!r}", self.path, ln) from None
+
+
+class CsvSink:
+    """W1 offsets, one row per reading (empty when the compensator did not step)."""
+
+    def __init__(self, path):
+        from ._io import atomic_open
+
+        self._cm = atomic_open(path, "w")
+        self._f = self._cm.__enter__()
+        self._f.write("w1_offset\n")
+
+    def write(self, offset: float) -> None:
+        self._f.write(f"{offset:.6f}\n")
+
+    def skip(self) -> None:
+        self._f.write("\n")
+
+    def close(self) -> None:
+        self._cm.__exit__(None, None, None)
+
+
+# ------------------------------------------------------------------------------------ OPC UA
+async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
+                        ready=None, poll: float = 0.0005):
+    """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
+    its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done."""
+    from asyncua import Server, ua
+
+    server = Server()
+    await server.init()
+    server.set_endpoint(endpoint)
+    server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    idx = await server.register_namespace(NAMESPACE)
+    obj = await server.nodes.objects.add_object(idx, "Controller")
+    thick = await obj.add_variable(idx, "Thickness", math.nan)
+    seq = await obj.add_variable(idx, "Sequence", 0, varianttype=ua.VariantType.Int64)
+    w1 = await obj.add_variable(idx, "W1Offset", 0.0)
+    ack = await obj.add_variable(idx, "Ack", 0, varianttype=ua.VariantType.Int64)
+    for v in (w1, ack):
+        await v.set_writable()
+    async with server:
+        if ready is not None:
+            ready.set()
+        n = 0
+        for m in machines:
+            while not m.done:
+                t = m.advance()
+                n += 1
+                await thick.write_value(math.nan if t is None else float(t))
+                await seq.write_value(n, ua.VariantType.Int64)
+                while await ack.read_value() != n:
+                    await asyncio.sleep(poll)
+                if t is not None:
+                    m.command(target_depth + float(await w1.read_value()))
+            # a new pocket: the client starts its compensator afresh
+            n += 1
+            await thick.write_value(math.nan)
+            await seq.write_value(-n, ua.VariantType.Int64)
+            while await ack.read_value() != -n:
+                await asyncio.sleep(poll)
+        await seq.write_value(0, ua.VariantType.Int64)
+        await asyncio.sleep(0.05)
+
+
+async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int, poll: float = 0.0005,
+                    latencies: list | None = None) -> int:
+    """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
+    each pocket (a negative Sequence announces the next one). Returns the number of steps;
+    ``latencies`` collects, per reading, the seconds from seeing the new Sequence to writing Ack."""
+    from asyncua import Client, ua
+
+    steps = 0
+    async with Client(url=url) as client:
+        idx = await client.get_namespace_index(NAMESPACE)
+        obj = await client.nodes.objects.get_child(f"{idx}:Controller")
+        thick = await obj.get_child(f"{idx}:Thickness")
+        seq = await obj.get_child(f"{idx}:Sequence")
+        w1 = await obj.get_child(f"{idx}:W1Offset")
+        ack = await obj.get_child(f"{idx}:Ack")
+        comp = make_compensator()
+        last, done = 0, 0
+        while done < pockets:
+            s = await seq.read_value()
+            if s == last or s == 0:
+                await asyncio.sleep(poll)
+                continue
+            t0 = time.perf_counter()
+            last = s
+            if s < 0:
+                done += 1
+                if comp is not None:
+                    steps += comp.steps
+                comp = make_compensator()
+            else:
+                t = await thick.read_value()
+                if comp is not None and math.isfinite(t):
+                    comp.step(t - target_thickness)
+                    await w1.write_value(ua.DataValue(ua.Variant(float(comp.w1_offset), ua.VariantType.Double)))
+            await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
+            if latencies is not None:
+                latencies.append(time.perf_counter() - t0)
+    return steps

@@ -1,0 +1,220 @@
+"""Mirror milling of thin skins: real-time wall-thickness compensation (Wu, Zhang, Yang, Cao,
+Zhong, "Real-time compensation of machining error in aircraft-skin mirror milling based on the
+two-point secant method").
+
+The thin wall deflects under the axial cutting force, so the real depth is a_r = a_p − f(a_p)
+for a programmed depth a_p. With target depth a_g = T_s − T_g, the error measured by the
+ultrasonic gauge is δ = T − T_g = a_g − a_r. A compensator turns the latest δ_i into the next
+programmed depth a_p,i+1 (the W1 axis moves the tool by a_p,i+1 − a_g along the skin normal):
+
+- :class:`MirrorCompensator` (error mirror): a_p,i+1 = a_p,i + δ_i, a_p,1 = a_g. Linear
+  convergence: the error shrinks by f'(a_p) per step.
+- :class:`SecantCompensator` (two-point secant on δ(a_p) = 0):
+  a_p,i+1 = a_p,i − δ_i (a_p,i − a_p,i−1)/(δ_i − δ_i−1), the second point from the mirror step.
+  Order 1.618. Made safe: when |δ_i − δ_i−1| is at noise level, or the slope
+  s = (δ_i − δ_i−1)/(a_p,i − a_p,i−1) has the wrong sign (δ falls as a_p grows, so s < 0) or a
+  magnitude outside [s_min, s_max], the step falls back to the mirror step; every step is
+  bounded to ±``max_step``; fallbacks are counted.
+- :class:`RlsSecantCompensator` (ours): Newton steps a_p,i+1 = a_p,i − δ̂_i / ŝ_i where ŝ is the
+  slope dδ/da_p estimated by recursive least squares with forgetting λ on the increments
+  (Δa, Δδ) — one-parameter RLS: P ← P/λ, k = PΔa/(1 + Δa²P), ŝ ← ŝ + k(Δδ − ŝΔa), P ← (1 − kΔa)P
+  — bounded to [s_min, s_max] (−1 ≤ s ≤ −0.05: a_r can neither exceed a_p nor stop following it),
+  with the prior ŝ₀ = −0.5 (the first step is twice the mirror step, right when the wall is as
+  soft as f' = 0.5); δ̂ is the reading low-pass filtered by δ̂ ← δ̂ + β(δ − δ̂), because a
+  Newton step on raw noisy readings moves the tool by the noise.
+
+- :class:`KalmanCompensator` (ours, the default of ``ncadapt skin simulate``): the paper's model
+  has the force, and so the deflection, proportional to the depth, f(a_p) = κ a_p with κ the
+  local compliance ratio, so one reading identifies κ: z = 1 − (a_g − δ)/a_p. A Kalman filter
+  tracks κ and its rate per reading (constant-velocity model: x = [κ, κ̇], F = [[1, 1], [0, 1]],
+  white-acceleration process noise q·[[1/4, 1/2], [1/2, 1]], measurement noise (σ/a_p)²); the next
+  depth is a_p = a_g / (1 − κ̂) with κ̂ predicted one reading ahead — where the command will land
+  (the dead time and the spot's lag are a spatial lag) — bounded to 0 ≤ κ̂ ≤ 0.9 and by
+  ``max_step``. A prediction outside the bounds is clamped and counted as a fallback.
+
+All four share the interface the loop runner uses: ``step(delta) -> a_p,i+1``, ``w1_offset``,
+``fallbacks``, ``reset()``.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["MirrorCompensator", "SecantCompensator", "RlsSecantCompensator", "KalmanCompensator", "COMPENSATORS", "make"]
+
+# physically possible slopes dδ/da_p: δ = a_g − a_p + f(a_p) with 0 ≤ f' < 1 ⇒ −1 ≤ s < 0
+S_MIN = -1.0
+S_MAX = -0.05
+
+
+class _Base:
+    name = "base"
+
+    def __init__(self, target_depth: float, *, max_step: float = 0.5):
+        if not (math.isfinite(target_depth) and target_depth > 0):
+            raise ValueError(f"target depth must be > 0 mm, got {target_depth}")
+        self.target_depth = float(target_depth)
+        self.max_step = float(max_step)
+        self.reset()
+
+    def reset(self) -> None:
+        self.depth = self.target_depth  # a_p,1 = a_g
+        self.fallbacks = 0
+        self.steps = 0
+
+    @property
+    def w1_offset(self) -> float:
+        """The W1 axis command relative to the uncompensated program: a_p − a_g, mm."""
+        return self.depth - self.target_depth
+
+    def _bounded(self, new: float) -> float:
+        lo, hi = self.depth - self.max_step, self.depth + self.max_step
+        if new < lo or new > hi:
+            self.fallbacks += 1
+            new = min(max(new, lo), hi)
+        return new
+
+    def step(self, delta: float) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class MirrorCompensator(_Base):
+    """a_p,i+1 = a_p,i + δ_i."""
+
+    name = "mirror"
+
+    def step(self, delta: float) -> float:
+        self.steps += 1
+        self.depth = self._bounded(self.depth + float(delta))
+        return self.depth
+
+
+class SecantCompensator(_Base):
+    """The two-point secant with the safety rules of the module's docstring."""
+
+    name = "secant"
+
+    def __init__(self, target_depth: float, *, noise: float = 0.005, max_step: float = 0.5,
+                 s_min: float = S_MIN, s_max: float = S_MAX):
+        self.noise = float(noise)
+        self.s_min, self.s_max = s_min, s_max
+        super().__init__(target_depth, max_step=max_step)
+
+    def reset(self) -> None:
+        super().reset()
+        self._prev = None  # (a_p, δ) of the previous step
+
+    def step(self, delta: float) -> float:
+        self.steps += 1
+        delta = float(delta)
+        a = self.depth
+        new = None
+        if self._prev is not None:
+            a0, d0 = self._prev
+            dd, da = delta - d0, a - a0
+            if abs(dd) > 3 * self.noise and abs(da) > 1e-12:
+                s = dd / da
+                if self.s_min <= s <= self.s_max:
+                    new = a - delta / s
+            if new is None:
+                self.fallbacks += 1
+        if new is None:
+            new = a + delta  # the mirror step (also the first step, which gives the second point)
+        self._prev = (a, delta)
+        self.depth = self._bounded(new)
+        return self.depth
+
+
+class RlsSecantCompensator(_Base):
+    """Ours: Newton steps on a filtered error with an RLS-estimated, bounded slope and dead-time
+    bookkeeping (see the module's docstring)."""
+
+    name = "rls"
+
+    def __init__(self, target_depth: float, *, forgetting: float = 0.9, smoothing: float = 0.5, max_step: float = 0.5,
+                 s0: float = -0.5, s_min: float = S_MIN, s_max: float = S_MAX, noise: float = 0.005):
+        self.forgetting, self.smoothing, self.s0 = forgetting, smoothing, s0
+        self.s_min, self.s_max, self.noise = s_min, s_max, noise
+        super().__init__(target_depth, max_step=max_step)
+
+    def reset(self) -> None:
+        super().reset()
+        self.slope = self.s0
+        self._p = 10.0
+        self._prev = None  # (a_p applied when δ was read, filtered δ)
+        self._filtered = None
+
+    def step(self, delta: float) -> float:
+        self.steps += 1
+        delta = float(delta)
+        self._filtered = delta if self._filtered is None else self._filtered + self.smoothing * (delta - self._filtered)
+        a = self.depth
+        if self._prev is not None:
+            a0, d0 = self._prev
+            da, dd = a - a0, self._filtered - d0
+            if abs(da) > self.noise / 4:  # the increment carries information about the slope
+                self._p /= self.forgetting
+                k = self._p * da / (1.0 + da * da * self._p)
+                s = self.slope + k * (dd - self.slope * da)
+                self._p *= 1.0 - k * da
+                if not self.s_min <= s <= self.s_max:
+                    self.fallbacks += 1
+                    s = min(max(s, self.s_min), self.s_max)
+                self.slope = s
+        self._prev = (a, self._filtered)
+        new = a - self._filtered / self.slope
+        self.depth = self._bounded(new)
+        return self.depth
+
+
+class KalmanCompensator(_Base):
+    """Ours: a Kalman filter on the local compliance ratio κ, predicting one reading ahead."""
+
+    name = "kalman"
+
+    def __init__(self, target_depth: float, *, noise: float = 0.005, q: float = 1e-4, max_step: float = 0.5,
+                 kappa_max: float = 0.9):
+        self.noise, self.q, self.kappa_max = max(float(noise), 1e-6), float(q), kappa_max
+        super().__init__(target_depth, max_step=max_step)
+
+    def reset(self) -> None:
+        super().reset()
+        self._x = None  # [κ, κ̇]
+        self._p = None
+
+    def step(self, delta: float) -> float:
+        import numpy as np
+
+        self.steps += 1
+        a = self.depth
+        z = 1.0 - (self.target_depth - float(delta)) / a
+        r = (self.noise / a) ** 2
+        if self._x is None:
+            self._x = np.array([z, 0.0])
+            self._p = np.diag([r, 0.01])
+        else:
+            f = np.array([[1.0, 1.0], [0.0, 1.0]])
+            x = f @ self._x
+            p = f @ self._p @ f.T + self.q * np.array([[0.25, 0.5], [0.5, 1.0]])
+            k = p[:, 0] / (p[0, 0] + r)
+            self._x = x + k * (z - x[0])
+            self._p = p - np.outer(k, p[0])
+        kappa = self._x[0] + self._x[1]  # one reading ahead
+        if not 0.0 <= kappa <= self.kappa_max:
+            self.fallbacks += 1
+            kappa = min(max(kappa, 0.0), self.kappa_max)
+        self.depth = self._bounded(self.target_depth / (1.0 - kappa))
+        return self.depth
+
+
+COMPENSATORS = {"mirror": MirrorCompensator, "secant": SecantCompensator, "rls": RlsSecantCompensator,
+                "kalman": KalmanCompensator}
+
+
+def make(method: str, target_depth: float, **kw):
+    """A compensator by name (``mirror``, ``secant``, ``rls``)."""
+    try:
+        cls = COMPENSATORS[method]
+    except KeyError:
+        raise ValueError(f"method must be one of {sorted(COMPENSATORS)}, got {method!r}") from None
+    return cls(target_depth, **kw)
