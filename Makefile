@@ -48,6 +48,7 @@ bench: install-test
 	$(PIP) install -q --no-deps bCNC==0.9.16 svgelements
 	$(PY) benchmarks/bench_correct.py
 	$(PY) benchmarks/bench_freeform.py
+	$(PY) benchmarks/bench_skin.py
 
 clean:
 	rm -rf $(VENV) target demo-out
