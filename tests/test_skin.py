@@ -60,6 +60,23 @@ def test_kalman_identifies_the_compliance_in_one_reading():
     assert a == pytest.approx(A_G / (1 - 0.48), rel=1e-9) and plant(a) == pytest.approx(0, abs=1e-12)
 
 
+def test_csv_replay(tmp_path):
+    """Recorded readings through the mirror: the offsets are the running sums of δ; a rejected
+    (empty) reading leaves an empty row and no step."""
+    src = tmp_path / "gauge.csv"
+    src.write_text("thickness\n1.52\n\n1.51\n1.495\n")
+    sink = lp.CsvSink(tmp_path / "w1.csv")
+    n = lp.run(lp.CsvSource(src), sink, ps.MirrorCompensator(A_G), 1.5)
+    sink.close()
+    assert n == 3
+    rows = (tmp_path / "w1.csv").read_text().splitlines()
+    assert rows[0] == "w1_offset" and rows[2] == ""
+    assert [float(r) for r in rows[1:] if r] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
+    src.write_text("thickness\n1.5\nabc\n")
+    with pytest.raises(Exception, match="line 3|:3:"):
+        lp.run(lp.CsvSource(src), lp.CsvSink(tmp_path / "x.csv"), ps.MirrorCompensator(A_G), 1.5)
+
+
 def test_calibration_and_the_papers_protocol():
     """f(a_g) = 0.24 mm at the pocket centre (the paper's largest error), ~0 at the walls; in the
     noise-free protocol the secant ends ≥ 100× closer than the mirror (the paper: 2.13e-4 vs 3.22e-2)."""

@@ -92,23 +92,23 @@ class CsvSource:
 
 
 class CsvSink:
-    """W1 offsets, one row per reading (empty when the compensator did not step)."""
+    """W1 offsets, one row per reading (empty when the compensator did not step), written
+    atomically by :meth:`close`."""
 
     def __init__(self, path):
-        from ._io import atomic_open
-
-        self._cm = atomic_open(path, "w")
-        self._f = self._cm.__enter__()
-        self._f.write("w1_offset\n")
+        self.path = path
+        self._rows = ["w1_offset"]
 
     def write(self, offset: float) -> None:
-        self._f.write(f"{offset:.6f}\n")
+        self._rows.append(f"{offset:.6f}")
 
     def skip(self) -> None:
-        self._f.write("\n")
+        self._rows.append("")
 
     def close(self) -> None:
-        self._cm.__exit__(None, None, None)
+        from ._io import atomic_write
+
+        atomic_write(self.path, ("\n".join(self._rows) + "\n").encode())
 
 
 # ------------------------------------------------------------------------------------ OPC UA
