@@ -133,13 +133,9 @@ HOLE_LETTERS = tuple(s.upper() for s in SHAFT_LETTERS)
 _DESIGNATION = re.compile(r"^\s*(?:[Ø⌀]\s*)?(?P<size>\d+(?:[.,]\d+)?)\s*(?P<letter>[A-Za-z]{1,2})\s*(?P<grade>0?1|\d{1,2})\s*$")
 
 
-def _bad(msg: str) -> InputError:
-    return InputError(msg)
-
-
 def _range(size: float, limits) -> int:
     if not (isinstance(size, (int, float)) and math.isfinite(size)) or not 0 < size <= MAX_SIZE:
-        raise _bad(f"nominal size must be above 0 up to and including {MAX_SIZE:g} mm, got {size!r}")
+        raise InputError(f"nominal size must be above 0 up to and including {MAX_SIZE:g} mm, got {size!r}")
     for i, upper in enumerate(limits):
         if size <= upper:
             return i
@@ -151,7 +147,7 @@ def _grade(grade) -> str:
     if g in ("00", "001"):
         g = "01"
     if g not in IT:
-        raise _bad(f"unknown tolerance grade {grade!r}: ISO 286 has IT01, IT0, IT1 … IT18")
+        raise InputError(f"unknown tolerance grade {grade!r}: ISO 286 has IT01, IT0, IT1 … IT18")
     return g
 
 
@@ -160,9 +156,9 @@ def _it_um(size: float, grade) -> float:
     row = IT[g]
     i = _range(size, MAIN)
     if i >= len(row):
-        raise _bad(f"IT{g} is defined up to {MAIN[len(row) - 1]} mm, not for {size:g} mm")
+        raise InputError(f"IT{g} is defined up to {MAIN[len(row) - 1]} mm, not for {size:g} mm")
     if int(g) >= 14 and g != "01" and size <= 1:
-        raise _bad(f"IT{g} is not used for sizes up to 1 mm")
+        raise InputError(f"IT{g} is not used for sizes up to 1 mm")
     return float(row[i])
 
 
@@ -176,12 +172,12 @@ def _shaft_um(size: float, letter: str, grade: str) -> tuple[float, float]:
     t = _it_um(size, grade)
     g = int(grade) if grade not in ("01", "0") else 0
     if letter in ("a", "b") and size <= 1:
-        raise _bad(f"fundamental deviation {letter} is not used for sizes up to 1 mm")
+        raise InputError(f"fundamental deviation {letter} is not used for sizes up to 1 mm")
     if letter in _ES_SUB or letter in _ES_MAIN:
         if letter in _ES_SUB:
             i = _range(size, SUB)
             if i >= len(_ES_SUB[letter]):
-                raise _bad(f"fundamental deviation {letter} is defined up to 500 mm, not for {size:g} mm")
+                raise InputError(f"fundamental deviation {letter} is defined up to 500 mm, not for {size:g} mm")
             es = _ES_SUB[letter][i]
         else:
             es = _ES_MAIN[letter][_range(size, MAIN)]
@@ -192,7 +188,7 @@ def _shaft_um(size: float, letter: str, grade: str) -> tuple[float, float]:
         row = _J.get(grade)
         i = _range(size, MAIN)
         if row is None or i >= len(row):
-            raise _bad(f"j{grade} is not tabulated by ISO 286 for {size:g} mm (j5, j6, j7 up to 500 mm, j8 up to 3 mm)")
+            raise InputError(f"j{grade} is not tabulated by ISO 286 for {size:g} mm (j5, j6, j7 up to 500 mm, j8 up to 3 mm)")
         return float(row[i]), row[i] + t
     if letter == "k":
         i = _range(size, MAIN)
@@ -204,9 +200,9 @@ def _shaft_um(size: float, letter: str, grade: str) -> tuple[float, float]:
     if letter in _EI_SUB:
         ei = _EI_SUB[letter][_range(size, SUB)]
         if ei is None:
-            raise _bad(f"fundamental deviation {letter} starts above 24 mm, not for {size:g} mm")
+            raise InputError(f"fundamental deviation {letter} starts above 24 mm, not for {size:g} mm")
         return float(ei), ei + t
-    raise _bad(f"unknown shaft letter {letter!r}; supported: {', '.join(SHAFT_LETTERS)}")
+    raise InputError(f"unknown shaft letter {letter!r}; supported: {', '.join(SHAFT_LETTERS)}")
 
 
 def _hole_um(size: float, letter: str, grade: str) -> tuple[float, float]:
@@ -215,7 +211,7 @@ def _hole_um(size: float, letter: str, grade: str) -> tuple[float, float]:
     g = int(grade) if grade not in ("01", "0") else 0
     low = letter.lower()
     if letter in ("A", "B", "C", "D", "E", "F", "G", "H"):
-        ei_shaft, es = _shaft_um(size, low, grade)
+        _, es = _shaft_um(size, low, grade)
         return -es, -es + t
     if letter == "JS":
         return -t / 2, t / 2
@@ -224,7 +220,7 @@ def _hole_um(size: float, letter: str, grade: str) -> tuple[float, float]:
     if letter == "J":
         row = _J_HOLE.get(grade)
         if row is None or not small:
-            raise _bad(f"J{grade} is not tabulated by ISO 286 for {size:g} mm (J6, J7, J8 up to 500 mm)")
+            raise InputError(f"J{grade} is not tabulated by ISO 286 for {size:g} mm (J6, J7, J8 up to 500 mm)")
         return row[i] - t, float(row[i])
     delta = _DELTA[grade][i] if (small and grade in _DELTA) else 0.0
     if letter in ("K", "M", "N"):
@@ -237,7 +233,7 @@ def _hole_um(size: float, letter: str, grade: str) -> tuple[float, float]:
                 es = -9.0  # the standard's special case
         elif letter == "K":
             if size > 3:
-                raise _bad(f"K{grade} (above IT8) is defined by ISO 286 only up to 3 mm, not for {size:g} mm")
+                raise InputError(f"K{grade} (above IT8) is defined by ISO 286 only up to 3 mm, not for {size:g} mm")
             es = 0.0
         elif letter == "M":
             es = -x[i]
@@ -253,14 +249,14 @@ def parse(designation: str) -> tuple[float, str, str]:
     """``"40H6"``, ``"40 h6"``, ``"Ø25 js7"`` → (size, letter, grade). Upper case letters are holes."""
     m = _DESIGNATION.match(str(designation))
     if not m:
-        raise _bad(f"cannot read the tolerance designation {designation!r}; expected e.g. '40H6' or '25 g6'")
+        raise InputError(f"cannot read the tolerance designation {designation!r}; expected e.g. '40H6' or '25 g6'")
     letter = m.group("letter")
     if not (letter.isupper() or letter.islower()) and letter not in ("Js", "jS"):
-        raise _bad(f"mixed-case letter in {designation!r}; holes are upper case (H7), shafts lower case (g6)")
+        raise InputError(f"mixed-case letter in {designation!r}; holes are upper case (H7), shafts lower case (g6)")
     if letter in ("Js", "jS"):
         letter = "JS"
     if letter not in HOLE_LETTERS and letter not in SHAFT_LETTERS:
-        raise _bad(f"unknown fundamental deviation {letter!r} in {designation!r}; "
+        raise InputError(f"unknown fundamental deviation {letter!r} in {designation!r}; "
                    f"holes: {', '.join(HOLE_LETTERS)}; shafts: {', '.join(SHAFT_LETTERS)}")
     return float(m.group("size").replace(",", ".")), letter, _grade(m.group("grade"))
 
@@ -273,7 +269,7 @@ def deviations(size: float, letter: str, grade) -> tuple[float, float]:
     elif letter in SHAFT_LETTERS:
         lo, hi = _shaft_um(size, letter, g)
     else:
-        raise _bad(f"unknown fundamental deviation {letter!r}")
+        raise InputError(f"unknown fundamental deviation {letter!r}")
     return round(lo / 1000.0, 7) + 0.0, round(hi / 1000.0, 7) + 0.0  # + 0.0: no -0.0
 
 
@@ -284,4 +280,4 @@ def tolerance(designation: str) -> tuple[float, float]:
     except InputError as err:
         if str(designation) in err.message:
             raise
-        raise _bad(f"{designation}: {err.message}") from None
+        raise InputError(f"{designation}: {err.message}") from None

@@ -16,7 +16,7 @@ def skin() -> None:
 
 
 @skin.command("simulate")
-@click.option("--method", type=click.Choice(["none", "mirror", "secant", "kalman", "rls"]), default="kalman",
+@click.option("--method", type=click.Choice(["none", "mirror", "secant", "kalman"]), default="kalman",
               show_default=True, help="Compensator (kalman: ours).")
 @click.option("--noise", type=click.FloatRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
 @click.option("--latency-ms", type=click.FloatRange(min=0), default=45.0, show_default=True,

@@ -177,7 +177,7 @@ def read_probe(path, entry: str = "top") -> BoreMeasurement:
 
 
 # ------------------------------------------------------------------------------------ the plan
-def _limits(diameter: float, cls: str) -> tuple[float, float]:
+def class_limits(diameter: float, cls: str) -> tuple[float, float]:
     lo, hi = iso286.deviations(*iso286.parse(f"{diameter:g}{cls}"))
     return lo, hi
 
@@ -287,8 +287,8 @@ def plan(diameter: float, final: str = "H6", prefinish: str = "H9", t0: float = 
     for name, v in (("delta_a", delta_a), ("delta_b", delta_b)):
         if not (isinstance(v, (int, float)) and math.isfinite(v)):
             raise InputError(f"{name} must be a number, got {v!r}")
-    lo_f, hi_f = _limits(diameter, final)
-    lo_p, hi_p = _limits(diameter, prefinish)
+    lo_f, hi_f = class_limits(diameter, final)
+    lo_p, hi_p = class_limits(diameter, prefinish)
     it_f, it_p = hi_f - lo_f, hi_p - lo_p
     if it_f >= it_p:
         raise InputError(f"the final class {final} ({it_f * 1000:g} µm) must be finer than the pre-finish {prefinish} "
@@ -307,7 +307,7 @@ def plan_from_measurement(diameter: float, meas: BoreMeasurement, *, final: str 
                           target_diameter: float | None = None) -> Plan:
     """A plan with δ_A, δ_B taken from the probed pre-finished bore: δ = (D_aimed − D)/2 at the
     planes nearest faces A and B, D_aimed = D_target − 2z the diameter the pre-finish aimed at."""
-    lo_f, hi_f = _limits(diameter, final)
+    lo_f, hi_f = class_limits(diameter, final)
     target = diameter + (lo_f + hi_f) / 2 if target_diameter is None else float(target_diameter)
     dev = meas.deviations(target - 2 * allowance)
     return plan(diameter, final, prefinish, t0, allowance, float(dev[0]), float(dev[-1]), k=k, target_diameter=target)

@@ -15,14 +15,6 @@ programmed depth a_p,i+1 (the W1 axis moves the tool by a_p,i+1 − a_g along th
   s = (δ_i − δ_i−1)/(a_p,i − a_p,i−1) has the wrong sign (δ falls as a_p grows, so s < 0) or a
   magnitude outside [s_min, s_max], the step falls back to the mirror step; every step is
   bounded to ±``max_step``; fallbacks are counted.
-- :class:`RlsSecantCompensator` (ours): Newton steps a_p,i+1 = a_p,i − δ̂_i / ŝ_i where ŝ is the
-  slope dδ/da_p estimated by recursive least squares with forgetting λ on the increments
-  (Δa, Δδ) — one-parameter RLS: P ← P/λ, k = PΔa/(1 + Δa²P), ŝ ← ŝ + k(Δδ − ŝΔa), P ← (1 − kΔa)P
-  — bounded to [s_min, s_max] (−1 ≤ s ≤ −0.05: a_r can neither exceed a_p nor stop following it),
-  with the prior ŝ₀ = −0.5 (the first step is twice the mirror step, right when the wall is as
-  soft as f' = 0.5); δ̂ is the reading low-pass filtered by δ̂ ← δ̂ + β(δ − δ̂), because a
-  Newton step on raw noisy readings moves the tool by the noise.
-
 - :class:`KalmanCompensator` (ours, the default of ``ncadapt skin simulate``): the paper's model
   has the force, and so the deflection, proportional to the depth, f(a_p) = κ a_p with κ the
   local compliance ratio, so one reading identifies κ: z = 1 − (a_g − δ)/a_p. A Kalman filter
@@ -32,7 +24,7 @@ programmed depth a_p,i+1 (the W1 axis moves the tool by a_p,i+1 − a_g along th
   (the dead time and the spot's lag are a spatial lag) — bounded to 0 ≤ κ̂ ≤ 0.9 and by
   ``max_step``. A prediction outside the bounds is clamped and counted as a fallback.
 
-All four share the interface the loop runner uses: ``step(delta) -> a_p,i+1``, ``w1_offset``,
+All three share the interface the loop runner uses: ``step(delta) -> a_p,i+1``, ``w1_offset``,
 ``fallbacks``, ``reset()``.
 """
 
@@ -40,7 +32,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["MirrorCompensator", "SecantCompensator", "RlsSecantCompensator", "KalmanCompensator", "COMPENSATORS", "make"]
+__all__ = ["MirrorCompensator", "SecantCompensator", "KalmanCompensator", "COMPENSATORS", "make"]
 
 # physically possible slopes dδ/da_p: δ = a_g − a_p + f(a_p) with 0 ≤ f' < 1 ⇒ −1 ≤ s < 0
 S_MIN = -1.0
@@ -125,48 +117,6 @@ class SecantCompensator(_Base):
         return self.depth
 
 
-class RlsSecantCompensator(_Base):
-    """Ours: Newton steps on a filtered error with an RLS-estimated, bounded slope and dead-time
-    bookkeeping (see the module's docstring)."""
-
-    name = "rls"
-
-    def __init__(self, target_depth: float, *, forgetting: float = 0.9, smoothing: float = 0.5, max_step: float = 0.5,
-                 s0: float = -0.5, s_min: float = S_MIN, s_max: float = S_MAX, noise: float = 0.005):
-        self.forgetting, self.smoothing, self.s0 = forgetting, smoothing, s0
-        self.s_min, self.s_max, self.noise = s_min, s_max, noise
-        super().__init__(target_depth, max_step=max_step)
-
-    def reset(self) -> None:
-        super().reset()
-        self.slope = self.s0
-        self._p = 10.0
-        self._prev = None  # (a_p applied when δ was read, filtered δ)
-        self._filtered = None
-
-    def step(self, delta: float) -> float:
-        self.steps += 1
-        delta = float(delta)
-        self._filtered = delta if self._filtered is None else self._filtered + self.smoothing * (delta - self._filtered)
-        a = self.depth
-        if self._prev is not None:
-            a0, d0 = self._prev
-            da, dd = a - a0, self._filtered - d0
-            if abs(da) > self.noise / 4:  # the increment carries information about the slope
-                self._p /= self.forgetting
-                k = self._p * da / (1.0 + da * da * self._p)
-                s = self.slope + k * (dd - self.slope * da)
-                self._p *= 1.0 - k * da
-                if not self.s_min <= s <= self.s_max:
-                    self.fallbacks += 1
-                    s = min(max(s, self.s_min), self.s_max)
-                self.slope = s
-        self._prev = (a, self._filtered)
-        new = a - self._filtered / self.slope
-        self.depth = self._bounded(new)
-        return self.depth
-
-
 class KalmanCompensator(_Base):
     """Ours: a Kalman filter on the local compliance ratio κ, predicting one reading ahead."""
 
@@ -212,12 +162,11 @@ class KalmanCompensator(_Base):
         return self.depth
 
 
-COMPENSATORS = {"mirror": MirrorCompensator, "secant": SecantCompensator, "rls": RlsSecantCompensator,
-                "kalman": KalmanCompensator}
+COMPENSATORS = {"mirror": MirrorCompensator, "secant": SecantCompensator, "kalman": KalmanCompensator}
 
 
 def make(method: str, target_depth: float, **kw):
-    """A compensator by name (``mirror``, ``secant``, ``rls``)."""
+    """A compensator by name (``mirror``, ``secant``, ``kalman``)."""
     try:
         cls = COMPENSATORS[method]
     except KeyError:

@@ -99,7 +99,7 @@ class PartResult:
 def run_part(rng, *, diameter: float = 40.0, final: str = "H6", prefinish: str = "H9", t0: float = 0.5,
              allowance: float = 0.1, k: float = 0.25, material: str = "steel") -> PartResult:
     part = random_part(rng, material)
-    lo, hi = pb._limits(diameter, final)
+    lo, hi = pb.class_limits(diameter, final)
     target = diameter + (lo + hi) / 2
     hardened = material == "hardened"
     # the pre-finish pass: aimed at D_target − 2z, depth t₀, not corrected
@@ -149,7 +149,7 @@ def simulate(parts: int = 1000, seed: int = 1, *, material: str = "steel", progr
             raise RuntimeError("the applicability condition almost never holds for these settings")
     d = np.array([r.diameters for r in done])
     diameter, final = kw.get("diameter", 40.0), kw.get("final", "H6")
-    target = diameter + sum(pb._limits(diameter, final)) / 2
+    target = diameter + sum(pb.class_limits(diameter, final)) / 2
     d1 = np.array([r.one_pass for r in done])
     ratios = [r.stiffness_ratio for r in done if r.stiffness_ratio is not None]
     return {

@@ -138,7 +138,7 @@ def protocol(method: str, compensations: int = 2) -> dict:
     passes, each a fresh cut from T_s (the paper's finite-element protocol)."""
     rows = []
     for pocket, x, y in CHECKPOINTS:
-        comp = ps.make(method, A_G, noise=0.0) if method != "mirror" else ps.make(method, A_G)
+        comp = compensator(method, 0.0)
         a = A_G
         deltas = [float(error(x, y, a))]
         for _ in range(compensations):
@@ -161,8 +161,9 @@ class Gauge:
 
     def read(self, thickness_history):
         n = max(1, int(round(SPOT / STEP)))
-        t = float(np.mean(thickness_history[-n:])) + float(self.rng.normal(0, self.noise)) if self.noise else \
-            float(np.mean(thickness_history[-n:]))
+        t = float(np.mean(thickness_history[-n:]))
+        if self.noise:
+            t += float(self.rng.normal(0, self.noise))
         if t > GAUGE_MAX or abs(t - T_TARGET) > GAUGE_BAND:
             self.rejected += 1
             return None
@@ -243,7 +244,7 @@ def compensator(method: str, noise: float = 0.005):
     """A fresh compensator as the testbed uses it (None for ``none``)."""
     if method == "none":
         return None
-    return ps.make(method, A_G, **({} if method == "mirror" else {"noise": max(noise, 1e-4)}))
+    return ps.make(method, A_G, **({} if method == "mirror" else {"noise": noise}))
 
 
 def result(method: str, ms: list, comps: list, *, noise: float, latency_ms: float, seed: int) -> Run:
@@ -271,6 +272,6 @@ def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.
     ms = machines(noise=noise, latency_ms=latency_ms, seed=seed)
     comps = []
     for m in ms:
-        comps.append(compensator(method, noise))
+        comps.append(compensator(method, max(noise, 1e-4)))
         lp.run_in_process(m, comps[-1])
     return result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
