@@ -4,10 +4,14 @@ targets, and the loop over a real OPC UA server."""
 from __future__ import annotations
 
 import asyncio
+import json
 import threading
 
 import numpy as np
 import pytest
+
+from conftest import needs_rs274
+from rs274 import canonical
 
 from ncadapt import loop as lp
 from ncadapt.processes import skin as ps
@@ -147,3 +151,90 @@ def test_opcua_loop_equals_the_in_process_run():
     assert steps == ref.steps
     for m, err in zip(ms, ref.path_errors):
         np.testing.assert_array_equal(m.thickness - sk.T_TARGET, err)
+
+
+def test_secant_stays_in_the_gauges_band_without_noise():
+    # a noise-free loop: the spatial change of the compliance pollutes the two-point slope; the
+    # slope bound (≥ 10 % of the mirror's gain) keeps the secant from stepping out of the gauge's band
+    r = sk.run("secant", noise=0.0, seed=1).as_dict()
+    m = sk.run("mirror", noise=0.0, seed=1).as_dict()
+    assert r["rejected_readings"] == 0
+    assert r["max_abs_error"] < 1.2 * m["max_abs_error"]
+
+
+# ------------------------------------------------------------------------------ offline mode
+def _skin_map(path, xs, ys, thickness):
+    with open(path, "w") as f:
+        f.write("x,y,thickness\n")
+        for x in xs:
+            for y in ys:
+                f.write(f"{x},{y},{thickness(x, y)!r}\n")
+
+
+def _cli(*args):
+    from click.testing import CliRunner
+
+    from ncadapt.cli import main
+
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+@needs_rs274
+def test_skin_correct_constant_map_shifts_every_cut_by_the_excess(tmp_path):
+    prog = tmp_path / "finish.ngc"
+    prog.write_text(sk.finishing_program(0, 0.5))
+    _skin_map(tmp_path / "map.csv", range(300, 601, 50), range(500, 701, 50), lambda x, y: 1.5 + 0.2 + 0.1)
+    r = _cli("skin", "correct", prog, "--thickness", tmp_path / "map.csv", "--target", 1.5, "--allowance", 0.2,
+             "-o", tmp_path / "out.ngc", "--json", tmp_path / "out.json")
+    assert r.exit_code == 0, r.output
+    before, after = canonical(prog), canonical(tmp_path / "out.ngc")
+    assert before.error is None and after.error is None
+    cut = after.ends[np.array(after.kinds) == "feed"]
+    orig = before.ends[np.array(before.kinds) == "feed"]
+    assert len(cut) == len(orig) == 30  # a constant shift keeps straight moves straight: nothing split
+    np.testing.assert_allclose(cut[:, :2], orig[:, :2], atol=after.resolution_mm)
+    np.testing.assert_allclose(cut[:, 2], orig[:, 2] - 0.1, atol=after.resolution_mm)  # 0.1 mm deeper
+    d = json.loads((tmp_path / "out.json").read_text())
+    assert d["excess_max"] == pytest.approx(0.1) and d["max_displacement"] == pytest.approx(0.1)
+
+
+@needs_rs274
+def test_skin_correct_scattered_linear_map_is_reproduced(tmp_path):
+    # a thin-plate spline reproduces a linear map exactly: Z = −0.5 − (t − T) along the path
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.uniform(290, 610, 80), rng.uniform(490, 710, 80)])
+    pts = np.vstack([pts, [[290, 490], [610, 490], [290, 710], [610, 710]]])
+    t = lambda x, y: 1.5 + 1e-4 * (x - 300) - 5e-5 * (y - 600)  # noqa: E731
+    with open(tmp_path / "map.csv", "w") as f:
+        f.write("x,y,thickness\n" + "".join(f"{x:.17g},{y:.17g},{t(x, y):.17g}\n" for x, y in pts))
+    prog = tmp_path / "finish.ngc"
+    prog.write_text(sk.finishing_program(0, 0.5))
+    r = _cli("skin", "correct", prog, "--thickness", tmp_path / "map.csv", "--target", 1.5, "-o", tmp_path / "out.ngc")
+    assert r.exit_code == 0, r.output
+    after = canonical(tmp_path / "out.ngc")
+    cut = after.ends[np.array(after.kinds) == "feed"]
+    np.testing.assert_allclose(cut[:, 2], -0.5 - (t(cut[:, 0], cut[:, 1]) - 1.5), atol=1e-4)
+
+
+def test_skin_correct_errors_name_the_file_and_line(tmp_path):
+    prog = tmp_path / "finish.ngc"
+    prog.write_text(sk.finishing_program(0, 0.5))
+    (tmp_path / "map.csv").write_text("x,y,thickness\n300,500,1.6\n600,500,abc\n")
+    r = _cli("skin", "correct", prog, "--thickness", tmp_path / "map.csv", "--target", 1.5, "-o", tmp_path / "out.ngc")
+    assert r.exit_code != 0 and "map.csv:3:" in r.output and "thickness" in r.output
+    assert not (tmp_path / "out.ngc").exists()
+    r = _cli("skin", "correct", prog, "--thickness", tmp_path / "map.csv", "--target", 1.5, "-o", prog)
+    assert r.exit_code != 0 and "overwrite" in r.output
+
+
+def test_simulate_cli_json_and_report(tmp_path):
+    r = _cli("skin", "simulate", "--method", "mirror", "--seed", 2, "--json", tmp_path / "r.json", "--report",
+             tmp_path / "r.html")
+    assert r.exit_code == 0, r.output
+    d = json.loads((tmp_path / "r.json").read_text())
+    ref = sk.run("mirror", seed=2).as_dict()
+    assert d["max_abs_error"] == ref["max_abs_error"] and d["checkpoints"] == ref["checkpoints"]
+    assert {"method", "max_abs_error", "min_abs_error", "mean_abs_error", "checkpoints", "fallbacks"} <= set(d)
+    assert len(d["checkpoints"]) == 13 and {"x", "y", "error"} <= set(d["checkpoints"][0])
+    html = (tmp_path / "r.html").read_text()
+    assert all(f"<th>{m}</th>" in html for m in ("none", "mirror", "secant", "kalman"))

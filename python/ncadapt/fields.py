@@ -43,6 +43,8 @@ __all__ = [
     "read_scattered_csv",
     "read_bcnc_probe",
     "read_probe_log",
+    "read_columns",
+    "from_values",
 ]
 
 #: What a field does with points outside its domain.
@@ -331,6 +333,35 @@ def _grid_from_points(x, y, dz, linenos, path, method, outside) -> GridField:
             f"not a rectangular grid: {n_missing} of {grid.size} points missing, e.g. x={xs[ii]:g} y={ys[jj]:g}",
             str(path))
     return GridField(xs, ys, grid, method=method, outside=outside, source=str(path))
+
+
+def read_columns(path, names) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Read the named columns of a CSV with a header line as floats, with the line number of each
+    row; errors name the file, line and column."""
+    return _read_csv(Path(path), tuple(n.lower() for n in names))
+
+
+def from_values(x, y, dz, *, method: str = "linear", outside: str = "error", source=None, linenos=None) -> Field:
+    """A Z displacement known at points (x, y): a :class:`GridField` when the points fill a
+    rectangular grid, otherwise a :class:`ScatteredField` (thin-plate spline)."""
+    x, y, dz = (np.asarray(v, dtype=np.float64).ravel() for v in (x, y, dz))
+    if linenos is None:
+        linenos = np.arange(1, len(x) + 1)
+    xs, ys = np.unique(x), np.unique(y)
+    pairs = len(np.unique(np.column_stack([x, y]), axis=0))
+    if len(xs) >= 2 and len(ys) >= 2 and pairs == len(x) == len(xs) * len(ys):
+        return _grid_from_points(x, y, dz, linenos, "<map>" if source is None else source, method, outside)
+    if pairs != len(x):
+        _, first, counts = np.unique(np.column_stack([x, y]), axis=0, return_index=True, return_counts=True)
+        k = first[np.flatnonzero(counts > 1)[0]]
+        m = next(m for m in range(len(x)) if m != k and x[m] == x[k] and y[m] == y[k])
+        raise InputError(f"duplicate point x={x[k]:g} y={y[k]:g} (first on line {linenos[k]})",
+                         None if source is None else str(source), int(linenos[m]), 1)
+    if len(x) < 3:
+        raise InputError(f"a map needs at least 3 points, found {len(x)}", None if source is None else str(source))
+    zeros = np.zeros_like(x)
+    return ScatteredField(np.column_stack([x, y, zeros]), np.column_stack([zeros, zeros, dz]), outside=outside,
+                          source=None if source is None else str(source))
 
 
 def read_grid_csv(path, method: str = "linear", outside: str = "error") -> GridField:

@@ -32,11 +32,12 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["MirrorCompensator", "SecantCompensator", "KalmanCompensator", "COMPENSATORS", "make"]
+__all__ = ["MirrorCompensator", "SecantCompensator", "KalmanCompensator", "COMPENSATORS", "make", "thickness_field"]
 
-# physically possible slopes dδ/da_p: δ = a_g − a_p + f(a_p) with 0 ≤ f' < 1 ⇒ −1 ≤ s < 0
+# physically possible slopes dδ/da_p: δ = a_g − a_p + f(a_p) with 0 ≤ f' ≤ 0.9 (the Kalman filter's
+# κ_max) ⇒ −1 ≤ s ≤ −0.1; a shallower secant slope would step more than 10 × the mirror step
 S_MIN = -1.0
-S_MAX = -0.05
+S_MAX = -0.1
 
 
 class _Base:
@@ -172,3 +173,28 @@ def make(method: str, target_depth: float, **kw):
     except KeyError:
         raise ValueError(f"method must be one of {sorted(COMPENSATORS)}, got {method!r}") from None
     return cls(target_depth, **kw)
+
+
+# ------------------------------------------------------------------------------ offline mode
+def thickness_field(path, target: float, *, allowance: float = 0.0, into: str = "-z", method: str = "linear",
+                    outside: str = "error"):
+    """The correction of a finishing program from a thickness map (offline mode).
+
+    ``path`` is a CSV with columns ``x,y,thickness`` (mm), measured after the previous pass: on a
+    rectangular grid (interpolated bilinearly, or bicubically with ``method="cubic"``) or at
+    scattered points (a thin-plate spline). The tool must cut deeper wherever more material is
+    left than planned: the excess is e = thickness − target − allowance (``allowance`` is what
+    the finishing pass was planned to remove; 0 when the map was measured after a finishing
+    pass, which makes this the error-mirror step applied offline), and the displacement along the
+    tool axis is e towards the material: dz = −e for ``into="-z"`` (the tool cuts downwards, the
+    default), +e for ``into="+z"``.
+    """
+    from .. import fields
+
+    if into not in ("-z", "+z"):
+        raise ValueError(f'into must be "-z" or "+z", got {into!r}')
+    c, lines = fields.read_columns(path, ("x", "y", "thickness"))
+    excess = c["thickness"] - float(target) - float(allowance)
+    sign = -1.0 if into == "-z" else 1.0
+    return fields.from_values(c["x"], c["y"], sign * excess, method=method, outside=outside, source=str(path),
+                              linenos=lines), excess

@@ -275,3 +275,37 @@ def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.
         comps.append(compensator(method, max(noise, 1e-4)))
         lp.run_in_process(m, comps[-1])
     return result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
+
+
+# ------------------------------------------------------------------------------ offline mode
+def finishing_program(pocket: int = 0, depth: float = A_G) -> str:
+    """G-code (mm, absolute, XY plane) that finishes a pocket along :func:`toolpath` at
+    Z = −``depth`` below the roughed floor (Z = 0), in panel coordinates."""
+    cx, cy = POCKETS[pocket]
+    rpm = FEED * 60 / (F_Z * TEETH)
+    out = [f"(ncadapt skin testbed: finish pocket {pocket + 1} to Z-{depth:g}, zig-zag along X)",
+           "G21 G90 G17 G94", f"S{rpm:.0f} M3", "G0 Z5.000"]
+    xs = (-140.0, 140.0)
+    for j, y in enumerate(np.arange(-87.5, 87.5 + 1e-9, 12.5)):
+        x0, x1 = xs if j % 2 == 0 else xs[::-1]
+        if j == 0:
+            out += [f"G0 X{cx + x0:.3f} Y{cy + y:.3f}", f"G1 Z{-depth:.3f} F300"]
+        else:
+            out.append(f"G1 Y{cy + y:.3f}")
+        out.append(f"G1 X{cx + x1:.3f} F{FEED * 60:.0f}")
+    out += ["G0 Z5.000", "M5", "M2"]
+    return "\n".join(out) + "\n"
+
+
+def thickness_map(depth: float, *, pocket: int = 0, spacing: float = 10.0, noise: float = 0.005, seed: int = 1):
+    """Thickness after a pass of programmed depth ``depth`` without compensation, gauged on a grid
+    over the pocket (panel coordinates, mm): columns x, y, thickness as an (n, 3) array."""
+    rng = np.random.default_rng(seed)
+    t_var = thickness_variation(seed)
+    a, b = POCKET
+    lx, ly = np.meshgrid(np.arange(-a / 2, a / 2 + 1e-9, spacing), np.arange(-b / 2, b / 2 + 1e-9, spacing))
+    lx, ly = lx.ravel(), ly.ravel()
+    cx, cy = POCKETS[pocket]
+    t_s = T_INITIAL + t_var(lx + cx, ly + cy)
+    t = t_s - (depth - deflection(lx, ly, depth, t_s)) + rng.normal(0, noise, lx.shape)
+    return np.column_stack([lx + cx, ly + cy, t])
