@@ -419,7 +419,12 @@ class Program:
             pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
             lines = rec_line[np.frombuffer(rec, dtype="<u4")].astype(np.int64) + 1
             try:
-                disp = np.ascontiguousarray(field(pts), dtype=np.float64) if len(pts) else np.zeros((0, 3))
+                if not len(pts):
+                    disp = np.zeros((0, 3))
+                elif getattr(field, "uses_axes", False):
+                    disp = np.ascontiguousarray(field(pts, self._axes_at(pts, np.frombuffer(rec, dtype="<u4"))), dtype=np.float64)
+                else:
+                    disp = np.ascontiguousarray(field(pts), dtype=np.float64)
             except _OutsideError as e:
                 refused = True
                 n_outside += len(e.indices)
@@ -491,6 +496,23 @@ class Program:
             unsupported_kept=uns if keep_unsupported else (),
             warnings=tuple(warnings),
         )
+
+    def _axes_at(self, pts: np.ndarray, rec: np.ndarray) -> np.ndarray:
+        """All nine axes (XYZABCUVW) at sampled points: XYZ as sampled, the others interpolated
+        between the block's start and end by the point's fraction along it (as the sampler and the
+        emitter do on split moves) — for fields that depend on a rotary axis (``uses_axes``)."""
+        end = self._records()["end"]
+        rec = rec.astype(np.int64)
+        e = end[rec]
+        s = np.where(rec[:, None] > 0, end[np.maximum(rec - 1, 0)], e)
+        s = np.where(np.isfinite(s), s, e)
+        a = np.linalg.norm(pts - s[:, :3], axis=1)
+        b = np.linalg.norm(e[:, :3] - pts, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.where(a + b > 1e-12, a / (a + b), 1.0)
+        out = s + t[:, None] * (e - s)
+        out[:, :3] = pts
+        return out
 
     def _clearance_warnings(self, field, clearance):
         if clearance is None:

@@ -1,0 +1,245 @@
+"""A virtual SVO machine milling the waffle grid of a cylindrical shell, deterministic for a seed.
+
+Shell: outer diameter D = 1500 mm, 4 rows × 24 cells (15° pitch, rows 120 mm apart); web target
+T_ref = 2.0 mm; semi-finishing allowance b = 0.3 mm. Cutter R = 10 mm. Each cell is finished
+along a zig-zag: 11 lines along B (±5° about the cell's centre, 0.1° = 1.31 mm apart) stepped
+8 mm in Z, at 2000 mm/min (Δt = 0.039 s per sample). The web thickness is evaluated at the path's
+samples (a 11 × 101 map per cell); cells are machined row by row.
+
+The back wall's deviation along the depth axis (into the material positive), mm:
+V(B, Z) = A₂ cos(2B + φ₂) + A₃ cos(3B + φ₃) + Σ_welds h·exp(−½((s − s_w)/25)²) + c·(Z/Z_max)²
+with s = B·πD/360 the arc length, A₂ ~ U(0.5, 1.0), A₃ ~ U(0.2, 0.5), two longitudinal welds
+h ~ U(0.2, 0.4) mm at random B, a bow c ~ U(−0.2, 0.2) mm (ovality and lobes of a rolled shell,
+weld sag: orders of magnitude of the shape errors the paper's tracking compensates).
+
+Web-thickness error of a finished cell, T − T_ref (mm) — the paper's two groups:
+
+- group I, a pattern inside the cell:
+  - spindle tilt, −R·|∂V/∂s| (see :mod:`ncadapt.processes.waffle` for the derivation);
+  - the copying system: V_ideal − w, w = drive(play(V along the zig-zag; g), τ) with g = 0.03 mm,
+    τ = 0.05 s (:func:`ncadapt.processes.waffle.copy`);
+  - the cutter's deflection near the ribs: +0.04·exp(−d/8 mm) (d: distance to the pocket's edge
+    along B or Z), the same in every cell;
+- group II, a drift with the cell's place: temperature, 0.08 mm·(n / N_cells − ½) with n the
+  machining order (the machine set up on the shell's middle cell); the rows next to the end
+  flanges (stiffer) +0.02 mm, the middle rows −0.02 mm;
+- machining noise σ = 4 µm; the ultrasonic thickness map adds σ = 8 µm; the tracking
+  pre-measurement (one-way along B, every 2 mm of Z over the row, 0.25° steps) σ = 3 µm.
+
+Strategies: ``none``; ``disturbance`` (K_dist from the pre-measurement: the tilt from its segment
+fits, N = 10, plus the copying system's error predicted along the cell's zig-zag with the gap and
+drive estimated by :func:`ncadapt.processes.waffle.estimate_backlash` from the pair of signals of
+:func:`backlash_pair`);
+``self-tuning`` (K_fb from a semi-finishing pass smoothed along B with a Gaussian of σ = 2
+samples, band T_ref ± 0.03 mm, the finished maps smoothed the same way before the band check); ``combined`` (both; the semi-finishing pass carries K_dist).
+A retuned cell is semi-finished then finished; ``retunes`` counts every semi-finishing pass,
+the first cell's included.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..processes import waffle as pw
+
+D = 1500.0
+ROWS, CELLS = 4, 24
+PITCH = 360.0 / CELLS
+ROW_PITCH = 120.0
+T_REF = 2.0
+ALLOWANCE = 0.3
+BAND = 0.03
+R_TOOL = 10.0
+HALF_B = 5.0  # deg: the path's half-width along B
+STEP_B = 0.1
+Z_LINES = np.arange(-40.0, 40.0 + 1e-9, 8.0)
+FEED = 2000.0 / 60.0  # mm/s
+GAP = 0.03
+TAU = 0.05
+RIB = 0.04
+DRIFT = 0.08
+FLANGE = 0.02
+NOISE_CUT, NOISE_UT, NOISE_TRACK = 0.004, 0.008, 0.003
+SEGMENT = 10
+STRATEGIES = ("none", "disturbance", "self-tuning", "combined")
+MM_PER_DEG = math.pi * D / 360.0
+
+
+@dataclass
+class Shell:
+    """The back wall of a seeded shell."""
+
+    seed: int
+    a2: float
+    a3: float
+    p2: float
+    p3: float
+    welds: list
+    bow: float
+
+    @classmethod
+    def make(cls, seed: int) -> "Shell":
+        rng = np.random.default_rng(seed)
+        return cls(seed, rng.uniform(0.5, 1.0), rng.uniform(0.2, 0.5), rng.uniform(0, 2 * np.pi),
+                   rng.uniform(0, 2 * np.pi), [(rng.uniform(0, 360), rng.uniform(0.2, 0.4)) for _ in range(2)],
+                   rng.uniform(-0.2, 0.2))
+
+    def v(self, b, z):
+        b = np.asarray(b, float)
+        r = np.radians(b)
+        zmax = ROWS * ROW_PITCH / 2
+        out = self.a2 * np.cos(2 * r + self.p2) + self.a3 * np.cos(3 * r + self.p3) + self.bow * (np.asarray(z) / zmax) ** 2
+        for bw, h in self.welds:
+            ds = ((b - bw + 180) % 360 - 180) * MM_PER_DEG
+            out = out + h * np.exp(-0.5 * (ds / 25.0) ** 2)
+        return out
+
+    def slope(self, b, z):
+        """∂V/∂s (dimensionless)."""
+        b = np.asarray(b, float)
+        r = np.radians(b)
+        d = (-2 * self.a2 * np.sin(2 * r + self.p2) - 3 * self.a3 * np.sin(3 * r + self.p3)) / (D / 2)
+        for bw, h in self.welds:
+            ds = ((b - bw + 180) % 360 - 180) * MM_PER_DEG
+            d = d - h * ds / 25.0 ** 2 * np.exp(-0.5 * (ds / 25.0) ** 2)
+        return d + 0 * np.asarray(z)
+
+
+def cell_path():
+    """Local (u in deg, w in mm) samples of the zig-zag, line by line (lines, samples)."""
+    u = np.arange(-HALF_B, HALF_B + 1e-9, STEP_B)
+    uu = np.array([u if k % 2 == 0 else u[::-1] for k in range(len(Z_LINES))])
+    ww = np.repeat(Z_LINES[:, None], len(u), axis=1)
+    return uu, ww
+
+
+def cell_centre(row: int, cell: int) -> tuple[float, float]:
+    return cell * PITCH + PITCH / 2, (row - (ROWS - 1) / 2) * ROW_PITCH
+
+
+def premeasurement(shell: Shell, rng):
+    """The tracking pre-measurement [B, Z, V]: one-way along B at every 2 mm of Z, 0.25° steps."""
+    b = np.arange(0.0, 360.0, 0.25)
+    zs = np.arange(-ROWS * ROW_PITCH / 2 + 10, ROWS * ROW_PITCH / 2 - 10 + 1e-9, 2.0)
+    bb, zz = np.meshgrid(b, zs)
+    bb, zz = bb.ravel(), zz.ravel()
+    return bb, zz, shell.v(bb, zz) + rng.normal(0, NOISE_TRACK, bb.shape)
+
+
+def rib_pattern(uu, ww):
+    d = np.minimum((HALF_B - np.abs(uu)) * MM_PER_DEG, Z_LINES.max() - np.abs(ww)) + R_TOOL
+    return RIB * np.exp(-d / 8.0)
+
+
+@dataclass
+class Result:
+    strategy: str
+    seed: int
+    maps: np.ndarray  # (rows, cells, lines, samples) finished thickness error, mm
+    before: np.ndarray  # the same without correction (same seed)
+    retuned: np.ndarray  # (rows, cells) bool: semi-finished first
+    backlash: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        e = self.maps
+        cells = [{"row": int(r + 1), "cell": int(c + 1), "B": cell_centre(r, c)[0], "Z": cell_centre(r, c)[1],
+                  "rms_error": float(np.sqrt(np.mean(e[r, c] ** 2))), "max_abs_error": float(np.abs(e[r, c]).max()),
+                  "retuned": bool(self.retuned[r, c])} for r in range(e.shape[0]) for c in range(e.shape[1])]
+        return {"strategy": self.strategy, "seed": self.seed, "rms_error": float(np.sqrt(np.mean(e ** 2))),
+                "max_abs_error": float(np.abs(e).max()), "retunes": int(self.retuned.sum()),
+                "cells_total": int(self.retuned.size), "rms_error_uncorrected": float(np.sqrt(np.mean(self.before ** 2))),
+                "backlash": self.backlash, "cells": cells}
+
+
+def simulate(strategy: str = "combined", seed: int = 1) -> Result:
+    if strategy not in STRATEGIES:
+        raise ValueError(f"strategy must be one of {', '.join(STRATEGIES)}, got {strategy!r}")
+    from scipy.ndimage import gaussian_filter1d
+
+    shell = Shell.make(seed)
+    rng = np.random.default_rng(seed + 1)
+    uu, ww = cell_path()
+    dt = STEP_B * MM_PER_DEG / FEED
+    use_dist = strategy in ("disturbance", "combined")
+    use_fb = strategy in ("self-tuning", "combined")
+    k_field = v_field = None
+    backlash = {}
+    if use_dist:
+        b, z, v = premeasurement(shell, rng)
+        t = pw.tilt(b, z, v, tool_radius=R_TOOL, diameter=D, segment=SEGMENT)
+        k_field = pw.DepthField(b, z, t.correction, diameter=D, outside="clamp")
+        v_field = pw.DepthField(b, z, v, diameter=D, outside="clamp")
+        est = pw.estimate_backlash(*backlash_pair(seed))
+        backlash = est.as_dict()
+    tuner = pw.SelfTuning(T_REF, ALLOWANCE, T_REF - BAND, T_REF + BAND)
+    shape = (ROWS, CELLS) + uu.shape
+    maps, before = np.empty(shape), np.empty(shape)
+    retuned = np.zeros((ROWS, CELLS), bool)
+    pattern = rib_pattern(uu, ww)
+    n_total = ROWS * CELLS
+    for r in range(ROWS):
+        for c in range(CELLS):
+            bc, zc = cell_centre(r, c)
+            bb, zz = bc + uu, zc + ww
+            order = r * CELLS + c
+            v_true = shell.v(bb, zz)
+            tilt_err = -R_TOOL * np.abs(shell.slope(bb, zz))
+            w = pw.copy(v_true.ravel(), GAP, TAU, dt).reshape(uu.shape)
+            drift = DRIFT * (order / n_total - 0.5) + (FLANGE if r in (0, ROWS - 1) else -FLANGE)
+            base = tilt_err + (v_true - w) + pattern + drift  # the error of an uncorrected pass
+            k_dist = 0.0
+            if use_dist:
+                k_dist = k_field.values(bb.ravel(), zz.ravel()).reshape(uu.shape)
+                # the copying system's error predicted along this cell's zig-zag from the
+                # pre-measured wall and the estimated gap and drive
+                v_pre = v_field.values(bb.ravel(), zz.ravel())
+                k_dist = k_dist + pw.copying_error(v_pre, est.gap, est.tau, dt).reshape(uu.shape)
+            k = k_dist
+            if use_fb:
+                if tuner.needs_semi_finish:
+                    # semi-finishing pass with allowance b (carrying K_dist), gauged
+                    semi = T_REF + ALLOWANCE + base - k_dist + rng.normal(0, NOISE_CUT, uu.shape)
+                    gauged = semi + rng.normal(0, NOISE_UT, uu.shape)
+                    tuner.tune(gaussian_filter1d(gauged, 2.0, axis=1, mode="nearest"))
+                    retuned[r, c] = True
+                k = k + tuner.k_fb
+            noise = rng.normal(0, NOISE_CUT, uu.shape)
+            before[r, c] = base + noise
+            maps[r, c] = base - k + noise
+            if use_fb:
+                gauged = T_REF + maps[r, c] + rng.normal(0, NOISE_UT, uu.shape)
+                tuner.finished(gaussian_filter1d(gauged, 2.0, axis=1, mode="nearest"))
+    return Result(strategy, seed, maps, before, retuned, backlash)
+
+
+def backlash_pair(seed: int = 1, noise: float = 0.002):
+    """The pair of signals of section 3 for the first cell: the ideal V along the cell's zig-zag
+    (from the one-way pre-measurement) and V recorded while machining it; and Δt."""
+    shell = Shell.make(seed)
+    rng = np.random.default_rng(seed + 2)
+    uu, ww = cell_path()
+    bc, zc = cell_centre(0, 0)
+    # a cell where the wall slopes: start at the steepest part of the ovality
+    v_ideal = shell.v(bc + uu, zc + ww).ravel()
+    dt = STEP_B * MM_PER_DEG / FEED
+    measured = pw.copy(v_ideal, GAP, TAU, dt) + rng.normal(0, noise, v_ideal.shape)
+    return v_ideal, measured, dt
+
+
+def shell_map(maps: np.ndarray):
+    """The shell's thickness-error map as one image over B × Z (rows of Z, columns of B) with
+    the extents (B0, B1, Z0, Z1)."""
+    rows, cells, lines, samples = maps.shape
+    uu, _ = cell_path()
+    img = np.full((rows * lines, cells * samples), np.nan)
+    for r in range(rows):
+        for c in range(cells):
+            m = maps[r, c].copy()
+            m[1::2] = m[1::2, ::-1]  # the zig-zag's odd lines run backwards
+            img[r * lines:(r + 1) * lines, c * samples:(c + 1) * samples] = m
+    z0 = cell_centre(0, 0)[1] + Z_LINES[0]
+    z1 = cell_centre(rows - 1, 0)[1] + Z_LINES[-1]
+    return img, (0.0, 360.0, z0, z1)
