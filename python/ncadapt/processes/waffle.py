@@ -59,7 +59,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["segments", "fit_segments", "Tilt", "tilt", "read_tracking", "read_thickness", "DepthField",
+__all__ = ["segments", "fit_segments", "Tilt", "tilt", "read_tracking", "read_thickness", "DepthField", "Sum",
            "disturbance_correction", "feedback_correction", "play", "drive", "copy", "copying_error", "estimate_backlash",
            "Backlash", "SelfTuning"]
 
@@ -239,6 +239,21 @@ class DepthField:
         if len(points):
             d[:, self.depth] = self.values(axes[:, self.rotary], axes[:, self.axial])
         return d
+
+
+class Sum:
+    """The sum of depth corrections (K_dist + K_fb) as one field for :meth:`Program.correct`."""
+
+    uses_axes = True
+
+    def __init__(self, parts):
+        self.parts = list(parts)
+
+    def __call__(self, points, axes=None):
+        out = np.zeros_like(np.asarray(points, float))
+        for f in self.parts:
+            out += f(points, axes)
+        return out
 
 
 def disturbance_correction(t: Tilt) -> np.ndarray:

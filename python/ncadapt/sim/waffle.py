@@ -160,7 +160,6 @@ def simulate(strategy: str = "combined", seed: int = 1) -> Result:
     from scipy.ndimage import gaussian_filter1d
 
     shell = Shell.make(seed)
-    rng = np.random.default_rng(seed + 1)
     uu, ww = cell_path()
     dt = STEP_B * MM_PER_DEG / FEED
     use_dist = strategy in ("disturbance", "combined")
@@ -168,7 +167,7 @@ def simulate(strategy: str = "combined", seed: int = 1) -> Result:
     k_field = v_field = None
     backlash = {}
     if use_dist:
-        b, z, v = premeasurement(shell, rng)
+        b, z, v = premeasurement(shell, np.random.default_rng([seed, 3]))
         t = pw.tilt(b, z, v, tool_radius=R_TOOL, diameter=D, segment=SEGMENT)
         k_field = pw.DepthField(b, z, t.correction, diameter=D, outside="clamp")
         v_field = pw.DepthField(b, z, v, diameter=D, outside="clamp")
@@ -184,6 +183,8 @@ def simulate(strategy: str = "combined", seed: int = 1) -> Result:
         for c in range(CELLS):
             bc, zc = cell_centre(r, c)
             bb, zz = bc + uu, zc + ww
+            # separate streams: the cut's noise is the same whatever the strategy
+            cut_rng, gauge_rng = np.random.default_rng([seed, 1, r, c]), np.random.default_rng([seed, 2, r, c])
             order = r * CELLS + c
             v_true = shell.v(bb, zz)
             tilt_err = -R_TOOL * np.abs(shell.slope(bb, zz))
@@ -201,16 +202,16 @@ def simulate(strategy: str = "combined", seed: int = 1) -> Result:
             if use_fb:
                 if tuner.needs_semi_finish:
                     # semi-finishing pass with allowance b (carrying K_dist), gauged
-                    semi = T_REF + ALLOWANCE + base - k_dist + rng.normal(0, NOISE_CUT, uu.shape)
-                    gauged = semi + rng.normal(0, NOISE_UT, uu.shape)
+                    semi = T_REF + ALLOWANCE + base - k_dist + gauge_rng.normal(0, NOISE_CUT, uu.shape)
+                    gauged = semi + gauge_rng.normal(0, NOISE_UT, uu.shape)
                     tuner.tune(gaussian_filter1d(gauged, 2.0, axis=1, mode="nearest"))
                     retuned[r, c] = True
                 k = k + tuner.k_fb
-            noise = rng.normal(0, NOISE_CUT, uu.shape)
+            noise = cut_rng.normal(0, NOISE_CUT, uu.shape)
             before[r, c] = base + noise
             maps[r, c] = base - k + noise
             if use_fb:
-                gauged = T_REF + maps[r, c] + rng.normal(0, NOISE_UT, uu.shape)
+                gauged = T_REF + maps[r, c] + gauge_rng.normal(0, NOISE_UT, uu.shape)
                 tuner.finished(gaussian_filter1d(gauged, 2.0, axis=1, mode="nearest"))
     return Result(strategy, seed, maps, before, retuned, backlash)
 
@@ -243,3 +244,20 @@ def shell_map(maps: np.ndarray):
     z0 = cell_centre(0, 0)[1] + Z_LINES[0]
     z1 = cell_centre(rows - 1, 0)[1] + Z_LINES[-1]
     return img, (0.0, 360.0, z0, z1)
+
+
+def cell_program(row: int = 0, cell: int = 0, depth: float = 8.0, step: float = 0.5) -> str:
+    """G-code finishing one cell along the zig-zag, as a post-processor writes it for an SVO
+    machine: B (deg) rotary, Z along the shell, Y the depth along the spindle (larger: deeper),
+    reference points every ``step`` degrees."""
+    bc, zc = cell_centre(row, cell)
+    u = np.arange(-HALF_B, HALF_B + 1e-9, step)
+    out = [f"(ncadapt waffle testbed: finish row {row + 1} cell {cell + 1}, zig-zag along B)", "G21 G90 G94 G17",
+           "S6000 M3", "G0 X0.000 Y0.000", f"G0 B{bc + u[0]:.3f} Z{zc + Z_LINES[0]:.3f}", f"G1 Y{depth:.3f} F300"]
+    for k, w in enumerate(Z_LINES):
+        line = u if k % 2 == 0 else u[::-1]
+        if k:
+            out.append(f"G1 Z{zc + w:.3f}")
+        out += [f"G1 B{bc + x:.3f} F{FEED * 60:.0f}" for x in line[1:]]
+    out += ["G0 Y0.000", "M5", "M2"]
+    return "\n".join(out) + "\n"
