@@ -49,6 +49,7 @@ bench: install-test
 	$(PY) benchmarks/bench_correct.py
 	$(PY) benchmarks/bench_freeform.py
 	$(PY) benchmarks/bench_skin.py
+	$(PY) benchmarks/bench_waffle.py
 
 clean:
 	rm -rf $(VENV) target demo-out

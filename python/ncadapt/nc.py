@@ -344,7 +344,9 @@ class Program:
         ----------
         field : callable, (n, 3) float mm -> (n, 3) float mm
             The displacement to add at each point, usually an :mod:`ncadapt.fields` field. A field
-            with ``grid_lines`` makes moves split where they cross its cell lines.
+            with ``grid_lines`` makes moves split where they cross its cell lines; one with
+            ``uses_axes = True`` is called ``field(points, axes)`` with axes (n, 9) XYZABCUVW at
+            every point (for corrections that depend on a rotary axis).
         chord_tol, max_segment : float, mm
             Sampling of arcs and long moves.
         limit : float, mm
