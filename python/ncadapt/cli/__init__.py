@@ -14,6 +14,7 @@ from ._demo import demo
 from ._freeform import analyze, compensate
 from ._inspect import inspect
 from ._skin import skin
+from ._turning import turning
 from ._waffle import waffle
 
 __all__ = ["main"]
@@ -33,3 +34,4 @@ main.add_command(demo)
 main.add_command(bore)
 main.add_command(skin)
 main.add_command(waffle)
+main.add_command(turning)

@@ -1,0 +1,128 @@
+"""``ncadapt turning``: feed and path trajectories for slender shafts (see
+:mod:`ncadapt.processes.turning` and :mod:`ncadapt.sim.turning`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ._common import handle_errors, write_json
+
+
+@click.group()
+def turning() -> None:
+    """Turning slender shafts: trajectories that keep the diameter constant."""
+
+
+@turning.command("plan")
+@click.argument("config", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--mode", type=click.Choice(["feed", "path"]), default="feed", show_default=True,
+              help="feed: a feed (and speed) schedule; path: the X path pre-distorted at constant feed.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Lathe program to write.")
+@click.option("--radius-mode", is_flag=True, help="X words as radii (G8) instead of diameters (G7).")
+@click.option("--css", is_flag=True, help="Constant surface speed (G96) instead of per-block S words (G97).")
+@click.option("--wear-weight", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="Weight of tool wear (Taylor's law) in the cost, s per tool life.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="HTML report: the feed/speed/position family and the diameter profiles.")
+@handle_errors
+def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_path):
+    """Plan the trajectory for the shaft in CONFIG (TOML, the paper's units)."""
+    from ..processes import turning as tu
+    from .._io import atomic_write
+
+    cfg = tu.load(config)
+    p = tu.plan(cfg, mode, wear_weight=wear_weight)
+    d = p.as_dict()
+    click.echo(f"{mode}: diameter variation on the model {d['diameter_error_max'] * 1000:.1f} µm "
+               f"(constant feed {d['constant_feed']:.3f} mm/rev at {d['constant_rpm']:.0f} rpm: "
+               f"{d['diameter_error_constant_feed'] * 1000:.1f} µm, ratio {d['diameter_variation_ratio']:.3f}); "
+               f"machining time {d['machining_time_s']:.1f} s"
+               + (f", a constant feed with the same worst error {d['constant_feed_same_error']:.4f} mm/rev takes "
+                  f"{d['machining_time_same_error_s']:.1f} s" if d["machining_time_same_error_s"] is not None else ""))
+    if output:
+        if output.resolve() == config.resolve():
+            raise click.UsageError("-o names the configuration file")
+        atomic_write(output, tu.program(p, cfg, diameter_mode=not radius_mode, css=css).encode())
+        click.echo(f"wrote {output}", err=True)
+    if json_path:
+        write_json(json_path, {"config": str(config), **d})
+    if report_path:
+        _report(report_path, cfg, p, css)
+
+
+@turning.command("simulate")
+@click.argument("config", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--rho-sigma", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="Relative scatter of the cutting pressure ρ.")
+@click.option("--stiffness-sigma", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="Relative scatter of the stiffness.")
+@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@handle_errors
+def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
+    """Turn the shaft of CONFIG with PROGRAM on the virtual lathe: the diameter along the shaft."""
+    from ..processes import turning as tu
+    from ..sim import turning as st
+
+    prof = st.simulate(tu.load(config), program, rho_sigma=rho_sigma, stiffness_sigma=stiffness_sigma, seed=seed)
+    d = prof.as_dict()
+    click.echo(f"{program}: diameter {d['diameter_min']:.4f} .. {d['diameter_max']:.4f} mm (target "
+               f"{d['diameter_target']:.3f}, error up to {d['diameter_error_max'] * 1000:.1f} µm, variation "
+               f"{d['diameter_variation'] * 1000:.1f} µm), {d['machining_time_s']:.1f} s")
+    if json_path:
+        write_json(json_path, {"config": str(config), "program": str(program), **d})
+
+
+def _report(path, cfg, p, css) -> None:
+    import tempfile
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from ..processes import turning as tu
+    from ..report import figure_png, page, table, write
+    from ..sim import turning as st
+
+    fam = p.family_feed * 1e3
+    fig = plt.figure(figsize=(10, 5.5))
+    ax = fig.add_subplot(projection="3d")
+    X, N = np.meshgrid(p.x3 * 1e3, p.family_rpm)
+    ax.plot_surface(X, N, np.where(np.isfinite(fam), fam, np.nan), cmap="viridis", alpha=0.8)
+    ax.plot(p.x3 * 1e3, p.rpm, p.feed * 1e3, "r-", lw=2, label="chosen (dynamic programming)")
+    ax.set_xlabel("x3 from the tailstock, mm")
+    ax.set_ylabel("spindle, rpm")
+    ax.set_zlabel("feed, mm/rev")
+    ax.legend()
+    # diameter profiles on the virtual lathe: constant feed, X pre-distortion, feed schedule
+    fig2, ax2 = plt.subplots(figsize=(10, 3.8))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        plans = {"constant feed": None, "X pre-distortion": tu.plan(cfg, "path"), "feed schedule": tu.plan(cfg, "feed")}
+        for name, q in plans.items():
+            if q is None:
+                q = tu.plan(cfg, "path")
+                q.x1_offset = np.zeros_like(q.x1_offset)  # the best constant offset is applied below
+                q.feed = np.full_like(q.feed, plans["feed schedule"].constant_feed)
+                q.rpm = np.full_like(q.rpm, plans["feed schedule"].constant_rpm)
+            f = f"{tmp}/p.ngc"
+            open(f, "w").write(tu.program(q, cfg, css=False))
+            prof = st.simulate(cfg, f)
+            ax2.plot(prof.x3, (prof.diameter - prof.target) * 1000, label=name)
+            rows.append((name, f"{prof.error_max * 1000:.1f}", f"{np.ptp(prof.diameter) * 1000:.1f}", f"{prof.time_s:.1f}"))
+    ax2.set_xlabel("x3 from the tailstock, mm")
+    ax2.set_ylabel("diameter − target, µm")
+    ax2.legend(fontsize=8)
+    d = p.as_dict()
+    summary = [(k, v) for k, v in d.items() if k != "profile"]
+    write(path, page(f"Turning plan: {p.mode} mode", cfg.source, [
+        ("Summary", table(summary, ["", "value"])),
+        ("Feed / spindle speed / position: the family keeping the deflection constant", figure_png(fig)),
+        ("Diameter along the shaft on the virtual lathe", figure_png(fig2)
+         + table(rows, ["program", "max |diameter error|, µm", "diameter variation, µm", "time, s"]))]))

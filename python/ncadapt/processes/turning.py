@@ -1,0 +1,403 @@
+"""Turning slender shafts: a stiffness-matrix deflection model and feed (or X) trajectories that
+keep the diameter constant (Zakovorotny, Flek, Pham Dinh Tung, "Synergetic concept in construction
+of accuracy control systems for manufacturing parts of complex geometric forms").
+
+Everything inside is SI (m, N, N/m, Pa, s); the configuration is read in the paper's units and
+converted on reading: 1 kgf = 9.80665 N, so stiffness kgf/mm × 9806.65 → N/m and ρ kgf/mm² ×
+9.80665·10⁶ → Pa; mm × 10⁻³ → m. Results are reported in mm, mm/rev and rpm.
+
+Coordinates: X₁ radial (positive away from the axis), X₂ tangential (cutting speed), X₃ along the
+axis; the tool travels from the tailstock towards the chuck, x3 is the distance from the tailstock
+centre. r = X₁ + x₁ + y₁: the tool's x₁ and the workpiece's y₁ radial deflections both leave the
+radius larger than programmed.
+
+Model
+-----
+- Workpiece subsystem compliance at the contact point (3 × 3): the shaft as an Euler–Bernoulli beam
+  (EI = E·πd⁴/64, EA = E·πd²/4) on the chuck and tailstock supports, each support taking the share
+  of the load given by the lever rule (w_c = x3/L at the chuck, w_t = 1 − x3/L at the tailstock) in
+  every direction: S_Y = w_c² C_chuck⁻¹ + w_t² C_tail⁻¹ + diag(b, b, e), with the pinned–pinned beam
+  b = u²(L−u)²/(3EIL) and the bar fixed at both ends e = u(L−u)/(EA·L), u = L − x3.
+  c^(Y)(x3) = S_Y⁻¹. The tool subsystem's c^(X) is constant.
+- Cutting force F₀ = ρ(V_p)·S, S = S_p t_p − ζ S_p², ζ = ½ tan φ tan φ₁ / (tan φ + tan φ₁), along
+  λ = (λ₁, λ₂, λ₃): F = F₀ λ. ρ(V_p) is interpolated linearly in the paper's table.
+- Per revolution, the linearised system C_Σ x = F (the paper's eq. 7) in x = (x₁, x₂, x₃, y₁, y₂, y₃):
+  each subsystem c x = λ F₀ with the chip area reduced by the radial deflection and changed by the
+  axial deflection against the previous revolution,
+  F₀ = ρ [t_p S_p − ζ S_p² + t_p (x₃ + y₃)(prev) − t_p (x₃ + y₃) − S_p (x₁ + y₁)];
+  moving the deflection terms to the left gives the paper's C_Σ (the −ζS_p² term, which the
+  paper's linearisation drops from F, is kept).
+- Steady state (x₃ = x₃(prev)): with g = e₁ᵀ(S_X + S_Y) λ the radial compliance along λ,
+  F₀ = ρ(t_p S_p − ζS_p²)/(1 + ρ S_p g) and x₁ + y₁ = g F₀ — the closed form the inverse uses.
+
+Inverse problem
+---------------
+The invariant X₁ − (x₁ + y₁) = const. **Feed mode**: for a deflection δ*, S_p(x3) solves
+g ρ ζ S² + g ρ (δ* − t_p) S + δ* = 0 (the smaller root) within the feed bounds; δ* is chosen as
+large as the bounds allow everywhere (least machining time for the least variation).
+**Path mode**: X₁(x3) = R − δ(x3) at the constant feed — exact on the model, since the depth of
+cut, and so the force, stays the nominal one.
+
+Choosing one trajectory: dynamic programming over stations along x3 and the spindle speeds of
+the family, minimising machining time Σ Δx3 / (S_p n) (plus, optionally, tool wear by Taylor's law
+V Tᵐ = C: wear cost w Σ Δt / T(V)) with |ΔS_p| and |Δn| per revolution bounded.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+KGF = 9.80665  # N
+__all__ = ["Config", "load", "Model", "Plan", "plan", "program"]
+
+
+def _sym(v, scale: float) -> np.ndarray:
+    """The paper's six numbers C11, C22, C33, C21, C31, C32 as a symmetric 3 × 3 matrix."""
+    c11, c22, c33, c21, c31, c32 = (float(x) * scale for x in v)
+    return np.array([[c11, c21, c31], [c21, c22, c32], [c31, c32, c33]])
+
+
+@dataclass
+class Config:
+    diameter: float  # m
+    length: float  # m
+    youngs: float  # Pa
+    depth: float  # m
+    phi: float  # rad
+    phi1: float
+    lam: np.ndarray
+    rho_speed: np.ndarray  # m/min
+    rho: np.ndarray  # Pa
+    chuck: np.ndarray  # N/m
+    tail: np.ndarray
+    tool: np.ndarray
+    feed_bounds: tuple  # m/rev
+    rpm_bounds: tuple
+    feed_change: float  # m/rev per rev
+    rpm_change: float  # rpm per rev
+    start: float  # m
+    end: float
+    step: float
+    speeds: int
+    source: str = ""
+    raw: dict = field(default_factory=dict)
+
+
+def load(path) -> Config:
+    """Read a turning configuration (TOML, the paper's units) and convert it to SI."""
+    path = Path(path)
+    try:
+        d = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise InputError(f"cannot read: {e.strerror}", str(path)) from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"not valid TOML: {e}", str(path)) from None
+
+    def get(section, key, n=None):
+        try:
+            v = d[section][key]
+        except KeyError:
+            raise InputError(f"missing [{section}] {key}", str(path)) from None
+        if n is not None and (not isinstance(v, list) or len(v) != n):
+            raise InputError(f"[{section}] {key} must be a list of {n} numbers", str(path))
+        return v
+
+    mm = 1e-3
+    rs = np.asarray(get("cut", "rho_speed"), float)
+    rho = np.asarray(get("cut", "rho"), float)
+    if len(rs) != len(rho) or len(rs) < 2 or np.any(np.diff(rs) <= 0):
+        raise InputError("[cut] rho_speed must increase and match rho in length", str(path))
+    cfg = Config(
+        diameter=float(get("shaft", "diameter")) * mm, length=float(get("shaft", "length")) * mm,
+        youngs=float(get("shaft", "youngs_modulus")) * 1e6, depth=float(get("cut", "depth")) * mm,
+        phi=math.radians(float(get("cut", "plan_angle"))), phi1=math.radians(float(get("cut", "trailing_angle"))),
+        lam=np.asarray(get("cut", "lambda", 3), float), rho_speed=rs, rho=rho * KGF * 1e6,
+        chuck=_sym(get("stiffness", "chuck", 6), KGF / mm), tail=_sym(get("stiffness", "tailstock", 6), KGF / mm),
+        tool=_sym(get("stiffness", "tool", 6), KGF / mm),
+        feed_bounds=tuple(float(x) * mm for x in get("bounds", "feed", 2)),
+        rpm_bounds=tuple(float(x) for x in get("bounds", "spindle_rpm", 2)),
+        feed_change=float(get("bounds", "feed_change")) * mm, rpm_change=float(get("bounds", "rpm_change")),
+        start=float(get("plan", "start")) * mm, end=float(get("plan", "end")) * mm, step=float(get("plan", "step")) * mm,
+        speeds=int(get("plan", "speeds")), source=str(path), raw=d)
+    if not 0 <= cfg.start < cfg.end <= cfg.length:
+        raise InputError("[plan] needs 0 <= start < end <= shaft length", str(path))
+    if not 0 < cfg.feed_bounds[0] < cfg.feed_bounds[1] or not 0 < cfg.rpm_bounds[0] <= cfg.rpm_bounds[1]:
+        raise InputError("[bounds] feed and spindle_rpm must be increasing positive pairs", str(path))
+    for name in ("chuck", "tail", "tool"):
+        if np.any(np.linalg.eigvalsh(getattr(cfg, name)) <= 0):
+            raise InputError(f"[stiffness] {name} is not positive definite", str(path))
+    return cfg
+
+
+class Model:
+    """The cutting system of a configuration: compliances, force and the per-revolution solver."""
+
+    def __init__(self, cfg: Config, *, rho_scale: float = 1.0, stiffness_scale: float = 1.0):
+        self.cfg = cfg
+        d, L, E = cfg.diameter, cfg.length, cfg.youngs
+        self.EI = E * math.pi * d ** 4 / 64
+        self.EA = E * math.pi * d ** 2 / 4
+        self.s_chuck = np.linalg.inv(cfg.chuck * stiffness_scale)
+        self.s_tail = np.linalg.inv(cfg.tail * stiffness_scale)
+        self.c_tool = cfg.tool * stiffness_scale
+        self.s_tool = np.linalg.inv(self.c_tool)
+        tp, tp1 = math.tan(cfg.phi), math.tan(cfg.phi1)
+        self.zeta = 0.5 * tp * tp1 / (tp + tp1)
+        self.rho_scale = rho_scale
+
+    # --- compliances
+    def workpiece_compliance(self, x3) -> np.ndarray:
+        """S_Y (3 × 3, m/N) at distance x3 from the tailstock centre; (n, 3, 3) for an array."""
+        x3 = np.atleast_1d(np.asarray(x3, float))
+        L = self.cfg.length
+        u = L - x3  # from the chuck
+        wc, wt = x3 / L, 1.0 - x3 / L
+        b = u ** 2 * (L - u) ** 2 / (3 * self.EI * L)
+        e = u * (L - u) / (self.EA * L)
+        s = wc[:, None, None] ** 2 * self.s_chuck + wt[:, None, None] ** 2 * self.s_tail
+        s[:, 0, 0] += b
+        s[:, 1, 1] += b
+        s[:, 2, 2] += e
+        return s
+
+    def workpiece_stiffness(self, x3) -> np.ndarray:
+        return np.linalg.inv(self.workpiece_compliance(x3))
+
+    def radial_compliance(self, x3) -> np.ndarray:
+        """g = e₁ᵀ (S_X + S_Y) λ, m/N: the radial deflection x₁ + y₁ per newton of F₀."""
+        s = self.s_tool[None] + self.workpiece_compliance(x3)
+        return s[:, 0, :] @ self.cfg.lam
+
+    # --- cutting
+    def rho(self, rpm) -> np.ndarray:
+        v = math.pi * self.cfg.diameter * np.asarray(rpm, float)  # m/min
+        return np.interp(v, self.cfg.rho_speed, self.cfg.rho) * self.rho_scale
+
+    def chip_area(self, feed) -> np.ndarray:
+        s = np.asarray(feed, float)
+        return s * self.cfg.depth - self.zeta * s ** 2
+
+    def deflection(self, x3, feed, rpm) -> np.ndarray:
+        """Steady-state radial deflection x₁ + y₁, m (closed form)."""
+        g, r, a = self.radial_compliance(x3), self.rho(rpm), self.chip_area(feed)
+        return g * r * a / (1 + r * np.asarray(feed, float) * g)
+
+    def feed_for(self, x3, rpm, delta) -> np.ndarray:
+        """The feed per revolution that gives the steady deflection δ (the smaller root), m/rev;
+        NaN where no feed does."""
+        g, r, tp = self.radial_compliance(x3), self.rho(rpm), self.cfg.depth
+        A, B, C = g * r * self.zeta, g * r * (delta - tp), delta + 0 * g
+        disc = B * B - 4 * A * C
+        with np.errstate(invalid="ignore"):
+            return np.where(disc >= 0, (-B - np.sqrt(np.maximum(disc, 0))) / (2 * A), np.nan)
+
+    # --- the paper's 6 × 6 system, revolution by revolution
+    def c_sigma(self, x3: float, feed: float, rpm: float) -> tuple[np.ndarray, float]:
+        cfg = self.cfg
+        r = float(self.rho(rpm))
+        cy = self.workpiece_stiffness(x3)[0]
+        lam = cfg.lam
+        m = np.zeros((6, 6))
+        m[:3, :3] = self.c_tool.T
+        m[3:, 3:] = cy.T
+        for blk in (0, 3):
+            for i in range(3):
+                for k0 in (0, 3):
+                    m[blk + i, k0 + 0] += lam[i] * r * feed
+                    m[blk + i, k0 + 2] += lam[i] * r * cfg.depth
+        return m, r
+
+    def solve_revolution(self, x3: float, feed: float, rpm: float, prev_axial: float) -> np.ndarray:
+        """x = (x₁, x₂, x₃, y₁, y₂, y₃) from C_Σ x = F with the previous revolution's x₃ + y₃."""
+        m, r = self.c_sigma(x3, feed, rpm)
+        f0 = r * (float(self.chip_area(feed)) + self.cfg.depth * prev_axial)
+        rhs = f0 * np.concatenate([self.cfg.lam, self.cfg.lam])
+        return np.linalg.solve(m, rhs)
+
+
+@dataclass
+class Plan:
+    mode: str
+    x3: np.ndarray  # m, stations
+    feed: np.ndarray  # m/rev
+    rpm: np.ndarray
+    deflection: np.ndarray  # m, steady radial deflection at the stations
+    x1_offset: np.ndarray  # m: programmed radius offset (path mode), 0 in feed mode
+    constant_feed: float  # m/rev, the comparison program's feed
+    constant_rpm: float
+    diameter_error_max: float  # m, on the model
+    diameter_error_constant_feed: float
+    machining_time_s: float
+    machining_time_constant_feed_s: float
+    constant_feed_same_error: float  # m/rev: the constant feed that gives the same worst error
+    machining_time_same_error_s: float
+    family_rpm: np.ndarray
+    family_feed: np.ndarray  # (speeds, stations) m/rev, NaN outside the bounds
+    delta: float
+
+    def as_dict(self) -> dict:
+        mm = 1e3
+        same = self.diameter_error_max > 1e-9  # a constant feed can match a non-zero error only
+        return {
+            "mode": self.mode,
+            "diameter_error_max": self.diameter_error_max * mm,
+            "diameter_error_constant_feed": self.diameter_error_constant_feed * mm,
+            "diameter_variation_ratio": (self.diameter_error_max / self.diameter_error_constant_feed
+                                         if self.diameter_error_constant_feed else 0.0),
+            "machining_time_s": self.machining_time_s,
+            "machining_time_constant_feed_s": self.machining_time_constant_feed_s,
+            "constant_feed": self.constant_feed * mm,
+            "constant_rpm": self.constant_rpm,
+            "constant_feed_same_error": self.constant_feed_same_error * mm if same else None,
+            "machining_time_same_error_s": self.machining_time_same_error_s if same else None,
+            "deflection_target": self.delta * mm,
+            "profile": [{"x3": float(a * mm), "feed": float(s * mm), "spindle_rpm": float(n), "deflection": float(d * mm),
+                         "x1_offset": float(o * mm)}
+                        for a, s, n, d, o in zip(self.x3, self.feed, self.rpm, self.deflection, self.x1_offset)],
+        }
+
+
+def _time(x3, feed, rpm) -> float:
+    """Σ Δx3 / (S n) over the stations (the feed and speed of a station hold up to the next), s."""
+    dx = np.diff(x3)
+    return float(np.sum(dx / (feed[:-1] * rpm[:-1] / 60.0)))
+
+
+def _dp(cost, feeds, rpms, dx, feed_change, rpm_change):
+    """Dynamic programming over stations: states are (speed, feed) candidates; the least total
+    cost path whose feed and speed change by at most ``feed_change`` and ``rpm_change`` per
+    revolution between stations (the revolutions between two stations: Δx3 over the larger of
+    their feeds — the fewer). ``cost`` and ``feeds`` are (states, stations), ``rpms`` (states,);
+    cost = inf where a state is not allowed. Returns the state per station or None."""
+    nk, ns = cost.shape
+    acc = cost[:, 0].copy()
+    back = np.zeros((nk, ns), dtype=np.int64)
+    dn_ok = np.abs(rpms[:, None] - rpms[None, :])
+    for j in range(1, ns):
+        fj, fp = feeds[:, j][:, None], feeds[:, j - 1][None, :]
+        revs = dx[j - 1] / np.maximum(fj, fp)
+        ok = (np.abs(fj - fp) <= feed_change * revs + 1e-15) & (dn_ok <= rpm_change * revs + 1e-9)
+        tot = np.where(ok, acc[None, :], np.inf)
+        back[:, j] = np.argmin(tot, axis=1)
+        acc = tot[np.arange(nk), back[:, j]] + cost[:, j]
+    k = int(np.argmin(acc))
+    if not np.isfinite(acc[k]):
+        return None
+    path = [k]
+    for j in range(ns - 1, 0, -1):
+        k = int(back[k, j])
+        path.append(k)
+    return np.array(path[::-1])
+
+
+def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c: float = 300.0,
+         taylor_m: float = 0.25) -> Plan:
+    """Plan the trajectory (``mode`` "feed": S_p(x3) and n(x3); "path": X₁(x3) at constant feed)."""
+    if mode not in ("feed", "path"):
+        raise ValueError(f'mode must be "feed" or "path", got {mode!r}')
+    m = Model(cfg)
+    x3 = np.arange(cfg.start, cfg.end + 1e-12, cfg.step)
+    smin, smax = cfg.feed_bounds
+    rpms = np.linspace(cfg.rpm_bounds[0], cfg.rpm_bounds[1], max(cfg.speeds, 1))
+    # the deflection target: as large as the bounds allow at every station, at some speed
+    d_min = np.array([m.deflection(x3, smin, n) for n in rpms])  # (speeds, stations)
+    d_max = np.array([m.deflection(x3, smax, n) for n in rpms])
+    delta = float(np.max(d_min.min(axis=0)))  # the most compliant station at its best speed, feed at minimum
+    family = np.array([m.feed_for(x3, n, delta) for n in rpms])
+    # no root: δ is out of reach of any feed here (a stiff station), so the largest feed; below the
+    # smallest feed: this speed cannot keep δ here (NaN, not a candidate)
+    family = np.where(~np.isfinite(family) | (family > smax), smax, family)
+    family = np.where(family >= smin * (1 - 1e-9), family, np.nan)
+
+    # the comparison: constant feed and speed with the same mean feed and speed (set below)
+    if mode == "feed":
+        # states: per speed, the family's feed and a geometric grid of lower feeds; a state is
+        # allowed where its deflection stays inside [floor, δ] — floor: the least deflection the
+        # stiffest station reaches at the largest feed — so the rate bounds can be met near the
+        # ends without adding to the variation
+        floor = float(np.min(d_max.max(axis=0)))
+        grid = np.geomspace(smin, smax, 24)
+        st_rpm = np.repeat(rpms, len(grid) + 1)
+        st_feed = np.empty((len(st_rpm), len(x3)))
+        for k in range(len(rpms)):
+            st_feed[k * (len(grid) + 1)] = np.nan_to_num(family[k], nan=smin)
+            st_feed[k * (len(grid) + 1) + 1:(k + 1) * (len(grid) + 1)] = grid[:, None]
+        dfl_states = np.array([m.deflection(x3, st_feed[i], st_rpm[i]) for i in range(len(st_rpm))])
+        allowed = (dfl_states <= delta * (1 + 1e-9)) & (dfl_states >= floor * (1 - 1e-9))
+        allowed[::len(grid) + 1] &= np.isfinite(family)
+        dx = np.gradient(x3)
+        v = math.pi * cfg.diameter * st_rpm  # m/min
+        life = (taylor_c / v) ** (1 / taylor_m) * 60.0  # s: Taylor's tool life V T^m = C
+        t = dx[None, :] / (st_feed * st_rpm[:, None] / 60.0)
+        cost = np.where(allowed, t * (1 + wear_weight / life[:, None]), np.inf)
+        path = _dp(cost, st_feed, st_rpm, np.diff(x3), cfg.feed_change, cfg.rpm_change)
+        if path is None:
+            raise InputError("no trajectory satisfies the feed and speed bounds and their rates of change", cfg.source)
+        feed = st_feed[path, np.arange(len(x3))]
+        rpm = st_rpm[path]
+        # the deflection is held (nearly) constant: a constant X offset takes out its mid-range
+        d = m.deflection(x3, feed, rpm)
+        x1 = np.full_like(x3, -0.5 * (d.max() + d.min()))
+    else:
+        feed = np.full_like(x3, 0.5 * (smin + smax))
+        rpm = np.full_like(x3, rpms[len(rpms) // 2])
+        x1 = -m.deflection(x3, feed, rpm)  # pre-distortion: X₁ = R − δ
+    dfl = m.deflection(x3, feed, rpm)
+    s_bar, n_bar = float(np.mean(feed)), float(np.mean(rpm))
+    # diameter errors: 2·max|r − R| with, for the constant-feed program too, the best constant offset
+    err = 2 * float(np.max(np.abs(dfl + x1)))
+    err_const = float(np.ptp(m.deflection(x3, s_bar, n_bar)))
+    # the constant feed giving the same worst-case error (at the mean speed): bisection
+    lo, hi = 1e-6 * smin, smax
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if np.ptp(m.deflection(x3, mid, n_bar)) > err:
+            hi = mid
+        else:
+            lo = mid
+    s_same = lo
+    return Plan(mode, x3, feed, rpm, dfl, x1, s_bar, n_bar, err, err_const, _time(x3, feed, rpm),
+                _time(x3, np.full_like(x3, s_bar), np.full_like(x3, n_bar)), s_same,
+                _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)), rpms, family, delta)
+
+
+def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False) -> str:
+    """Lathe G-code for a plan: G18, G7/G8, G95 feed per revolution, G97 (or G96 constant surface
+    speed) with an S word per block where the speed changes, G1 blocks along the shaft with the
+    plan's F (feed mode) or pre-distorted X (path mode). Z0 is the tailstock centre, the chuck at
+    Z−L; the tool cuts towards the chuck."""
+    mm = 1e3
+    r_final = (cfg.diameter / 2 - cfg.depth) * mm
+    xw = (lambda r: 2 * r) if diameter_mode else (lambda r: r)
+    out = [f"(ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode)",
+           "G18 G21 G90 G40 G80", "G7" if diameter_mode else "G8", "G95"]
+    n0 = p.rpm[0]
+    if css:
+        v = math.pi * cfg.diameter * n0  # m/min
+        out.append(f"G96 D{max(p.rpm):.0f} S{v:.1f} M3")
+    else:
+        out.append(f"G97 S{n0:.0f} M3")
+    # approach clear of the shaft, plunge radially at the first station, then one G1 per station;
+    # a block runs at the lower feed and the higher speed of its two stations, so the deflection
+    # stays at or under the target along it (the compliance changes monotonically between stations)
+    out.append(f"G0 X{xw(cfg.diameter / 2 * mm + 2):.4f} Z{-p.x3[0] * mm:.4f}")
+    f0 = min(p.feed[0], p.feed[1]) if len(p.feed) > 1 else p.feed[0]
+    out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.4f} F{f0 * mm:.4f}")
+    last_s = n0
+    for j in range(1, len(p.x3)):
+        f = min(p.feed[j - 1], p.feed[j])
+        n = max(p.rpm[j - 1], p.rpm[j])
+        words = [f"G1 X{xw(r_final + p.x1_offset[j] * mm):.4f} Z{-p.x3[j] * mm:.4f} F{f * mm:.4f}"]
+        if not css and abs(n - last_s) >= 0.5:
+            words.append(f"S{n:.0f}")
+            last_s = n
+        out.append(" ".join(words))
+    out += [f"G0 X{xw(cfg.diameter / 2 * mm + 2):.4f}", "M5", "M2"]
+    return "\n".join(out) + "\n"
