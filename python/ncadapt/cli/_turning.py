@@ -36,7 +36,7 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
     cfg = tu.load(config)
     p = tu.plan(cfg, mode, wear_weight=wear_weight)
     d = p.as_dict()
-    click.echo(f"{mode}: diameter variation on the model {d['diameter_error_max'] * 1000:.1f} µm "
+    click.echo(f"{mode}: diameter error on the model {d['diameter_error_max'] * 1000:.1f} µm "
                f"(constant feed {d['constant_feed']:.3f} mm/rev at {d['constant_rpm']:.0f} rpm: "
                f"{d['diameter_error_constant_feed'] * 1000:.1f} µm, ratio {d['diameter_variation_ratio']:.3f}); "
                f"machining time {d['machining_time_s']:.1f} s"
@@ -79,6 +79,7 @@ def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
 
 def _report(path, cfg, p, css) -> None:
     import tempfile
+    from pathlib import Path
 
     import matplotlib
 
@@ -112,7 +113,7 @@ def _report(path, cfg, p, css) -> None:
                 q.feed = np.full_like(q.feed, plans["feed schedule"].constant_feed)
                 q.rpm = np.full_like(q.rpm, plans["feed schedule"].constant_rpm)
             f = f"{tmp}/p.ngc"
-            open(f, "w").write(tu.program(q, cfg, css=False))
+            Path(f).write_text(tu.program(q, cfg, css=False))
             prof = st.simulate(cfg, f)
             ax2.plot(prof.x3, (prof.diameter - prof.target) * 1000, label=name)
             rows.append((name, f"{prof.error_max * 1000:.1f}", f"{np.ptp(prof.diameter) * 1000:.1f}", f"{prof.time_s:.1f}"))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,7 +47,10 @@ class Profile:
 def read_program(path) -> list[tuple[float, float, float, float]]:
     """The cutting moves of a lathe program: (z_start, z_end, radius at the end, feed mm/rev,
     rpm) per G1 block, in mm; refuses what it cannot follow, naming the line."""
-    text = open(path, encoding="utf-8", errors="replace").read()
+    try:
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise InputError(f"cannot read: {e.strerror}", str(path)) from None
     diam, css, cap = True, False, math.inf
     motion, x, z, f, s = None, None, None, None, None
     moves = []
