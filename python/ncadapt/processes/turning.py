@@ -141,7 +141,7 @@ class Model:
 
     def __init__(self, cfg: Config, *, rho_scale: float = 1.0, stiffness_scale: float = 1.0):
         self.cfg = cfg
-        d, L, E = cfg.diameter, cfg.length, cfg.youngs
+        d, E = cfg.diameter, cfg.youngs
         self.EI = E * math.pi * d ** 4 / 64
         self.EA = E * math.pi * d ** 2 / 4
         self.s_chuck = np.linalg.inv(cfg.chuck * stiffness_scale)

@@ -60,7 +60,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["segments", "fit_segments", "Tilt", "tilt", "read_tracking", "read_thickness", "DepthField", "Sum",
-           "disturbance_correction", "feedback_correction", "play", "drive", "copy", "copying_error", "estimate_backlash",
+           "feedback_correction", "play", "drive", "copy", "copying_error", "estimate_backlash",
            "Backlash", "SelfTuning"]
 
 
@@ -110,12 +110,9 @@ class Tilt:
     error: np.ndarray
 
     @property
-    def thickness_error(self) -> np.ndarray:
-        return -np.abs(self.error)
-
-    @property
     def correction(self) -> np.ndarray:
-        """K_dist along the depth axis (into the material): −|E|."""
+        """K_dist along the depth axis (into the material): −|E|, which cancels the tilt's
+        web-thickness error −|E|."""
         return -np.abs(self.error)
 
     def as_dict(self) -> dict:
@@ -254,11 +251,6 @@ class Sum:
         for f in self.parts:
             out += f(points, axes)
         return out
-
-
-def disturbance_correction(t: Tilt) -> np.ndarray:
-    """K_dist at the pre-measured points: −|E| (the tool withdrawn by the tilt's thinning)."""
-    return t.correction
 
 
 def feedback_correction(thickness, target: float, allowance: float) -> np.ndarray:
