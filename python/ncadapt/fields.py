@@ -348,11 +348,11 @@ def from_values(x, y, dz, *, method: str = "linear", outside: str = "error", sou
     if linenos is None:
         linenos = np.arange(1, len(x) + 1)
     xs, ys = np.unique(x), np.unique(y)
-    pairs = len(np.unique(np.column_stack([x, y]), axis=0))
+    _, first, counts = np.unique(np.column_stack([x, y]), axis=0, return_index=True, return_counts=True)
+    pairs = len(counts)
     if len(xs) >= 2 and len(ys) >= 2 and pairs == len(x) == len(xs) * len(ys):
         return _grid_from_points(x, y, dz, linenos, "<map>" if source is None else source, method, outside)
     if pairs != len(x):
-        _, first, counts = np.unique(np.column_stack([x, y]), axis=0, return_index=True, return_counts=True)
         k = first[np.flatnonzero(counts > 1)[0]]
         m = next(m for m in range(len(x)) if m != k and x[m] == x[k] and y[m] == y[k])
         raise InputError(f"duplicate point x={x[k]:g} y={y[k]:g} (first on line {linenos[k]})",

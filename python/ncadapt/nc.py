@@ -419,12 +419,13 @@ class Program:
             first, end, xyz, rec = chunk
             say(f"correcting lines {first + 1:,}-{end:,} of {n_lines:,}")
             pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
-            lines = rec_line[np.frombuffer(rec, dtype="<u4")].astype(np.int64) + 1
+            recs = np.frombuffer(rec, dtype="<u4")
+            lines = rec_line[recs].astype(np.int64) + 1
             try:
                 if not len(pts):
                     disp = np.zeros((0, 3))
                 elif getattr(field, "uses_axes", False):
-                    disp = np.ascontiguousarray(field(pts, self._axes_at(pts, np.frombuffer(rec, dtype="<u4"))), dtype=np.float64)
+                    disp = np.ascontiguousarray(field(pts, self._axes_at(pts, recs)), dtype=np.float64)
                 else:
                     disp = np.ascontiguousarray(field(pts), dtype=np.float64)
             except _OutsideError as e:

@@ -78,6 +78,7 @@ def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
 
 
 def _report(path, cfg, p, css) -> None:
+    import copy
     import tempfile
     from pathlib import Path
 
@@ -105,10 +106,11 @@ def _report(path, cfg, p, css) -> None:
     fig2, ax2 = plt.subplots(figsize=(10, 3.8))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        plans = {"constant feed": None, "X pre-distortion": tu.plan(cfg, "path"), "feed schedule": tu.plan(cfg, "feed")}
+        plans = {"constant feed": None, "X pre-distortion": p if p.mode == "path" else tu.plan(cfg, "path"),
+                 "feed schedule": p if p.mode == "feed" else tu.plan(cfg, "feed")}
         for name, q in plans.items():
             if q is None:
-                q = tu.plan(cfg, "path")
+                q = copy.deepcopy(plans["X pre-distortion"])
                 q.x1_offset = np.zeros_like(q.x1_offset)  # the best constant offset is applied below
                 q.feed = np.full_like(q.feed, plans["feed schedule"].constant_feed)
                 q.rpm = np.full_like(q.rpm, plans["feed schedule"].constant_rpm)

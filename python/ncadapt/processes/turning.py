@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -87,7 +87,6 @@ class Config:
     step: float
     speeds: int
     source: str = ""
-    raw: dict = field(default_factory=dict)
 
 
 def load(path) -> Config:
@@ -125,7 +124,7 @@ def load(path) -> Config:
         rpm_bounds=tuple(float(x) for x in get("bounds", "spindle_rpm", 2)),
         feed_change=float(get("bounds", "feed_change")) * mm, rpm_change=float(get("bounds", "rpm_change")),
         start=float(get("plan", "start")) * mm, end=float(get("plan", "end")) * mm, step=float(get("plan", "step")) * mm,
-        speeds=int(get("plan", "speeds")), source=str(path), raw=d)
+        speeds=int(get("plan", "speeds")), source=str(path))
     if not 0 <= cfg.start < cfg.end <= cfg.length:
         raise InputError("[plan] needs 0 <= start < end <= shaft length", str(path))
     if not 0 < cfg.feed_bounds[0] < cfg.feed_bounds[1] or not 0 < cfg.rpm_bounds[0] <= cfg.rpm_bounds[1]:
@@ -342,14 +341,14 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
             raise InputError("no trajectory satisfies the feed and speed bounds and their rates of change", cfg.source)
         feed = st_feed[path, np.arange(len(x3))]
         rpm = st_rpm[path]
+        dfl = m.deflection(x3, feed, rpm)
         # the deflection is held (nearly) constant: a constant X offset takes out its mid-range
-        d = m.deflection(x3, feed, rpm)
-        x1 = np.full_like(x3, -0.5 * (d.max() + d.min()))
+        x1 = np.full_like(x3, -0.5 * (dfl.max() + dfl.min()))
     else:
         feed = np.full_like(x3, 0.5 * (smin + smax))
         rpm = np.full_like(x3, rpms[len(rpms) // 2])
-        x1 = -m.deflection(x3, feed, rpm)  # pre-distortion: X₁ = R − δ
-    dfl = m.deflection(x3, feed, rpm)
+        dfl = m.deflection(x3, feed, rpm)
+        x1 = -dfl  # pre-distortion: X₁ = R − δ
     s_bar, n_bar = float(np.mean(feed)), float(np.mean(rpm))
     # diameter errors: 2·max|r − R| with, for the constant-feed program too, the best constant offset
     err = 2 * float(np.max(np.abs(dfl + x1)))
