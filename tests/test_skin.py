@@ -64,6 +64,31 @@ def test_kalman_identifies_the_compliance_in_one_reading():
     assert a == pytest.approx(A_G / (1 - 0.48), rel=1e-9) and plant(a) == pytest.approx(0, abs=1e-12)
 
 
+def test_tracking_a_moving_root_the_secant_falls_back_to_the_mirror():
+    """Along the path the root moves: δ_i = a_g + r i − (1 − s) a_p. The mirror's error then
+    settles at r/(1 − s) (δ_i+1 = r + s δ_i); a secant through consecutive readings sees δ stop
+    changing while a_p moves, a slope of 0, and falls back to the mirror step on every reading —
+    both end at r/(1 − s). Ours, with the compliance itself ramping (κ_i = 0.2 + 0.001 i), tracks
+    it to round-off: a constant-velocity filter has no steady error on a ramp."""
+    s, r = 0.48, 0.002
+    for comp in (ps.MirrorCompensator(A_G), ps.SecantCompensator(A_G, noise=0.0)):
+        a, d = A_G, []
+        for i in range(60):
+            d.append(A_G + r * i - (1 - s) * a)
+            a = comp.step(d[-1])
+        assert d[-1] == pytest.approx(r / (1 - s), rel=1e-12)
+    assert comp.fallbacks >= comp.steps - 5
+    for comp, bound in ((ps.KalmanCompensator(A_G, noise=1e-4), 1e-12), (ps.MirrorCompensator(A_G), None)):
+        a = A_G
+        for i in range(200):
+            d = A_G - (1 - (0.2 + 0.001 * i)) * a
+            a = comp.step(d)
+        if bound:
+            assert abs(d) < bound
+        else:
+            assert d > 1e-3
+
+
 def test_csv_replay(tmp_path):
     """Recorded readings through the mirror: the offsets are the running sums of δ; a rejected
     (empty) reading leaves an empty row and no step."""
@@ -79,6 +104,21 @@ def test_csv_replay(tmp_path):
     src.write_text("thickness\n1.5\nabc\n")
     with pytest.raises(Exception, match="line 3|:3:"):
         lp.run(lp.CsvSource(src), lp.CsvSink(tmp_path / "x.csv"), ps.MirrorCompensator(A_G), 1.5)
+
+
+@pytest.mark.parametrize("a, table", [(200.0, 0.00560), (400.0, 0.00722)])
+def test_clamped_plate_matches_timoshenkos_table(a, table):
+    """Centre deflection of a clamped rectangular plate under a central load, w = α P b²/D:
+    Timoshenko and Woinowsky-Krieger, Table 35 (b/a = 1: 0.00560, 2: 0.00722; Roark's
+    0.0611 and 0.0787 for ν = 0.3 give the same). The 5 mm grid is within 1.5 %; Richardson
+    extrapolation from 10 and 5 mm (second-order scheme) within 0.5 %."""
+    coarse = sk.plate_coefficients(a, 200.0, 10.0)[2].max()
+    x, y, fine = sk.plate_coefficients(a, 200.0, 5.0)
+    assert fine.max() == pytest.approx(table, rel=0.015)
+    assert fine.max() + (fine.max() - coarse) / 3 == pytest.approx(table, rel=0.005)
+    assert fine[np.argmin(abs(x)), np.argmin(abs(y))] == fine.max()  # largest at the centre
+    assert not fine[0].any() and not fine[:, 0].any() and not fine[-1].any()  # clamped edges
+    np.testing.assert_allclose(fine, fine[::-1, ::-1], rtol=1e-9)  # symmetric
 
 
 def test_calibration_and_the_papers_protocol():
