@@ -145,10 +145,14 @@ def support_stiffness() -> float:
     return float(force(A_G) / F_CENTRE - 1 / c)
 
 
-def deflection(lx, ly, a_p, t_s=T_INITIAL, *, coefficient=None):
-    """f(a_p) at pocket-local (x, y), mm (``coefficient``: α(x, y) when already known)."""
-    a = alpha(lx, ly) if coefficient is None else coefficient
-    c = a * POCKET[1] ** 2 / rigidity(t_s - THETA * np.asarray(a_p, float))
+def deflection(lx, ly, a_p, t_s=T_INITIAL):
+    """f(a_p) at pocket-local (x, y), mm."""
+    return deflection_at(alpha(lx, ly), a_p, t_s)
+
+
+def deflection_at(coefficient, a_p, t_s=T_INITIAL):
+    """f(a_p) where the plate's coefficient α is ``coefficient``, mm."""
+    c = coefficient * POCKET[1] ** 2 / rigidity(t_s - THETA * np.asarray(a_p, float))
     return force(a_p) * c / (1 + support_stiffness() * c)
 
 
@@ -168,14 +172,18 @@ def thickness_variation(seed: int):
     return lambda x, y: sum(amp[i] * np.sin(k[i, 0] * x + k[i, 1] * y + ph[i]) for i in range(3))
 
 
+def _line_x():
+    return np.arange(-140.0, 140.0 + 1e-9, STEP)
+
+
 def line_samples() -> int:
     """Samples per line of the zig-zag."""
-    return len(np.arange(-140.0, 140.0 + 1e-9, STEP))
+    return len(_line_x())
 
 
 def toolpath(pocket: int):
     """Pocket-local (x, y) samples of the zig-zag, every STEP mm."""
-    xs = np.arange(-140.0, 140.0 + 1e-9, STEP)
+    xs = _line_x()
     lines = []
     for j, y in enumerate(np.arange(-87.5, 87.5 + 1e-9, 12.5)):
         x = xs if j % 2 == 0 else xs[::-1]
@@ -278,7 +286,7 @@ class Machine:
 
     def _cut(self, at: int, points) -> np.ndarray:
         """Thickness of ``points`` cut with the depth in force and the tool axis at sample ``at``."""
-        f = deflection(0, 0, self.a_cmd, self.t_s[at], coefficient=self.alpha[at])
+        f = deflection_at(self.alpha[at], self.a_cmd, self.t_s[at])
         return self.t_s[points] - (self.a_cmd - f)
 
     def advance(self):
