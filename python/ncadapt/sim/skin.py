@@ -134,14 +134,15 @@ def alpha(lx, ly):
     return _plate()(np.column_stack([lx.ravel(), ly.ravel()])).reshape(lx.shape)
 
 
-def plate_compliance(lx, ly, t):
-    return alpha(lx, ly) * POCKET[1] ** 2 / rigidity(t)
+def compliance(coefficient, t):
+    """Point compliance C = α b² / D(t) of the pocket floor, mm/N."""
+    return coefficient * POCKET[1] ** 2 / rigidity(t)
 
 
 @functools.lru_cache(maxsize=1)
 def support_stiffness() -> float:
     """k_sup so that f(a_g) = 0.24 mm at the pocket centre."""
-    c = plate_compliance(0.0, 0.0, T_INITIAL - THETA * A_G)
+    c = compliance(alpha(0.0, 0.0), T_INITIAL - THETA * A_G)
     return float(force(A_G) / F_CENTRE - 1 / c)
 
 
@@ -152,7 +153,7 @@ def deflection(lx, ly, a_p, t_s=T_INITIAL):
 
 def deflection_at(coefficient, a_p, t_s=T_INITIAL):
     """f(a_p) where the plate's coefficient α is ``coefficient``, mm."""
-    c = coefficient * POCKET[1] ** 2 / rigidity(t_s - THETA * np.asarray(a_p, float))
+    c = compliance(coefficient, t_s - THETA * np.asarray(a_p, float))
     return force(a_p) * c / (1 + support_stiffness() * c)
 
 
@@ -176,6 +177,11 @@ def _line_x():
     return np.arange(-140.0, 140.0 + 1e-9, STEP)
 
 
+def _line_y():
+    """Pocket-local y of the zig-zag's lines."""
+    return np.arange(-87.5, 87.5 + 1e-9, 12.5)
+
+
 def line_samples() -> int:
     """Samples per line of the zig-zag."""
     return len(_line_x())
@@ -185,7 +191,7 @@ def toolpath(pocket: int):
     """Pocket-local (x, y) samples of the zig-zag, every STEP mm."""
     xs = _line_x()
     lines = []
-    for j, y in enumerate(np.arange(-87.5, 87.5 + 1e-9, 12.5)):
+    for j, y in enumerate(_line_y()):
         x = xs if j % 2 == 0 else xs[::-1]
         lines.append(np.column_stack([x, np.full_like(x, y)]))
     return np.concatenate(lines)
@@ -360,7 +366,7 @@ def finishing_program(pocket: int = 0, depth: float = A_G) -> str:
     out = [f"(ncadapt skin testbed: finish pocket {pocket + 1} to Z-{depth:g}, zig-zag along X)",
            "G21 G90 G17 G94", f"S{rpm:.0f} M3", "G0 Z5.000"]
     xs = (-140.0, 140.0)
-    for j, y in enumerate(np.arange(-87.5, 87.5 + 1e-9, 12.5)):
+    for j, y in enumerate(_line_y()):
         x0, x1 = xs if j % 2 == 0 else xs[::-1]
         if j == 0:
             out += [f"G0 X{cx + x0:.3f} Y{cy + y:.3f}", f"G1 Z{-depth:.3f} F300"]
