@@ -51,14 +51,12 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
 
 
 def _report(path, run) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
 
-    from ..report import figure_png, page, table, write
+    from ..report import figure_png, page, pyplot, table, write
     from ..sim import skin as sk
+
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, len(run.path_errors), figsize=(11, 3.8), squeeze=False)
     for k, (ax, err) in enumerate(zip(axes[0], run.path_errors)):

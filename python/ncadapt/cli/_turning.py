@@ -82,15 +82,13 @@ def _report(path, cfg, p, css) -> None:
     import tempfile
     from pathlib import Path
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
 
     from ..processes import turning as tu
-    from ..report import figure_png, page, table, write
+    from ..report import figure_png, page, pyplot, table, write
     from ..sim import turning as st
+
+    plt = pyplot()
 
     fam = p.family_feed * 1e3
     fig = plt.figure(figsize=(10, 5.5))

@@ -166,15 +166,13 @@ def simulate(strategy, seed, json_path, report_path):
 
 
 def _report(path, r) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
 
     from ..processes import waffle as pw
-    from ..report import figure_png, page, table, write
+    from ..report import figure_png, page, pyplot, table, write
     from ..sim import waffle as sw
+
+    plt = pyplot()
 
     fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True)
     lim = 1000 * float(np.nanmax(np.abs(r.before)))

@@ -23,6 +23,16 @@ figure{margin:1rem 0} figcaption{color:#555;font-size:.9rem} img{max-width:100%}
 """
 
 
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (reports are drawn without a display)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def figure_png(fig) -> str:
     """A matplotlib figure as an <img> tag with embedded PNG."""
     import matplotlib.pyplot as plt

@@ -5,14 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import figure_png, page, table
+from . import figure_png, page, pyplot, table
 
 
 def _maps(xy, panels, title, names=("x", "y")):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     vmax = max(float(np.abs(v).max()) for _, v in panels) * 1000
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
