@@ -98,3 +98,66 @@ def test_plate_example(tmp_path):
     r = run("correct", ex / "plate.ngc", "--field", ex / "plate_probe.csv", "-o", tmp_path / "c.ngc")
     assert r.exit_code == 0, r.output
     assert (tmp_path / "c.ngc").read_text() != (ex / "plate.ngc").read_text()
+
+
+_EX = {"nc": ("plate.ngc", "plate_probe.csv"), "skin": ("pocket1_finish.ngc", "pocket1_thickness.csv"),
+       "waffle": ("cell_r1c1.ngc", "tracking.csv", "thickness_r1c1.csv", "backlash_signals.csv"),
+       "turning": ("shaft_d20_l430.toml",)}
+
+# every command with an input file: (arguments, the input given again as an output, what the message calls it)
+_GUARDED = [
+    (("correct", "plate.ngc", "--shift", "0,0,0.01", "-o", "o.ngc", "--json"), "plate_probe.csv", None),
+    (("correct", "plate.ngc", "--field", "plate_probe.csv", "-o", "o.ngc", "--json"), "plate_probe.csv", "field file"),
+    (("inspect", "plate.ngc", "--json"), "plate.ngc", "program"),
+    (("analyze", "plate_probe.csv", "--report"), "plate_probe.csv", "measurements"),
+    (("compensate", "plate_probe.csv", "--program", "plate.ngc", "-o", "o.ngc", "--points-out"), "plate.ngc",
+     "input program"),
+    (("skin", "correct", "pocket1_finish.ngc", "--thickness", "pocket1_thickness.csv", "--target", "1.5", "-o", "o.ngc",
+      "--json"), "pocket1_thickness.csv", "thickness map"),
+    (("waffle", "tilt", "--tracking", "tracking.csv", "--tool-radius", "5", "--diameter", "2000", "--json"),
+     "tracking.csv", "tracking log"),
+    (("waffle", "correct", "cell_r1c1.ngc", "--tracking", "tracking.csv", "--tool-radius", "5", "--diameter", "2000",
+      "--thickness", "thickness_r1c1.csv", "--target", "2", "-o", "o.ngc", "--json"), "thickness_r1c1.csv", "thickness map"),
+    (("waffle", "backlash", "--signals", "backlash_signals.csv", "--json"), "backlash_signals.csv", "signals"),
+    (("turning", "plan", "shaft_d20_l430.toml", "--report"), "shaft_d20_l430.toml", "configuration"),
+    (("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--measured", "plate_probe.csv", "--json"),
+     "plate_probe.csv", "probe file"),
+    (("turning", "simulate", "shaft_d20_l430.toml", "plate.ngc", "--json"), "plate.ngc", "program"),
+]
+
+
+@pytest.fixture
+def inputs(tmp_path, examples):
+    for sub, names in _EX.items():
+        for name in names:
+            shutil.copy(examples / sub / name, tmp_path / name)
+    return tmp_path
+
+
+@pytest.mark.parametrize("args,victim,what", _GUARDED, ids=lambda v: "-".join(v[:2]) if isinstance(v, tuple) else None)
+def test_no_output_replaces_an_input(inputs, monkeypatch, args, victim, what):
+    monkeypatch.chdir(inputs)
+    before = {p.name: p.read_bytes() for p in inputs.iterdir()}
+    r = run(*args, victim)
+    if what is None:  # the field file is not an input of a --shift correction: the JSON may go there
+        assert r.exit_code == 0, r.output
+        assert json.loads((inputs / victim).read_text())["lines_in"] == 34
+        return
+    assert r.exit_code == 2, r.output
+    assert r.stderr.startswith(f"{victim}: error: refusing to overwrite the {what} with "), r.stderr
+    assert {p.name: p.read_bytes() for p in inputs.iterdir()} == before  # nothing written, nothing changed
+
+
+def test_a_hard_link_to_an_input_is_the_input(inputs):
+    (inputs / "link.csv").hardlink_to(inputs / "tracking.csv")
+    r = run("waffle", "tilt", "--tracking", inputs / "tracking.csv", "--tool-radius", 5, "--diameter", 2000,
+            "--json", inputs / "link.csv")
+    assert r.exit_code == 2 and "refusing to overwrite the tracking log with --json" in r.stderr
+    assert (inputs / "link.csv").read_bytes() == (inputs / "tracking.csv").read_bytes() == \
+        (Path(__file__).parent.parent / "examples" / "waffle" / "tracking.csv").read_bytes()
+
+
+def test_two_outputs_naming_one_file_is_a_usage_error(tmp_path):
+    r = run("skin", "simulate", "--protocol", "--method", "mirror", "--json", tmp_path / "r", "--report", tmp_path / "r")
+    assert r.exit_code == 2 and "--json and --report name the same file" in r.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
-from ._common import handle_errors, progress, write_json
+from ._common import check_outputs, handle_errors, progress, write_json
 
 _CLASS = {"type": str, "show_default": True}
 
@@ -50,6 +50,7 @@ def plan_cmd(diameter, final, prefinish, t0, allowance, delta_a, delta_b, measur
         raise click.UsageError("give either --measured or --delta-a/--delta-b, not both")
     if measured is None and (delta_a is None or delta_b is None):
         raise click.UsageError("give --delta-a and --delta-b, or --measured PROBE.csv")
+    check_outputs({"probe file": measured}, {"--json": json_path})
     if measured is not None:
         meas = pb.read_probe(measured, entry)
         p = pb.plan_from_measurement(diameter, meas, final=final, prefinish=prefinish, t0=t0, allowance=allowance,
@@ -95,6 +96,7 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
     """The correction for the next pass and its tool-offset block."""
     from ..processes import bore as pb
 
+    check_outputs({"plan": plan_path, "probe file": measured}, {"--json": json_path})
     try:
         data = json.loads(plan_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:

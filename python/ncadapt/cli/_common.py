@@ -5,7 +5,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
+import os
 import sys
+from pathlib import Path
 
 import click
 from rich.console import Console
@@ -72,6 +74,31 @@ def comma_floats(value: str, n: int, what: str) -> list[float]:
     if len(parts) != n:
         raise click.BadParameter(f"expected {what}, got {value!r}")
     return parts
+
+
+def _same(a: Path, b: Path) -> bool:
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)  # hard links, and paths the resolution cannot join
+    except OSError:  # one of them does not exist yet
+        return False
+
+
+def check_outputs(inputs: dict, outputs: dict) -> None:
+    """Refuse, before any work, an output that would replace an input (an input error naming the
+    output) or two outputs naming one file (a usage error). Both map a name shown to the user, such
+    as ``"thickness map"`` or ``"--json"``, to a path or None (not given)."""
+    outs = [(name, Path(p)) for name, p in outputs.items() if p is not None]
+    ins = [(name, Path(p)) for name, p in inputs.items() if p is not None]
+    for name, out in outs:
+        for what, inp in ins:
+            if _same(out, inp):
+                raise InputError(f"refusing to overwrite the {what} with {name}; choose another output", str(out))
+    for i, (a, pa) in enumerate(outs):
+        for b, pb in outs[i + 1:]:
+            if _same(pa, pb):
+                raise click.UsageError(f"{a} and {b} name the same file")
 
 
 def write_json(path, payload: dict) -> None:

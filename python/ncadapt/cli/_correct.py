@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import click
@@ -10,16 +9,11 @@ import click
 from .. import constants
 from .. import fields as _fields
 from .. import nc
-from ..errors import InputError
-from ._common import comma_floats, echo_err, handle_errors, progress, write_json
+from ._common import check_outputs, comma_floats, echo_err, handle_errors, progress, write_json
 
 
 def _shift(ctx, param, value):
     return None if value is None else comma_floats(value, 3, "DX,DY,DZ (three numbers in mm)")
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    return a.exists() and b.exists() and os.path.samefile(a, b)
 
 
 @click.command()
@@ -47,11 +41,7 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
     """
     if (field_path is None) == (shift is None):
         raise click.UsageError("give exactly one of --field FILE or --shift DX,DY,DZ")
-    for other, what in ((program, "input program"), (field_path, "field file")):
-        if other is not None and (output.resolve() == other.resolve() or _same_file(output, other)):
-            raise InputError(f"refusing to overwrite the {what}; choose another output", str(output))
-    if json_path is not None and output.resolve() == json_path.resolve():
-        raise click.UsageError("--json and -o name the same file")
+    check_outputs({"input program": program, "field file": field_path}, {"-o": output, "--json": json_path})
     with progress() as say:
         say(f"reading {program}")
         prog = nc.read(program)

@@ -7,8 +7,7 @@ from pathlib import Path
 import click
 
 from .. import constants
-from ..errors import InputError
-from ._common import comma_floats, echo_err, handle_errors, progress, write_json
+from ._common import check_outputs, comma_floats, echo_err, handle_errors, progress, write_json
 
 
 def _moran_options(f):
@@ -56,6 +55,7 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     from .. import measure
     from ..processes import freeform as pf
 
+    check_outputs({"measurements": measurements}, {"--json": json_path, "--report": report_path})
     meas = measure.read(measurements, probe_radius=probe_radius)
     frame = pf.frame_of(meas)
     a = pf.analyze(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
@@ -113,9 +113,9 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
 
     if (program is None) != (output is None):
         raise click.UsageError("--program and -o go together")
-    for out in (output, surface_path, points_out, json_path, report_path):
-        if out is not None and (out.resolve() == measurements.resolve() or (program and out.resolve() == program.resolve())):
-            raise InputError("refusing to overwrite an input; choose another output", str(out))
+    check_outputs({"measurements": measurements, "input program": program},
+                  {"-o": output, "--surface": surface_path, "--points-out": points_out, "--json": json_path,
+                   "--report": report_path})
     kw = _moran_kw(weights, power, threshold, neighbors, alpha)
     with progress() as say:
         say(f"reading {measurements}")

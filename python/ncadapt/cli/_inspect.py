@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from .. import nc
-from ._common import handle_errors, write_json
+from ._common import check_outputs, handle_errors, write_json
 
 
 @click.command()
@@ -16,6 +16,7 @@ from ._common import handle_errors, write_json
 @handle_errors
 def inspect(program, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
+    check_outputs({"program": program}, {"--json": json_path})
     info = nc.read(program).inspect()
     m = info["motions"]
     click.echo(f"{program}: {info['lines']:,} lines, units {info['units']}")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import handle_errors, write_json
+from ._common import check_outputs, handle_errors, write_json
 
 
 @click.group()
@@ -31,6 +31,7 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
     """Finish the testbed's two pockets with a compensator; errors at the 13 checkpoints."""
     from ..sim import skin as sk
 
+    check_outputs({}, {"--json": json_path, "--report": report_path})
     if protocol:
         if method in ("none",):
             raise click.UsageError("the protocol compares compensators; choose one")
@@ -112,13 +113,10 @@ def correct(program, map_path, target, allowance, into, output, limit, outside, 
     import numpy as np
 
     from .. import nc
-    from ..errors import InputError
     from ..processes import skin as ps
     from ._common import echo_err, progress
 
-    for other, what in ((program, "input program"), (map_path, "thickness map")):
-        if output.resolve() == other.resolve():
-            raise InputError(f"refusing to overwrite the {what}; choose another output", str(output))
+    check_outputs({"input program": program, "thickness map": map_path}, {"-o": output, "--json": json_path})
     with progress() as say:
         say(f"reading {map_path}")
         field, excess = ps.thickness_field(map_path, target, allowance=allowance, into=into, outside=outside)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import handle_errors, write_json
+from ._common import check_outputs, handle_errors, write_json
 
 
 @click.group()
@@ -33,6 +33,7 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
     from ..processes import turning as tu
     from .._io import atomic_write
 
+    check_outputs({"configuration": config}, {"-o": output, "--json": json_path, "--report": report_path})
     cfg = tu.load(config)
     p = tu.plan(cfg, mode, wear_weight=wear_weight)
     d = p.as_dict()
@@ -43,8 +44,6 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
                + (f", a constant feed with the same worst error {d['constant_feed_same_error']:.4f} mm/rev takes "
                   f"{d['machining_time_same_error_s']:.1f} s" if d["machining_time_same_error_s"] is not None else ""))
     if output:
-        if output.resolve() == config.resolve():
-            raise click.UsageError("-o names the configuration file")
         atomic_write(output, tu.program(p, cfg, diameter_mode=not radius_mode, css=css).encode())
         click.echo(f"wrote {output}", err=True)
     if json_path:
@@ -68,6 +67,7 @@ def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
     from ..processes import turning as tu
     from ..sim import turning as st
 
+    check_outputs({"configuration": config, "program": program}, {"--json": json_path})
     prof = st.simulate(tu.load(config), program, rho_sigma=rho_sigma, stiffness_sigma=stiffness_sigma, seed=seed)
     d = prof.as_dict()
     click.echo(f"{program}: diameter {d['diameter_min']:.4f} .. {d['diameter_max']:.4f} mm (target "

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import echo_err, handle_errors, progress, write_json
+from ._common import check_outputs, echo_err, handle_errors, progress, write_json
 
 _POS = dict(type=click.FloatRange(min=0, min_open=True), required=True)
 
@@ -31,6 +31,7 @@ def tilt(log, tool_radius, diameter, segment, json_path):
     segment, signed (the web is left thinner by |E|)."""
     from ..processes import waffle as pw
 
+    check_outputs({"tracking log": log}, {"--json": json_path})
     b, z, v = pw.read_tracking(log)
     t = pw.tilt(b, z, v, tool_radius=tool_radius, diameter=diameter, segment=segment)
     d = t.as_dict()
@@ -75,16 +76,14 @@ def correct(program, log, tool_radius, diameter, segment, map_path, target, allo
     import numpy as np
 
     from .. import nc
-    from ..errors import InputError
     from ..processes import waffle as pw
 
     if map_path is not None and target is None:
         raise click.UsageError("--thickness needs --target")
     if map_path is None and (target is not None or allowance):
         raise click.UsageError("--target and --allowance go with --thickness")
-    for other, what in ((program, "input program"), (log, "tracking log"), (map_path, "thickness map")):
-        if other is not None and output.resolve() == other.resolve():
-            raise InputError(f"refusing to overwrite the {what}; choose another output", str(output))
+    check_outputs({"input program": program, "tracking log": log, "thickness map": map_path},
+                  {"-o": output, "--json": json_path})
     axes = dict(diameter=diameter, depth_axis=depth_axis, axial_axis=axial_axis, rotary_axis=rotary_axis, outside=outside)
     sign = 1.0 if into == "+" else -1.0
     with progress() as say:
@@ -134,6 +133,7 @@ def backlash(path, dt, json_path):
     from .. import fields
     from ..processes import waffle as pw
 
+    check_outputs({"signals": path}, {"--json": json_path})
     c, _ = fields.read_columns(path, ("v_ideal", "v_measured"))
     r = pw.estimate_backlash(c["v_ideal"], c["v_measured"], dt)
     click.echo(f"gap g = {r.gap * 1000:.2f} µm, τ = {r.tau:.4g} s, offset {r.offset * 1000:+.2f} µm; "
@@ -154,6 +154,7 @@ def simulate(strategy, seed, json_path, report_path):
     """Mill the virtual shell's waffle grid with a correction strategy."""
     from ..sim import waffle as sw
 
+    check_outputs({}, {"--json": json_path, "--report": report_path})
     r = sw.simulate(strategy, seed)
     d = r.as_dict()
     click.echo(f"{strategy}: web thickness error RMS {d['rms_error'] * 1000:.1f} µm (uncorrected "
