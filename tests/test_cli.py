@@ -161,3 +161,26 @@ def test_two_outputs_naming_one_file_is_a_usage_error(tmp_path):
     r = run("skin", "simulate", "--protocol", "--method", "mirror", "--json", tmp_path / "r", "--report", tmp_path / "r")
     assert r.exit_code == 2 and "--json and --report name the same file" in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+# every kind of text input, with one byte that is not UTF-8 (Latin-1 'é') at a known line and column
+_NOT_UTF8 = [
+    ("map.csv", b"x,y,thickness\n0,0,1.6\n10,0,1.5\n0,10,1.\xe95\n",
+     ("skin", "correct", "pocket1_finish.ngc", "--thickness", "map.csv", "--target", "1.5", "-o", "o.ngc"), (4, 8)),
+    ("m.csv", b"x,y,z,i,j,k,dev\n0,0,0,0,0,1,0.01 \xe9\n", ("analyze", "m.csv"), (2, 18)),
+    ("t.csv", b"B,Z,V\n\xe90,0,1\n", ("waffle", "tilt", "--tracking", "t.csv", "--tool-radius", "5", "--diameter", "2000"),
+     (2, 1)),
+    ("c.toml", b"# r\xe9glage\n", ("turning", "plan", "c.toml"), (1, 4)),
+    ("p.csv", b"plane,x,y,z\nA,1,0,5\xe9\n", ("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
+                                         "--measured", "p.csv"), (2, 8)),
+]
+
+
+@pytest.mark.parametrize("name,data,args,where", _NOT_UTF8, ids=[c[0] for c in _NOT_UTF8])
+def test_an_input_that_is_not_utf8_is_located(inputs, monkeypatch, name, data, args, where):
+    monkeypatch.chdir(inputs)
+    (inputs / name).write_bytes(data)
+    r = run(*args)
+    assert r.exit_code == 2, r.output
+    assert r.stderr == f"{name}:{where[0]}:{where[1]}: error: not UTF-8 text: byte 0xe9 (invalid continuation byte); " \
+                       "save the file as UTF-8\n"

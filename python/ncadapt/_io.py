@@ -1,4 +1,5 @@
-"""Writing files safely: to a temporary file beside the target, then an atomic rename."""
+"""Reading text inputs with located errors; writing files safely: to a temporary file beside the
+target, then an atomic rename."""
 
 from __future__ import annotations
 
@@ -6,6 +7,8 @@ import contextlib
 import os
 import tempfile
 from pathlib import Path
+
+from .errors import InputError
 
 
 @contextlib.contextmanager
@@ -41,3 +44,22 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     with atomic_open(path) as f:
         f.write(data)
     return Path(path)
+
+
+def read_text(path: str | os.PathLike) -> str:
+    """The text of an input file (UTF-8, with or without a byte-order mark). A file that cannot be
+    read, or is not UTF-8 text, is an :class:`InputError` naming the file (and the line and column of
+    the first byte that is not UTF-8)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read: {e.strerror}", str(p)) from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        bad = data[e.start:e.start + 1].hex()
+        raise InputError(f"not UTF-8 text: byte 0x{bad} ({e.reason}); save the file as UTF-8", str(p), line, col) \
+            from None

@@ -24,11 +24,13 @@ Examples
 from __future__ import annotations
 
 import csv
+import io
 import math
 from pathlib import Path
 
 import numpy as np
 
+from ._io import read_text
 from .errors import InputError, RefusedError
 
 __all__ = [
@@ -270,11 +272,7 @@ class ScatteredField(Field):
 # --------------------------------------------------------------------------------- readers
 def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Read a CSV with a header; return the required columns as floats and their line numbers."""
-    try:
-        f = open(path, newline="", encoding="utf-8-sig")
-    except OSError as e:
-        raise InputError(f"cannot read field: {e.strerror}", str(path)) from None
-    with f:
+    with io.StringIO(read_text(path), newline="") as f:
         rows = csv.reader(f)
         header = None
         cols: dict[str, list[float]] = {}
@@ -390,10 +388,7 @@ def read_scattered_csv(path, outside: str = "error") -> ScatteredField:
 
 def _numbers(path: Path):
     """Yield (line number, floats) for each non-blank line of a whitespace-separated number file."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise InputError(f"cannot read field: {e.strerror}", str(path)) from None
+    text = read_text(path)
     for n, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s:
@@ -477,11 +472,8 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
     if ext == ".probe":
         return read_bcnc_probe(path, method, outside)
     if ext == ".csv":
-        try:
-            with open(path, encoding="utf-8-sig") as f:
-                head = next((ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")), "")
-        except OSError as e:
-            raise InputError(f"cannot read field: {e.strerror}", str(path)) from None
+        lines = read_text(path).splitlines()
+        head = next((ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")), "")
         names = [c.strip().lower() for c in head.split(",")]
         if "dx" in names:
             return read_scattered_csv(path, outside)

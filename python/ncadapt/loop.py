@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import csv
+import io
 import math
 import time
 
@@ -72,15 +73,16 @@ class CsvSource:
         self.path = str(path)
 
     def __iter__(self):
+        from ._io import read_text
         from .errors import InputError
 
-        with open(self.path, newline="", encoding="utf-8-sig") as f:
+        with io.StringIO(read_text(self.path), newline="") as f:
             r = csv.reader(f)
             head = [h.strip().lower() for h in next(r, [])]
             if "thickness" not in head:
                 raise InputError("missing column 'thickness'", self.path, 1)
             k = head.index("thickness")
-            for ln, row in enumerate(r, start=2):
+            for row in r:
                 v = row[k].strip() if k < len(row) else ""
                 if not v:
                     yield None
@@ -88,7 +90,7 @@ class CsvSource:
                 try:
                     yield float(v)
                 except ValueError:
-                    raise InputError(f"thickness is not a number: {v!r}", self.path, ln) from None
+                    raise InputError(f"thickness is not a number: {v!r}", self.path, r.line_num) from None
 
 
 class CsvSink:

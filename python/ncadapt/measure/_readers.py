@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import read_text
 from ..errors import InputError
 from ._core import Measurements, from_arrays
 
@@ -19,10 +20,7 @@ MEASURED = ("mx", "my", "mz")
 
 def _text(path) -> tuple[str, str]:
     p = Path(path)
-    try:
-        return p.read_text(encoding="utf-8-sig"), str(p)
-    except UnicodeDecodeError as e:
-        raise InputError(f"not a text file ({e.reason} at byte {e.start})", str(p)) from None
+    return read_text(p), str(p)
 
 
 def _number(s: str, src: str, line: int, what: str) -> float:

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import iso286
+from .._io import read_text
 from ..errors import InputError
 
 APPLICABILITY_SHARE = 0.25  # δ_A − δ_B ≤ 0.25·ΔD(pre-finish)
@@ -132,13 +133,10 @@ def read_probe(path, entry: str = "top") -> BoreMeasurement:
     Face A is the plane nearest the tool's entry: the highest z for ``entry="top"`` (a vertical
     spindle boring downwards), the lowest for ``"bottom"``."""
     import csv
+    import io
 
     path = str(path)
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            rows = list(csv.reader(f))
-    except OSError as err:
-        raise InputError(f"cannot read: {err.strerror}", path) from None
+    rows = list(csv.reader(io.StringIO(read_text(path), newline="")))
     if not rows:
         raise InputError("empty file", path, 1)
     head = [h.strip().lower() for h in rows[0]]

@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import read_text
 from ..errors import InputError
 
 KGF = 9.80665  # N
@@ -93,9 +94,7 @@ def load(path) -> Config:
     """Read a turning configuration (TOML, the paper's units) and convert it to SI."""
     path = Path(path)
     try:
-        d = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise InputError(f"cannot read: {e.strerror}", str(path)) from None
+        d = tomllib.loads(read_text(path))
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"not valid TOML: {e}", str(path)) from None
 
