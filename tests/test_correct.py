@@ -28,6 +28,15 @@ def test_changed_block_keeps_words_order_and_comment():
     assert lines[-2:] == ["G0 Z5", "M30"]
 
 
+def test_comments_in_an_8bit_encoding_survive_byte_for_byte(tmp_path):
+    # a Latin-1 shop program: 'é' and 'µ' are single bytes that are not UTF-8
+    src = b"G21 G90\nG0 X0 Y0 Z5 (caf\xe9)\nG1 Z-1 F100 (prof \xb5m)\nG1 X10\nM30\n"
+    (tmp_path / "p.ngc").write_bytes(src)
+    out = nc.read(tmp_path / "p.ngc").correct(fields.Shift((0, 0, 0.01)))
+    out.write(tmp_path / "o.ngc")
+    assert (tmp_path / "o.ngc").read_bytes() == src.replace(b"Z-1 F100", b"Z-0.99 F100")
+
+
 def test_limit_refuses_and_lists_worst_points():
     with pytest.raises(RefusedError, match="exceeds the limit 0.5 mm") as e:
         nc.parse(PART).correct(lambda p: np.tile([0, 0, 0.0], (len(p), 1)) + [[0, 0, 0.6]] * (p[:, [0]] > 15))
