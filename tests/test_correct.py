@@ -37,6 +37,16 @@ def test_comments_in_an_8bit_encoding_survive_byte_for_byte(tmp_path):
     assert (tmp_path / "o.ngc").read_bytes() == src.replace(b"Z-1 F100", b"Z-0.99 F100")
 
 
+def test_a_cutting_move_after_a_return_to_reference_is_reported_not_guessed():
+    # Z is unknown after G28 until a move sets it: the feed move on line 3 cannot be corrected
+    prog = nc.parse("G21 G90 G0 X1 Y2 Z3\nG91 G28 Z0\nG90 G1 X5 F100\nG0 Z5\nG1 Z-1\nX10\nM30\n")
+    out = prog.correct(fields.Shift((0, 0, 0.02)))
+    assert out.text.splitlines()[:4] == ["G21 G90 G0 X1 Y2 Z3", "G91 G28 Z0", "G90 G1 X5 F100", "G0 Z5"]
+    assert out.text.splitlines()[4:6] == ["G1 Z-0.98", "X10"]
+    (w,) = out.correction.warnings
+    assert w.startswith("1 cutting move(s) not corrected because the position is unknown (first at line 3: Z not set")
+
+
 def test_limit_refuses_and_lists_worst_points():
     with pytest.raises(RefusedError, match="exceeds the limit 0.5 mm") as e:
         nc.parse(PART).correct(lambda p: np.tile([0, 0, 0.0], (len(p), 1)) + [[0, 0, 0.6]] * (p[:, [0]] > 15))

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import needs_rs274
 from helpers import match_path
-from ncadapt import fields, nc
+from ncadapt import InputError, fields, nc
 from rs274 import canonical
 
 pytestmark = [needs_rs274, pytest.mark.rs274]
@@ -120,6 +120,22 @@ G1 X-0.7 Y-0.2
 G90 G0 Z0.2
 M2
 """,
+    "fanuc_post_g28": """%
+O1001
+G21 G90 G17 G54
+G91 G28 Z0.
+G90 G0 X0. Y0.
+G43 Z15. H1
+G0 Z2.
+G1 Z-1. F300.
+X20. Y5.
+G2 X30. Y15. R10.
+G0 Z15.
+G91 G28 Z0.
+G28 X0. Y0.
+M30
+%
+""",
     "compact_fanuc": """%
 O0042
 N1G21G90G54G0X0.Y0.Z2.
@@ -163,3 +179,45 @@ def test_shift_keeps_arcs_exact(tmp_path):
         i, j = plane_shift[ca[3]]
         assert ca[0] == cb[0] and ca[3] == cb[3]
         assert abs(cb[1] - ca[1] - shift[i]) <= tol and abs(cb[2] - ca[2] - shift[j]) <= tol
+
+
+# G28/G30 as shop programs write them: (program, axes unknown after the return)
+RETURNS = {
+    "g91_g28_z0": ("G21 G90 G0 X1 Y2 Z3\nG91 G28 Z0\nG90 G0 X5\nG1 Z-1 F100\nX8\nM2\n", "Z"),
+    "g28_all": ("G21 G0 X1 Y2 Z3\nG28\nG0 X5 Y1 Z2\nM2\n", "XYZABCUVW"),
+    "g28_xy_via": ("G21 G0 X1 Y2 Z3\nG28 X4 Y5\nG0 X5 Y1\nM2\n", "XY"),
+    "g20_g28": ("G21 G0 X1 Y2 Z3\nG20 G28 Z0.1\nG0 X0.2 Z0.3\nM2\n", "Z"),
+    "g55_g30": ("G21 G55 G0 X1 Y2 Z3\nG30 Z7\nG0 X5 Z1\nM2\n", "Z"),
+    "g91_g30_x": ("G21 G0 X1 Y2 Z3\nG91 G30 X1\nG90 G0 X2\nM2\n", "X"),
+    "g28_a": ("G21 G0 X1 Y2 Z3 A0\nG28 A10\nG0 A5\nM2\n", "A"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RETURNS))
+def test_return_to_reference_is_traced_as_rs274(tmp_path, name):
+    """G28/G30: the rapid to the intermediate point and the return make two moves, as rs274 prints;
+    the intermediate point equals rs274's, the axes that return are unknown, the others are kept."""
+    src, unknown = RETURNS[name]
+    p = tmp_path / f"{name}.ngc"
+    p.write_text(src)
+    prog = nc.read(p)
+    assert not prog.unsupported
+    assert [n["line"] for n in prog.inspect()["notes"]] == [2]
+    assert _compare_endpoints(prog, p) >= 3
+    b = prog.blocks
+    home = np.flatnonzero(b.line == 2)
+    assert len(home) == 2 and np.isfinite(b.end[home[0], :3]).all()
+    via, after = b.end[home[0]], b.end[home[1]]
+    for k, axis in enumerate("XYZABCUVW"):
+        if axis in unknown:
+            assert np.isnan(after[k]), axis
+        else:  # kept as it was at the intermediate point (NaN for an axis the program never set)
+            assert after[k] == via[k] or np.isnan(after[k]) and np.isnan(via[k]), axis
+
+
+def test_return_with_a_motion_code_is_an_error_as_in_rs274(tmp_path):
+    p = tmp_path / "g28g1.ngc"
+    p.write_text("G21 G0 X1 Y2 Z3\nG28 G1 X4 F100\nM2\n")
+    assert "both use axis values" in canonical(p).error
+    with pytest.raises(InputError, match=r":2:1: G28 and a motion code in one block both use the axis words"):
+        nc.read(p)

@@ -476,7 +476,7 @@ class Program:
         if not refused:
             write(tail)
         stats = run.stats()
-        warnings = list(self._clearance_warnings(field, clearance))
+        warnings = list(self._unknown_position_warnings()) + list(self._clearance_warnings(field, clearance))
         if keep_unsupported and uns:
             warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
         pts_all = disp_all = line_all = None
@@ -516,6 +516,23 @@ class Program:
         out = s + t[:, None] * (e - s)
         out[:, :3] = pts
         return out
+
+    def _unknown_position_warnings(self):
+        """Cutting moves left as written because the program does not say where they are: an axis
+        unknown at their end (after G28, G30, G53, a canned cycle …), or for an arc at its start."""
+        r = self._records()
+        end = r["end"][:, :3]
+        start = np.vstack([np.full((1, 3), np.nan), end[:-1]])
+        cutting = (r["motion"] >= 1) & (r["motion"] <= 3)
+        arc = (r["motion"] == 2) | (r["motion"] == 3)
+        unknown = ~np.isfinite(end) | (arc[:, None] & ~np.isfinite(start))
+        left = np.flatnonzero(cutting & ((r["flags"] & 8) == 0) & unknown.any(axis=1))
+        if len(left):
+            i = left[0]
+            axes = "".join(a for a, u in zip("XYZ", unknown[i]) if u)
+            yield (f"{len(left)} cutting move(s) not corrected because the position is unknown (first at line "
+                   f"{r['line'][i]}: {axes} not set since a move the engine does not trace); give every axis a "
+                   f"G0/G1 after G28, G30, G53 or a canned cycle")
 
     def _clearance_warnings(self, field, clearance):
         if clearance is None:

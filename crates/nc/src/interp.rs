@@ -297,6 +297,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         let mut motion_word: Option<(Mode, usize)> = None;
         let mut g53 = false;
         let mut nonmodal_axis_user: Option<(i32, usize)> = None;
+        let mut home: Option<(i32, usize)> = None;
         let mut unit_change = None;
         let mut untraced: Option<usize> = None;
         for &(c, gc) in &gs[..ng] {
@@ -373,10 +374,14 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                     }
                     nonmodal_axis_user = Some((c, idx));
                 }
-                280 | 300 | 281 | 301 => {
-                    let idx = push_unsupported(&mut out, li, gc, &format!("return to reference {}", g_name(c)));
+                280 | 300 => home = Some((c, gc)),
+                // G28.1 / G30.1 store the position and move nothing; with axis words LinuxCNC's
+                // reading is not the documented one, so those are reported
+                281 | 301 if named != 0 => {
+                    let idx = push_unsupported(&mut out, li, gc, &format!("{} with axis words", g_name(c)));
                     nonmodal_axis_user = Some((c, idx));
                 }
+                281 | 301 => {}
                 680 => {
                     let idx = push_unsupported(&mut out, li, gc, "coordinate rotation G68");
                     st.active.rotation = Some((li as u32, idx));
@@ -471,6 +476,39 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 st.pos = [f64::NAN; NAXES];
                 push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
                 out.unsupported[idx].blocks += 1;
+            }
+            continue;
+        }
+        // G28 / G30: a rapid to the intermediate point the axis words give (in program coordinates,
+        // G90/G91 as set), then the axes named (every axis when none is) to the stored reference
+        // position, a machine position the program does not know: two moves, as LinuxCNC's rs274
+        if let Some((c, gc)) = home {
+            if matches!(motion_word, Some((Mode::Motion(_) | Mode::Canned(_), _))) {
+                return Err(ierr(li, gc, format!("{} and a motion code in one block both use the axis words", g_name(c))));
+            }
+            for k in 0..NAXES {
+                if let Some(v) = axis[k] {
+                    let scale = if (3..6).contains(&k) { 1.0 } else { unit };
+                    st.pos[k] = if st.incremental { st.pos[k] + v * scale } else { v * scale };
+                }
+            }
+            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            for k in 0..NAXES {
+                if named == 0 || named & (1 << k) != 0 {
+                    st.pos[k] = f64::NAN;
+                }
+            }
+            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            out.notes.push(Note {
+                line: li as u32,
+                message: format!(
+                    "{} return to the stored reference position: kept as written, not corrected; the axes it moves are unknown afterwards",
+                    g_name(c)
+                ),
+            });
+            if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                out.summary.end_line = Some(li as u32);
+                break;
             }
             continue;
         }
@@ -693,5 +731,22 @@ mod tests {
         assert_eq!(names[0], (1, "cutter compensation G41".to_string(), 2));
         assert_eq!(names[1], (4, "canned cycle G81".to_string(), 2));
         assert!(it.records[3].supported);
+    }
+
+    #[test]
+    fn return_to_reference() {
+        // G91 G28 Z0: a zero rapid, then Z to the stored position; X and Y stay known
+        let it = run("G90 G0 X1 Y2 Z3\nG91 G28 Z0\nG90 G1 X5 F100\n");
+        assert!(it.unsupported.is_empty());
+        assert_eq!(it.notes.len(), 1);
+        let (via, home) = (&it.records[1], &it.records[2]);
+        assert_eq!((via.line, home.line), (1, 1));
+        assert_eq!(&via.end[..3], &[1.0, 2.0, 3.0]);
+        assert!(home.end[2].is_nan() && home.end[0] == 1.0 && home.end[1] == 2.0);
+        assert!(!it.records[3].supported); // its Z is unknown
+        // G28.1 stores the position and moves nothing; G28 beside a motion code is an error
+        assert_eq!(run("G0 X1 Y2 Z3\nG28.1\n").records.len(), 1);
+        let l = lex(b"G0 X1 Y2 Z3\nG28 G1 X4 F1\n").unwrap();
+        assert!(interpret(&l).is_err());
     }
 }
