@@ -486,12 +486,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
             if matches!(motion_word, Some((Mode::Motion(_) | Mode::Canned(_), _))) {
                 return Err(ierr(li, gc, format!("{} and a motion code in one block both use the axis words", g_name(c))));
             }
-            for k in 0..NAXES {
-                if let Some(v) = axis[k] {
-                    let scale = if (3..6).contains(&k) { 1.0 } else { unit };
-                    st.pos[k] = if st.incremental { st.pos[k] + v * scale } else { v * scale };
-                }
-            }
+            st.pos = target(&st.pos, &axis, st.incremental, unit);
             push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
             for k in 0..NAXES {
                 if named == 0 || named & (1 << k) != 0 {
@@ -525,13 +520,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         }
 
         // the target of the axis words
-        let mut end = st.pos;
-        for k in 0..NAXES {
-            if let Some(v) = axis[k] {
-                let scale = if (3..6).contains(&k) { 1.0 } else { unit };
-                end[k] = if st.incremental && !g53 { st.pos[k] + v * scale } else { v * scale };
-            }
-        }
+        let mut end = target(&st.pos, &axis, st.incremental && !g53, unit);
 
         if g53 {
             out.notes.push(Note {
@@ -676,6 +665,19 @@ fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) ->
 }
 
 #[allow(clippy::too_many_arguments)]
+/// Where the axis words of a block take the axes from `pos`: lengths scaled by `unit` (mm per
+/// program unit), rotary words in degrees; added to `pos` when incremental.
+fn target(pos: &[f64; NAXES], axis: &[Option<f64>; NAXES], incremental: bool, unit: f64) -> [f64; NAXES] {
+    let mut end = *pos;
+    for (k, (e, w)) in end.iter_mut().zip(axis).enumerate() {
+        if let Some(v) = w {
+            let scale = if (3..6).contains(&k) { 1.0 } else { unit };
+            *e = if incremental { pos[k] + v * scale } else { v * scale };
+        }
+    }
+    end
+}
+
 fn push_record(out: &mut Interp, st: &State, li: usize, motion: Motion, supported: bool, named: u16, center: [f64; 2], turns: u32) {
     out.line_record[li] = out.records.len() as u32;
     out.records.push(Record {
