@@ -81,7 +81,8 @@ def _report(path, run) -> None:
     rows.append(("fallbacks", "", "", *(str(runs[m]["fallbacks"]) for m in methods)))
     proto = [(m, f"{sk.protocol(m)['max_abs_error'] * 1000:.4g}") for m in ("mirror", "secant", "kalman")]
     sections = [("Result", table([("method", run.method), ("gauge noise σ, mm", run.noise), ("dead time, ms", run.latency_ms),
-                                   ("max |error|, µm", d["max_abs_error"] * 1000), ("mean |error|, µm", d["mean_abs_error"] * 1000),
+                                   ("max |error|, µm", f"{d['max_abs_error'] * 1000:.1f}"),
+                                   ("mean |error|, µm", f"{d['mean_abs_error'] * 1000:.1f}"),
                                    ("fallbacks", d["fallbacks"])], ["", "value"])),
                 ("Error along the toolpath", figure_png(fig)),
                 ("Checkpoints: every method on the same seed (error, µm)",
