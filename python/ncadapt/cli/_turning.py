@@ -77,6 +77,22 @@ def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
         write_json(json_path, {"config": str(config), "program": str(program), **d})
 
 
+#: the report's names of the plan's JSON keys, with their units
+_LABELS = {
+    "mode": "mode",
+    "diameter_error_max": "max diameter error on the model, mm",
+    "diameter_error_constant_feed": "max diameter error at the constant feed, mm",
+    "diameter_variation_ratio": "ratio of the two",
+    "machining_time_s": "machining time, s",
+    "machining_time_constant_feed_s": "machining time at the constant feed, s",
+    "constant_feed": "the constant feed, mm/rev",
+    "constant_rpm": "its spindle speed, rpm",
+    "constant_feed_same_error": "a constant feed with the same max error, mm/rev",
+    "machining_time_same_error_s": "its machining time, s",
+    "deflection_target": "deflection kept, mm",
+}
+
+
 def _report(path, cfg, p, css) -> None:
     import copy
     import tempfile
@@ -121,7 +137,7 @@ def _report(path, cfg, p, css) -> None:
     ax2.set_ylabel("diameter − target, µm")
     ax2.legend(fontsize=8)
     d = p.as_dict()
-    summary = [(k, v) for k, v in d.items() if k != "profile"]
+    summary = [(_LABELS.get(k, k), v) for k, v in d.items() if k != "profile" and v is not None]
     write(path, page(f"Turning plan: {p.mode} mode", cfg.source, [
         ("Summary", table(summary, ["", "value"])),
         ("Feed / spindle speed / position: the family keeping the deflection constant", figure_png(fig)),
