@@ -284,3 +284,59 @@ def test_simulate_cli_json_and_report(tmp_path):
     assert len(d["checkpoints"]) == 13 and {"x", "y", "error"} <= set(d["checkpoints"][0])
     html = (tmp_path / "r.html").read_text()
     assert all(f"<th>{m}</th>" in html for m in ("none", "mirror", "secant", "kalman"))
+
+
+def test_loop_cli_replays_a_recording(tmp_path):
+    """`skin loop --replay`: the mirror's offsets are the running sums of δ (closed form); a
+    rejected reading leaves an empty row."""
+    gauge = tmp_path / "gauge.csv"
+    gauge.write_text("thickness\n1.52\n\n1.51\nnan\n1.495\n")
+    r = _cli("skin", "loop", "--method", "mirror", "--target", 1.5, "--depth", A_G, "--replay", gauge,
+             "-o", tmp_path / "w1.csv", "--json", tmp_path / "w1.json")
+    assert r.exit_code == 0, r.output
+    rows = (tmp_path / "w1.csv").read_text().splitlines()
+    assert rows[0] == "w1_offset" and rows[2] == rows[4] == ""
+    assert [float(v) for v in rows[1:] if v] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
+    d = json.loads((tmp_path / "w1.json").read_text())
+    assert (d["steps"], d["fallbacks"], d["method"]) == (3, 0, "mirror")
+    assert d["w1_offset_min"] == pytest.approx(0.02) and d["w1_offset_max"] == pytest.approx(0.03)
+    r = _cli("skin", "loop", "--target", 1.5, "--depth", A_G)
+    assert r.exit_code == 2 and "exactly one of --replay FILE or --opcua URL" in r.output
+    r = _cli("skin", "loop", "--target", 1.5, "--depth", A_G, "--replay", gauge)
+    assert r.exit_code == 2 and "--replay and -o go together" in r.output
+
+
+def test_serve_and_loop_clis_over_opcua_equal_the_in_process_run(tmp_path):
+    """`skin serve` (a separate process playing the controller) and `skin loop --opcua` (the
+    client): the checkpoint errors and the compensator's steps equal the in-process run."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("asyncua")
+    url = "opc.tcp://127.0.0.1:48412/ncadapt/"
+    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
+                            "--endpoint", url, "--seed", "4", "--json", str(tmp_path / "srv.json")],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = srv.stderr.readline()
+        assert line.startswith(f"serving the skin testbed at {url}"), line + srv.stderr.read()
+        r = _cli("skin", "loop", "--opcua", url, "--pockets", 2, "--target", sk.T_TARGET, "--depth", sk.A_G,
+                 "--json", tmp_path / "cl.json")
+        assert r.exit_code == 0, r.output
+        out, err = srv.communicate(timeout=60)
+    finally:
+        srv.kill()
+    assert srv.returncode == 0, err
+    ref = sk.run("kalman", seed=4).as_dict()
+    served = json.loads((tmp_path / "srv.json").read_text())
+    assert served["checkpoints"] == ref["checkpoints"]
+    assert out.startswith(f"client: |error| at 13 checkpoints max {ref['max_abs_error'] * 1000:.1f} µm")
+    client = json.loads((tmp_path / "cl.json").read_text())
+    assert (client["steps"], client["fallbacks"]) == (ref["compensator_steps"], ref["fallbacks"])
+    assert 0 < client["latency_median_ms"] <= client["latency_p99_ms"]
+
+
+def test_loop_cli_names_an_unreachable_controller():
+    url = "opc.tcp://127.0.0.1:48413/ncadapt/"  # nothing listens here
+    r = _cli("skin", "loop", "--opcua", url, "--target", 1.5, "--depth", A_G)
+    assert r.exit_code == 2 and r.output.startswith(f"{url}: error: cannot reach the controller")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
 from ._common import check_outputs, handle_errors, write_json
 
 
@@ -137,4 +138,139 @@ def correct(program, map_path, target, allowance, into, output, limit, outside, 
              "excess_min": float(np.min(excess)), "excess_max": float(np.max(excess)),
              "excess_mean": float(np.mean(excess))}
         d.update(c.as_dict())
+        write_json(json_path, d)
+
+
+_ENDPOINT = "opc.tcp://127.0.0.1:48400/ncadapt/"
+
+
+def _quiet_asyncua() -> None:
+    """Silence asyncua's own log: its notes on the missing security policy (documented in
+    docs/skin.md instead) and the tracebacks of failures the commands report themselves."""
+    import logging
+
+    logging.getLogger("asyncua").setLevel(logging.CRITICAL)
+
+
+@skin.command("loop")
+@click.option("--method", type=click.Choice(["mirror", "secant", "kalman"]), default="kalman", show_default=True,
+              help="Compensator (kalman: ours).")
+@click.option("--target", type=click.FloatRange(min=0, min_open=True), required=True,
+              help="Target wall thickness T_g, mm.")
+@click.option("--depth", type=click.FloatRange(min=0, min_open=True), required=True,
+              help="Target depth a_g = T_s − T_g of the finishing pass, mm.")
+@click.option("--noise", type=click.FloatRange(min=0, min_open=True), default=0.005, show_default=True,
+              help="The gauge's noise σ, mm (kalman and secant).")
+@click.option("--replay", "replay_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Recorded gauge readings: CSV with a column thickness (empty or NaN: rejected).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="With --replay: the W1 offsets, one row per reading (empty where none was commanded).")
+@click.option("--opcua", "url", metavar="URL",
+              help="The controller's OPC UA server (namespace urn:ncadapt:skin, object Controller).")
+@click.option("--pockets", type=click.IntRange(min=1), default=1, show_default=True,
+              help="With --opcua: pockets to finish before stopping.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@handle_errors
+def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, json_path):
+    """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
+    live as an OPC UA client of the controller."""
+    import asyncio
+
+    import numpy as np
+
+    from .. import loop as lp
+    from ..processes import skin as ps
+
+    if (replay_path is None) == (url is None):
+        raise click.UsageError("give exactly one of --replay FILE or --opcua URL")
+    if (replay_path is None) != (output is None):
+        raise click.UsageError("--replay and -o go together")
+    check_outputs({"gauge readings": replay_path}, {"-o": output, "--json": json_path})
+    comps = []
+
+    def fresh():
+        comps.append(ps.make(method, depth, **({} if method == "mirror" else {"noise": noise})))
+        return comps[-1]
+
+    d = {"method": method, "target": target, "depth": depth, "noise": noise}
+    if replay_path is not None:
+        sink = lp.CsvSink(output)
+        offsets = []
+        steps = lp.run(lp.CsvSource(replay_path), sink, fresh(), target,
+                       on_step=lambda n, t, w: offsets.append(w))
+        sink.close()
+        d.update(source=str(replay_path), output=str(output))
+        click.echo(f"{replay_path}: {steps} readings stepped -> {output}", err=True)
+    else:
+        from asyncua import ua
+
+        _quiet_asyncua()
+        lat: list = []
+        try:
+            steps = asyncio.run(lp.run_opcua(url, fresh, target, pockets=pockets, latencies=lat))
+        except (OSError, asyncio.TimeoutError) as err:
+            raise InputError(f"cannot reach the controller: {err or type(err).__name__}", url) from None
+        except (ua.UaError, ValueError) as err:
+            raise InputError(f"not an ncadapt skin controller (namespace {lp.NAMESPACE}, object Controller): {err}",
+                             url) from None
+        offsets = []
+        d.update(source=url, pockets=pockets, latency_median_ms=float(np.median(lat) * 1e3) if lat else None,
+                 latency_p99_ms=float(np.percentile(lat, 99) * 1e3) if lat else None)
+        if lat:
+            click.echo(f"{url}: {len(lat)} readings, latency median {d['latency_median_ms']:.2f} ms, "
+                       f"p99 {d['latency_p99_ms']:.2f} ms", err=True)
+    fallbacks = sum(c.fallbacks for c in comps)
+    d.update(steps=steps, fallbacks=fallbacks)
+    if offsets:
+        d.update(w1_offset_min=float(min(offsets)), w1_offset_max=float(max(offsets)))
+    click.echo(f"{method}: {steps} steps, {fallbacks} fallbacks"
+               + (f"; W1 offset {min(offsets):+.4f} .. {max(offsets):+.4f} mm" if offsets else ""))
+    if json_path:
+        write_json(json_path, d)
+
+
+@skin.command("serve")
+@click.option("--endpoint", default=_ENDPOINT, show_default=True, help="Where the virtual controller listens.")
+@click.option("--noise", type=click.FloatRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
+@click.option("--latency-ms", type=click.FloatRange(min=0), default=45.0, show_default=True,
+              help="Dead time from reading to axis motion, ms.")
+@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@handle_errors
+def serve(endpoint, noise, latency_ms, seed, json_path):
+    """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1
+    offsets a client writes (try `skin loop --opcua` against it before a real controller), and
+    report the errors at the 13 checkpoints when both pockets are finished."""
+    import asyncio
+    import threading
+
+    from .. import loop as lp
+    from ..sim import skin as sk
+
+    check_outputs({}, {"--json": json_path})
+    _quiet_asyncua()
+    ms = sk.machines(noise=noise, latency_ms=latency_ms, seed=seed)
+    ready = threading.Event()
+
+    async def main():
+        task = asyncio.create_task(lp.serve_machine(ms, sk.A_G, endpoint=endpoint, ready=ready))
+        while not ready.is_set() and not task.done():
+            await asyncio.sleep(0.01)
+        if ready.is_set():
+            click.echo(f"serving the skin testbed at {endpoint} (seed {seed}): target thickness {sk.T_TARGET} mm, "
+                       f"depth {sk.A_G} mm, {len(ms)} pockets", err=True)
+        await task
+
+    try:
+        asyncio.run(main())
+    except OSError as err:
+        raise InputError(f"cannot serve: {err}", endpoint) from None
+    run = sk.result("opcua client", ms, [None] * len(ms), noise=noise, latency_ms=latency_ms, seed=seed)
+    d = run.as_dict()
+    d["endpoint"] = endpoint
+    for key in ("fallbacks", "compensator_steps"):  # the client's to tell
+        d.pop(key)
+    click.echo(f"client: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
+               f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm")
+    if json_path:
         write_json(json_path, d)
