@@ -43,7 +43,7 @@ def main() -> int:
     for method in ("mirror", "secant", "kalman"):
         best = 1e9
         for _ in range(5):
-            c = ps.make(method, 0.5) if method == "mirror" else ps.make(method, 0.5, noise=0.005)
+            c = ps.make(method, 0.5, noise=0.005)
             t = time.perf_counter()
             for v in d:
                 c.step(v)

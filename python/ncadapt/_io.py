@@ -4,6 +4,8 @@ target, then an atomic rename."""
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import os
 import tempfile
 from pathlib import Path
@@ -63,3 +65,9 @@ def read_text(path: str | os.PathLike) -> str:
         bad = data[e.start:e.start + 1].hex()
         raise InputError(f"not UTF-8 text: byte 0x{bad} ({e.reason}); save the file as UTF-8", str(p), line, col) \
             from None
+
+
+def csv_reader(path: str | os.PathLike):
+    """A :func:`csv.reader` over an input file read by :func:`read_text` (its ``line_num`` is the
+    file's line)."""
+    return csv.reader(io.StringIO(read_text(path), newline=""))

@@ -23,14 +23,13 @@ Examples
 
 from __future__ import annotations
 
-import csv
 import io
 import math
 from pathlib import Path
 
 import numpy as np
 
-from ._io import read_text
+from ._io import csv_reader, read_text
 from .errors import InputError, RefusedError
 
 __all__ = [
@@ -272,37 +271,36 @@ class ScatteredField(Field):
 # --------------------------------------------------------------------------------- readers
 def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Read a CSV with a header; return the required columns as floats and their line numbers."""
-    with io.StringIO(read_text(path), newline="") as f:
-        rows = csv.reader(f)
-        header = None
-        cols: dict[str, list[float]] = {}
-        linenos: list[int] = []
-        for row in rows:
-            lineno = rows.line_num
-            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-                continue
-            if header is None:
-                header = [c.strip().lower() for c in row]
-                missing = [c for c in required if c not in header]
-                if missing:
-                    raise InputError(
-                        f"missing column(s) {', '.join(missing)}; the header must name {', '.join(required)}",
-                        str(path), lineno, 1)
-                idx = [header.index(c) for c in required]
-                cols = {c: [] for c in required}
-                continue
-            if len(row) != len(header):
-                raise InputError(f"expected {len(header)} fields, found {len(row)}", str(path), lineno, 1)
-            for c, k in zip(required, idx):
-                col = sum(len(v) + 1 for v in row[:k]) + 1
-                try:
-                    v = float(row[k])
-                except ValueError:
-                    raise InputError(f"column {c}: expected a number, found {row[k].strip()!r}", str(path), lineno, col) from None
-                if not math.isfinite(v):
-                    raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno, col)
-                cols[c].append(v)
-            linenos.append(lineno)
+    rows = csv_reader(path)
+    header = None
+    cols: dict[str, list[float]] = {}
+    linenos: list[int] = []
+    for row in rows:
+        lineno = rows.line_num
+        if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
+            continue
+        if header is None:
+            header = [c.strip().lower() for c in row]
+            missing = [c for c in required if c not in header]
+            if missing:
+                raise InputError(
+                    f"missing column(s) {', '.join(missing)}; the header must name {', '.join(required)}",
+                    str(path), lineno, 1)
+            idx = [header.index(c) for c in required]
+            cols = {c: [] for c in required}
+            continue
+        if len(row) != len(header):
+            raise InputError(f"expected {len(header)} fields, found {len(row)}", str(path), lineno, 1)
+        for c, k in zip(required, idx):
+            col = sum(len(v) + 1 for v in row[:k]) + 1
+            try:
+                v = float(row[k])
+            except ValueError:
+                raise InputError(f"column {c}: expected a number, found {row[k].strip()!r}", str(path), lineno, col) from None
+            if not math.isfinite(v):
+                raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno, col)
+            cols[c].append(v)
+        linenos.append(lineno)
     if header is None:
         raise InputError("empty file; expected a header line", str(path))
     return {c: np.asarray(v, dtype=np.float64) for c, v in cols.items()}, np.asarray(linenos)
@@ -472,8 +470,7 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
     if ext == ".probe":
         return read_bcnc_probe(path, method, outside)
     if ext == ".csv":
-        lines = read_text(path).splitlines()
-        head = next((ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")), "")
+        head = next((ln for ln in io.StringIO(read_text(path)) if ln.strip() and not ln.lstrip().startswith("#")), "")
         names = [c.strip().lower() for c in head.split(",")]
         if "dx" in names:
             return read_scattered_csv(path, outside)

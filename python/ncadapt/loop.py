@@ -19,8 +19,6 @@ next reading only after the Ack, so a run over OPC UA is step for step the in-pr
 from __future__ import annotations
 
 import asyncio
-import csv
-import io
 import math
 import time
 
@@ -73,24 +71,23 @@ class CsvSource:
         self.path = str(path)
 
     def __iter__(self):
-        from ._io import read_text
+        from ._io import csv_reader
         from .errors import InputError
 
-        with io.StringIO(read_text(self.path), newline="") as f:
-            r = csv.reader(f)
-            head = [h.strip().lower() for h in next(r, [])]
-            if "thickness" not in head:
-                raise InputError("missing column 'thickness'", self.path, 1)
-            k = head.index("thickness")
-            for row in r:
-                v = row[k].strip() if k < len(row) else ""
-                if not v:
-                    yield None
-                    continue
-                try:
-                    yield float(v)
-                except ValueError:
-                    raise InputError(f"thickness is not a number: {v!r}", self.path, r.line_num) from None
+        r = csv_reader(self.path)
+        head = [h.strip().lower() for h in next(r, [])]
+        if "thickness" not in head:
+            raise InputError("missing column 'thickness'", self.path, 1)
+        k = head.index("thickness")
+        for row in r:
+            v = row[k].strip() if k < len(row) else ""
+            if not v:
+                yield None
+                continue
+            try:
+                yield float(v)
+            except ValueError:
+                raise InputError(f"thickness is not a number: {v!r}", self.path, r.line_num) from None
 
 
 class CsvSink:

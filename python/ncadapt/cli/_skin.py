@@ -189,7 +189,7 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
     comps = []
 
     def fresh():
-        comps.append(ps.make(method, depth, **({} if method == "mirror" else {"noise": noise})))
+        comps.append(ps.make(method, depth, noise=noise))
         return comps[-1]
 
     d = {"method": method, "target": target, "depth": depth, "noise": noise}

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import iso286
-from .._io import read_text
+from .._io import csv_reader
 from ..errors import InputError
 
 APPLICABILITY_SHARE = 0.25  # δ_A − δ_B ≤ 0.25·ΔD(pre-finish)
@@ -132,11 +132,8 @@ def read_probe(path, entry: str = "top") -> BoreMeasurement:
 
     Face A is the plane nearest the tool's entry: the highest z for ``entry="top"`` (a vertical
     spindle boring downwards), the lowest for ``"bottom"``."""
-    import csv
-    import io
-
     path = str(path)
-    rows = list(csv.reader(io.StringIO(read_text(path), newline="")))
+    rows = list(csv_reader(path))
     if not rows:
         raise InputError("empty file", path, 1)
     head = [h.strip().lower() for h in rows[0]]

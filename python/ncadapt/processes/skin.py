@@ -42,6 +42,8 @@ S_MAX = -0.1
 
 class _Base:
     name = "base"
+    #: the constructor takes the gauge's noise σ (``noise=``)
+    uses_noise = False
 
     def __init__(self, target_depth: float, *, max_step: float = 0.5):
         if not (math.isfinite(target_depth) and target_depth > 0):
@@ -86,6 +88,7 @@ class SecantCompensator(_Base):
     """The two-point secant with the safety rules of the module's docstring."""
 
     name = "secant"
+    uses_noise = True
 
     def __init__(self, target_depth: float, *, noise: float = 0.005, max_step: float = 0.5,
                  s_min: float = S_MIN, s_max: float = S_MAX):
@@ -122,6 +125,7 @@ class KalmanCompensator(_Base):
     """Ours: a Kalman filter on the local compliance ratio κ, predicting one reading ahead."""
 
     name = "kalman"
+    uses_noise = True
 
     def __init__(self, target_depth: float, *, noise: float = 0.005, q: float = 1e-4, max_step: float = 0.5,
                  kappa_max: float = 0.9):
@@ -166,12 +170,15 @@ class KalmanCompensator(_Base):
 COMPENSATORS = {"mirror": MirrorCompensator, "secant": SecantCompensator, "kalman": KalmanCompensator}
 
 
-def make(method: str, target_depth: float, **kw):
-    """A compensator by name (``mirror``, ``secant``, ``kalman``)."""
+def make(method: str, target_depth: float, *, noise: float | None = None, **kw):
+    """A compensator by name (``mirror``, ``secant``, ``kalman``); ``noise``, the gauge's σ in mm,
+    goes to those that use it (the mirror does not)."""
     try:
         cls = COMPENSATORS[method]
     except KeyError:
         raise ValueError(f"method must be one of {sorted(COMPENSATORS)}, got {method!r}") from None
+    if noise is not None and cls.uses_noise:
+        kw["noise"] = noise
     return cls(target_depth, **kw)
 
 

@@ -324,7 +324,7 @@ def compensator(method: str, noise: float = 0.005):
     """A fresh compensator as the testbed uses it (None for ``none``)."""
     if method == "none":
         return None
-    return ps.make(method, A_G, **({} if method == "mirror" else {"noise": noise}))
+    return ps.make(method, A_G, noise=noise)
 
 
 def result(method: str, ms: list, comps: list, *, noise: float, latency_ms: float, seed: int) -> Run:
