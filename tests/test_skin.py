@@ -14,6 +14,7 @@ from conftest import needs_rs274
 from rs274 import canonical
 
 from ncadapt import loop as lp
+from ncadapt.errors import InputError
 from ncadapt.processes import skin as ps
 from ncadapt.sim import skin as sk
 
@@ -101,8 +102,8 @@ def test_csv_replay(tmp_path):
     rows = (tmp_path / "w1.csv").read_text().splitlines()
     assert rows[0] == "w1_offset" and rows[2] == ""
     assert [float(r) for r in rows[1:] if r] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
-    src.write_text("thickness\n1.5\nabc\n")
-    with pytest.raises(Exception, match="line 3|:3:"):
+    src.write_text("t,thickness\n0,1.5\n1,abc\n")
+    with pytest.raises(InputError, match=r"gauge.csv:3:3: .*column thickness.*'abc'"):
         lp.run(lp.CsvSource(src), lp.CsvSink(tmp_path / "x.csv"), ps.MirrorCompensator(A_G), 1.5)
 
 

@@ -71,3 +71,8 @@ def csv_reader(path: str | os.PathLike):
     """A :func:`csv.reader` over an input file read by :func:`read_text` (its ``line_num`` is the
     file's line)."""
     return csv.reader(io.StringIO(read_text(path), newline=""))
+
+
+def csv_column(row: list[str], k: int) -> int:
+    """The 1-based character column where field ``k`` of an unquoted CSV ``row`` starts."""
+    return sum(len(v) + 1 for v in row[:k]) + 1

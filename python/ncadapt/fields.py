@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import csv_reader, read_text
+from ._io import csv_column, csv_reader, read_text
 from .errors import InputError, RefusedError
 
 __all__ = [
@@ -292,7 +292,7 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
         if len(row) != len(header):
             raise InputError(f"expected {len(header)} fields, found {len(row)}", str(path), lineno, 1)
         for c, k in zip(required, idx):
-            col = sum(len(v) + 1 for v in row[:k]) + 1
+            col = csv_column(row, k)
             try:
                 v = float(row[k])
             except ValueError:

@@ -71,7 +71,7 @@ class CsvSource:
         self.path = str(path)
 
     def __iter__(self):
-        from ._io import csv_reader
+        from ._io import csv_column, csv_reader
         from .errors import InputError
 
         r = csv_reader(self.path)
@@ -87,7 +87,8 @@ class CsvSource:
             try:
                 yield float(v)
             except ValueError:
-                raise InputError(f"thickness is not a number: {v!r}", self.path, r.line_num) from None
+                raise InputError(f"column thickness: expected a number, found {v!r}", self.path, r.line_num,
+                                 csv_column(row, k)) from None
 
 
 class CsvSink:
