@@ -8,6 +8,7 @@ Run with `make bench`.
 from __future__ import annotations
 
 import asyncio
+import logging
 import sys
 import threading
 import time
@@ -51,6 +52,7 @@ def main() -> int:
         print(f"   {method:7s} {best * 1e6:6.2f} µs")
 
     print("\nOPC UA loop on loopback (asyncua server + client, one reading -> W1 offset -> ack)")
+    logging.getLogger("asyncua").setLevel(logging.ERROR)  # its notes on the (documented) missing security policy
     ms = sk.machines(seed=1)
     url = "opc.tcp://127.0.0.1:48412/ncadapt/"
     ready = threading.Event()
