@@ -10,7 +10,7 @@ from ncadapt import InputError, iso286
 
 
 @pytest.mark.parametrize("designation, limits", [
-    # the anchors, from ISO 286-2 tables
+    # anchors from the ISO 286-2 tables
     ("40H6", (0.0, 0.016)), ("40H9", (0.0, 0.062)), ("25H6", (0.0, 0.013)), ("25H9", (0.0, 0.052)),
     # ISO 286-2:1988/Cor.1:2006 corrected values: A13 315–355, E8 80–120, R10 18–30, f9 250–315
     ("340A13", (1.200, 2.090)), ("100E8", (0.072, 0.126)), ("25R10", (-0.112, -0.028)), ("300f9", (-0.186, -0.056)),

@@ -137,8 +137,8 @@ def test_calibration_and_the_papers_protocol():
 
 @pytest.mark.parametrize("noise, latency_ms, seeds", [(0.005, 45.0, 5), (0.010, 60.0, 3)])
 def test_ours_beats_mirror_and_secant_on_the_testbed(noise, latency_ms, seeds):
-    """The default (5 µm noise, 45 ms dead time; make bench runs twenty seeds) and the issue's
-    worst conditions (10 µm, 60 ms)."""
+    """The default (5 µm noise, 45 ms dead time; make bench runs twenty seeds) and the worst
+    conditions ours is meant for (10 µm, 60 ms)."""
     res = {m: [sk.run(m, seed=s, noise=noise, latency_ms=latency_ms).as_dict() for s in range(1, seeds + 1)]
            for m in ("mirror", "secant", "kalman")}
     mx = {m: np.mean([r["max_abs_error"] for r in v]) for m, v in res.items()}
