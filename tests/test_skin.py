@@ -4,6 +4,7 @@ targets, and the loop over a real OPC UA server."""
 from __future__ import annotations
 
 import asyncio
+import csv
 import json
 import threading
 
@@ -99,7 +100,7 @@ def test_csv_replay(tmp_path):
     n = lp.run(lp.CsvSource(src), sink, ps.MirrorCompensator(A_G), 1.5)
     sink.close()
     assert n == 3
-    rows = (tmp_path / "w1.csv").read_text().splitlines()
+    rows = [r[0] for r in csv.reader((tmp_path / "w1.csv").read_text().splitlines())]
     assert rows[0] == "w1_offset" and rows[2] == ""
     assert [float(r) for r in rows[1:] if r] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
     src.write_text("t,thickness\n0,1.5\n1,abc\n")
@@ -289,15 +290,24 @@ def test_simulate_cli_json_and_report(tmp_path):
 
 def test_loop_cli_replays_a_recording(tmp_path):
     """`skin loop --replay`: the mirror's offsets are the running sums of δ (closed form); a
-    rejected reading leaves an empty row."""
+    rejected reading leaves an empty offset; the log's other columns are kept as written, and a
+    replayed output's w1_offset column is replaced."""
     gauge = tmp_path / "gauge.csv"
-    gauge.write_text("thickness\n1.52\n\n1.51\nnan\n1.495\n")
+    gauge.write_text('t,thickness,note\n0.00,1.52,"a, b"\n0.05,,\n0.10,1.51,\n0.15,nan,\n0.20,1.495,x\n')
     r = _cli("skin", "loop", "--method", "mirror", "--target", 1.5, "--depth", A_G, "--replay", gauge,
              "-o", tmp_path / "w1.csv", "--json", tmp_path / "w1.json")
     assert r.exit_code == 0, r.output
-    rows = (tmp_path / "w1.csv").read_text().splitlines()
-    assert rows[0] == "w1_offset" and rows[2] == rows[4] == ""
-    assert [float(v) for v in rows[1:] if v] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
+    rows = list(csv.reader((tmp_path / "w1.csv").read_text().splitlines()))
+    assert rows[0] == ["t", "thickness", "note", "w1_offset"]
+    assert [r[:3] for r in rows[1:]] == list(csv.reader(gauge.read_text().splitlines()))[1:]
+    offsets = [r[3] for r in rows[1:]]
+    assert offsets[1] == offsets[3] == ""
+    assert [float(v) for v in offsets if v] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
+    r = _cli("skin", "loop", "--method", "mirror", "--target", 1.49, "--depth", A_G, "--replay", tmp_path / "w1.csv",
+             "-o", tmp_path / "w1b.csv")
+    rows = list(csv.reader((tmp_path / "w1b.csv").read_text().splitlines()))
+    assert rows[0] == ["t", "thickness", "note", "w1_offset"]
+    assert [float(r[3]) for r in rows[1:] if r[3]] == pytest.approx([0.03, 0.05, 0.055], abs=1e-12)
     d = json.loads((tmp_path / "w1.json").read_text())
     assert (d["steps"], d["fallbacks"], d["method"]) == (3, 0, "mirror")
     assert d["w1_offset_min"] == pytest.approx(0.02) and d["w1_offset_max"] == pytest.approx(0.03)

@@ -65,21 +65,26 @@ def run_in_process(machine, compensator) -> int:
 
 
 class CsvSource:
-    """Thickness readings from a CSV column ``thickness`` (empty or NaN: a rejected reading)."""
+    """Thickness readings from a CSV column ``thickness`` (empty or NaN: a rejected reading).
+    ``header`` and ``row`` are the header and the current row as written, for :class:`CsvSink`."""
 
     def __init__(self, path):
         self.path = str(path)
+        self.header: list[str] = []
+        self.row: list[str] = []
 
     def __iter__(self):
         from ._io import csv_column, csv_reader
         from .errors import InputError
 
         r = csv_reader(self.path)
-        head = [h.strip().lower() for h in next(r, [])]
+        self.header = next(r, [])
+        head = [h.strip().lower() for h in self.header]
         if "thickness" not in head:
             raise InputError("missing column 'thickness'", self.path, 1)
         k = head.index("thickness")
         for row in r:
+            self.row = row
             v = row[k].strip() if k < len(row) else ""
             if not v:
                 yield None
@@ -93,22 +98,40 @@ class CsvSource:
 
 class CsvSink:
     """W1 offsets, one row per reading (empty when the compensator did not step), written
-    atomically by :meth:`close`."""
+    atomically by :meth:`close`. With ``source`` (a :class:`CsvSource`), each row is the reading's
+    row as read with the offset in a column ``w1_offset`` (appended, or replaced if it has one)."""
 
-    def __init__(self, path):
-        self.path = path
-        self._rows = ["w1_offset"]
+    def __init__(self, path, source: CsvSource | None = None):
+        self.path, self.source = path, source
+        self._rows: list[tuple[list[str], str]] = []
+
+    def _add(self, value: str) -> None:
+        self._rows.append((list(self.source.row) if self.source else [], value))
 
     def write(self, offset: float) -> None:
-        self._rows.append(f"{offset:.6f}")
+        self._add(f"{offset:.6f}")
 
     def skip(self) -> None:
-        self._rows.append("")
+        self._add("")
 
     def close(self) -> None:
+        import csv
+        import io
+
         from ._io import atomic_write
 
-        atomic_write(self.path, ("\n".join(self._rows) + "\n").encode())
+        header = list(self.source.header) if self.source else []
+        names = [h.strip().lower() for h in header]
+        k = names.index("w1_offset") if "w1_offset" in names else len(header)
+        header[k:k + 1] = ["w1_offset"]
+        out = io.StringIO()
+        w = csv.writer(out, lineterminator="\n")
+        w.writerow(header)
+        for row, value in self._rows:
+            row = row + [""] * (len(header) - len(row)) if len(row) < len(header) else row
+            row[k:k + 1] = [value]
+            w.writerow(row)
+        atomic_write(self.path, out.getvalue().encode())
 
 
 # ------------------------------------------------------------------------------------ OPC UA

@@ -164,7 +164,8 @@ def _quiet_asyncua() -> None:
 @click.option("--replay", "replay_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Recorded gauge readings: CSV with a column thickness (empty or NaN: rejected).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="With --replay: the W1 offsets, one row per reading (empty where none was commanded).")
+              help="With --replay: the readings' rows with the W1 offset commanded after each in a column "
+                   "w1_offset (empty where none was).")
 @click.option("--opcua", "url", metavar="URL",
               help="The controller's OPC UA server (namespace urn:ncadapt:skin, object Controller).")
 @click.option("--pockets", type=click.IntRange(min=1), default=1, show_default=True,
@@ -194,9 +195,10 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
 
     d = {"method": method, "target": target, "depth": depth, "noise": noise}
     if replay_path is not None:
-        sink = lp.CsvSink(output)
+        source = lp.CsvSource(replay_path)
+        sink = lp.CsvSink(output, source)
         offsets = []
-        steps = lp.run(lp.CsvSource(replay_path), sink, fresh(), target,
+        steps = lp.run(source, sink, fresh(), target,
                        on_step=lambda n, t, w: offsets.append(w))
         sink.close()
         d.update(source=str(replay_path), output=str(output))
