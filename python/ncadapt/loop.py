@@ -128,7 +128,7 @@ class CsvSink:
         w = csv.writer(out, lineterminator="\n")
         w.writerow(header)
         for row, value in self._rows:
-            row = row + [""] * (len(header) - len(row)) if len(row) < len(header) else row
+            row = row + [""] * (len(header) - len(row))  # a short row is padded
             row[k:k + 1] = [value]
             w.writerow(row)
         atomic_write(self.path, out.getvalue().encode())
