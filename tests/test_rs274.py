@@ -219,5 +219,5 @@ def test_return_with_a_motion_code_is_an_error_as_in_rs274(tmp_path):
     p = tmp_path / "g28g1.ngc"
     p.write_text("G21 G0 X1 Y2 Z3\nG28 G1 X4 F100\nM2\n")
     assert "both use axis values" in canonical(p).error
-    with pytest.raises(InputError, match=r":2:1: G28 and a motion code in one block both use the axis words"):
+    with pytest.raises(InputError, match=r":2:5: G28 and G1 in one block both use the axis words"):
         nc.read(p)

@@ -10,6 +10,17 @@ CHORD_TOL = 0.002
 #: Default longest segment of a corrected move, mm: a correction field varies little within 1 mm.
 MAX_SEGMENT = 1.0
 
+#: Accepted ranges of the sampling options, mm. A chord tolerance below 1 nm or a segment below
+#: 1 µm is finer than any machine moves; a chord tolerance above 10 mm is no tolerance (a very
+#: long segment just means "do not split"). With the
+#: engine's bound of 1,000,000 pieces per block (``MAX_PIECES_PER_BLOCK``) these keep a correction's
+#: memory and time proportional to the program.
+CHORD_TOL_RANGE = (1e-6, 10.0)
+MAX_SEGMENT_RANGE = (1e-3, 1e9)
+
+#: Most pieces one block is cut into; a block that needs more is refused at its line.
+MAX_PIECES_PER_BLOCK = 1_000_000
+
 #: Default largest displacement ``correct`` writes without refusing, mm.
 LIMIT = 0.5
 

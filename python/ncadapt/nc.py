@@ -232,6 +232,7 @@ class Program:
                 "plane": np.frombuffer(r["plane"], dtype=np.uint8),
                 "flags": np.frombuffer(r["flags"], dtype=np.uint8),
                 "end": np.frombuffer(r["end"], dtype="<f8").reshape(-1, 9),
+                "named": np.frombuffer(r["named"], dtype="<u2"),
             }
         return self._rec
 
@@ -244,14 +245,19 @@ class Program:
     # ----------------------------------------------------------------------------- sampling
     @staticmethod
     def _check_sampling(chord_tol, max_segment) -> None:
-        if not chord_tol > 0:
-            raise ValueError(f"chord_tol must be > 0 mm, got {chord_tol}")
-        if not max_segment > 0:
-            raise ValueError(f"max_segment must be > 0 mm, got {max_segment}")
+        lo, hi = constants.CHORD_TOL_RANGE
+        if not lo <= chord_tol <= hi:
+            raise ValueError(f"chord_tol must be within {lo:g}..{hi:g} mm, got {chord_tol}")
+        lo, hi = constants.MAX_SEGMENT_RANGE
+        if not lo <= max_segment <= hi:
+            raise ValueError(f"max_segment must be within {lo:g}..{hi:g} mm, got {max_segment}")
 
     def _sample(self, chord_tol, max_segment, rapids, supported_only):
         self._check_sampling(chord_tol, max_segment)
-        xyz, rec = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), [], [])
+        try:
+            xyz, rec = self._p.sample(float(chord_tol), float(max_segment), bool(rapids), bool(supported_only), [], [])
+        except EngineError as e:
+            raise _engine_error(e, self.name) from None
         pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
         return pts, np.frombuffer(rec, dtype="<u4").astype(np.int64)
 
@@ -415,7 +421,7 @@ class Program:
         n_outside, domain = 0, ""
         worst: list[tuple[float, int, np.ndarray, np.ndarray]] = []  # the largest displacements seen
         n_pts, total, refused = 0, 0.0, False
-        while (chunk := run.next(_CHUNK_LINES)) is not None:
+        while (chunk := self._next_chunk(run)) is not None:
             first, end, xyz, rec = chunk
             say(f"correcting lines {first + 1:,}-{end:,} of {n_lines:,}")
             pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
@@ -500,6 +506,12 @@ class Program:
             warnings=tuple(warnings),
         )
 
+    def _next_chunk(self, run):
+        try:
+            return run.next(_CHUNK_LINES)
+        except EngineError as e:
+            raise _engine_error(e, self.name) from None
+
     def _axes_at(self, pts: np.ndarray, rec: np.ndarray) -> np.ndarray:
         """All nine axes (XYZABCUVW) at sampled points: XYZ as sampled, the others interpolated
         between the block's start and end by the point's fraction along it (as the sampler and the
@@ -519,17 +531,23 @@ class Program:
 
     def _unknown_position_warnings(self):
         """Cutting moves left as written because the program does not say where they are: an axis
-        unknown at their end (after G28, G30, G53, a canned cycle …), or for an arc at its start."""
+        unknown at their end (after G28, G30, G53, a canned cycle …), or at their start for an arc
+        and for an axis other than XYZ that the block moves (its pieces are interpolated from it)."""
         r = self._records()
-        end = r["end"][:, :3]
-        start = np.vstack([np.full((1, 3), np.nan), end[:-1]])
+        end = r["end"]
+        start = np.vstack([np.full((1, 9), np.nan), end[:-1]])
         cutting = (r["motion"] >= 1) & (r["motion"] <= 3)
         arc = (r["motion"] == 2) | (r["motion"] == 3)
-        unknown = ~np.isfinite(end) | (arc[:, None] & ~np.isfinite(start))
+        named = ((r["named"][:, None] >> np.arange(9)) & 1).astype(bool)
+        needs_end = named.copy()
+        needs_end[:, :3] = True
+        needs_start = named.copy()
+        needs_start[:, :3] = arc[:, None]
+        unknown = (needs_end & ~np.isfinite(end)) | (needs_start & ~np.isfinite(start))
         left = np.flatnonzero(cutting & ((r["flags"] & 8) == 0) & unknown.any(axis=1))
         if len(left):
             i = left[0]
-            axes = "".join(a for a, u in zip("XYZ", unknown[i]) if u)
+            axes = "".join(a for a, u in zip(_AXES, unknown[i]) if u)
             yield (f"{len(left)} cutting move(s) not corrected because the position is unknown (first at line "
                    f"{r['line'][i]}: {axes} not set since a move the engine does not trace); give every axis a "
                    f"G0/G1 after G28, G30, G53 or a canned cycle")

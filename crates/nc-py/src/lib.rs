@@ -96,6 +96,8 @@ impl Program {
             .iter()
             .map(|r| r.inch as u8 | (r.incremental as u8) << 1 | (r.arc_absolute as u8) << 2 | (r.supported as u8) << 3)
             .collect();
+        let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();
+        d.set_item("named", raw_bytes(py, &named))?;
         d.set_item("motion", PyBytes::new(py, &motion))?;
         d.set_item("plane", PyBytes::new(py, &plane))?;
         d.set_item("flags", PyBytes::new(py, &flags))?;
@@ -150,10 +152,10 @@ impl Program {
         only_supported: bool,
         grid_x: Vec<f64>,
         grid_y: Vec<f64>,
-    ) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
+    ) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyBytes>)> {
         let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y };
-        let s = py.allow_threads(|| self.inner.sample(&opts));
-        (raw_bytes(py, &s.xyz), raw_bytes(py, &s.rec))
+        let s = py.allow_threads(|| self.inner.sample(&opts)).map_err(to_py)?;
+        Ok((raw_bytes(py, &s.xyz), raw_bytes(py, &s.rec)))
     }
 }
 
@@ -245,7 +247,11 @@ impl Corrector {
         let b = (a + max_lines.max(1)).min(n);
         let mut samples = self.spare.pop().map(|(s, _)| s).unwrap_or_default();
         let opts = &self.opts;
-        py.allow_threads(|| nc::sample::sample_range(&p.interp, opts, p.records_of_lines(a..b), &mut samples));
+        let r = py.allow_threads(|| nc::sample::sample_range(&p.interp, opts, p.records_of_lines(a..b), &mut samples));
+        if let Err(e) = r {
+            self.spare.push((samples, Vec::new()));
+            return Err(to_py(e));
+        }
         self.next_line = b;
         let r = (a, b, raw_bytes(py, &samples.xyz), raw_bytes(py, &samples.rec));
         self.current = Some(((a, b), samples));

@@ -39,7 +39,7 @@ fn main() {
         let b = (a + CHUNK).min(nl);
         let t = Instant::now();
         let recs = prog.records_of_lines(a..b);
-        nc::sample::sample_range(&prog.interp, &opts, recs, &mut s);
+        nc::sample::sample_range(&prog.interp, &opts, recs, &mut s).unwrap();
         t_samp += t.elapsed();
         let t = Instant::now();
         disp.clear();

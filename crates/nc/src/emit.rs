@@ -434,15 +434,20 @@ impl<'a> Emitter<'a> {
         // the output starts this block where the corrected path expects it
         let on_path = (0..3).all(|a| (self.st.epos[a] - (start[a] + d0[a])).abs() < half_mm);
         let keep_arc = rec.motion.is_arc() && uniform && on_path;
-        // a straight move whose corrected pieces all lie on one line is written as one move
+        // a straight move whose corrected pieces all lie on one line is written as one move; when
+        // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
+        // piece must also be where that one move puts it at the piece's fraction
         let only_xyz = rec.named & !0b111 == 0;
         let straight = !rec.motion.is_arc()
-            && only_xyz
             && (n == 1 || {
                 let e = target_at(n - 1, 1.0);
                 (0..n - 1).all(|k| {
                     let p = target_at(k, ts[k]);
-                    dist_to_segment(&p, &self.st.epos, &e) <= MERGE_TOL_MM
+                    if only_xyz {
+                        dist_to_segment(&p, &self.st.epos, &e) <= MERGE_TOL_MM
+                    } else {
+                        dist_at_fraction(&p, &self.st.epos, &e, ts[k]) <= MERGE_TOL_MM
+                    }
                 })
             });
         if straight || keep_arc {
@@ -610,6 +615,11 @@ fn dist_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 
     (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
 
+/// Distance from p to the point at fraction t of the segment a-b (XYZ).
+fn dist_at_fraction(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES], t: f64) -> f64 {
+    (0..3).map(|k| (p[k] - (a[k] + t * (b[k] - a[k]))).powi(2)).sum::<f64>().sqrt()
+}
+
 /// Where a block's words begin: after `/`, leading blanks and a leading N word.
 fn block_start(lx: &Lexed, li: usize) -> u32 {
     let line = &lx.lines[li];
@@ -633,7 +643,7 @@ mod tests {
         let l = lex(src.as_bytes()).unwrap();
         let it = interpret(&l).unwrap();
         let o = SampleOpts { chord_tol: 0.002, max_segment, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
-        let s = sample(&it, &o);
+        let s = sample(&it, &o).unwrap();
         let mut d = Vec::new();
         for p in s.xyz.chunks_exact(3) {
             d.extend_from_slice(&f(p[0], p[1], p[2]));
@@ -688,7 +698,7 @@ mod tests {
         let it = interpret(&l).unwrap();
         let o = SampleOpts { chord_tol: 0.002, max_segment: 0.7, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
         let field = |s: &Samples| s.xyz.chunks_exact(3).flat_map(|p| [0.01 * p[1], 0.0, 0.02 * p[0]]).collect::<Vec<f64>>();
-        let s = sample(&it, &o);
+        let s = sample(&it, &o).unwrap();
         let (whole, stats) = Emitter::new(src.as_bytes(), &l, &it).run(&s, &field(&s)).unwrap();
         let prog = crate::Program::parse(src.as_bytes().to_vec()).unwrap();
         for step in 1..4 {
@@ -696,7 +706,7 @@ mod tests {
             let (mut out, mut part) = (Vec::new(), Samples::default());
             for a in (0..l.lines.len()).step_by(step) {
                 let b = (a + step).min(l.lines.len());
-                crate::sample::sample_range(&it, &o, prog.records_of_lines(a..b), &mut part);
+                crate::sample::sample_range(&it, &o, prog.records_of_lines(a..b), &mut part).unwrap();
                 em.lines(a..b, &part, &field(&part), &mut out).unwrap();
             }
             assert_eq!(String::from_utf8(out).unwrap(), String::from_utf8(whole.clone()).unwrap(), "chunks of {step} lines");

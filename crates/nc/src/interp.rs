@@ -103,8 +103,11 @@ pub struct Interp {
     pub unsupported: Vec<Unsupported>,
     pub notes: Vec<Note>,
     pub summary: Summary,
-    /// Initial position (all NaN: a program does not know where the machine is).
+    /// Position before the first record (all NaN at a program's start: a program does not know
+    /// where the machine is).
     pub origin: [f64; NAXES],
+    /// Line index (0-based, from the program's start) of `line_record[0]`.
+    pub line_base: usize,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -119,6 +122,7 @@ struct Active {
     diameter: Option<(u32, usize)>,
     inverse_time: Option<(u32, usize)>,
     flow: Option<(u32, usize)>,
+    tool_offset: Option<(u32, usize)>,
 }
 
 impl Active {
@@ -133,6 +137,7 @@ impl Active {
             self.cutter_comp,
             self.canned,
             self.inverse_time,
+            self.tool_offset,
         ]
         .iter()
         .flatten()
@@ -148,6 +153,7 @@ enum Mode {
     None,
 }
 
+#[derive(Debug)]
 struct State {
     pos: [f64; NAXES],
     mode: Mode,
@@ -174,50 +180,127 @@ fn ierr(line: usize, col: usize, msg: impl Into<String>) -> NcError {
     NcError::Interpret { line: line + 1, col: col + 1, message: msg.into() }
 }
 
-/// Radius mismatch LinuxCNC accepts between start and end of a centre-format arc.
+/// How far an R-format arc's radius may fall short of half the chord (LinuxCNC's
+/// RADIUS_TOLERANCE: 0.00005 inch, 0.00127 mm; the same length in both units).
 const ARC_ABS_TOL_MM: f64 = 0.00005 * MM_PER_INCH;
-const ARC_REL_TOL: f64 = 0.001;
+/// Radius mismatch LinuxCNC 2.9 accepts between the start and end of a centre-format arc (a
+/// spiral): refused when the difference exceeds 100 × the absolute tolerance, or exceeds it and
+/// 0.1 % of the radius. The absolute tolerances are those `rs274` (linuxcnc-uspace 2.9) applies
+/// without an INI file, in program units, measured at its accept/refuse boundary and held by
+/// `tests/test_nc_parity.py`.
+const SPIRAL_ABS_TOL_MM: f64 = 0.028_284_271;
+const SPIRAL_ABS_TOL_INCH: f64 = 0.002_828_427;
+const SPIRAL_REL_TOL: f64 = 0.001;
+/// Radii below this are a zero-radius arc (LinuxCNC's radius tolerance).
+const ARC_MIN_RADIUS_MM: f64 = 0.00127;
 
 /// Interpret a lexed program.
 pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
-    let nlines = lx.lines.len();
-    let mut out = Interp {
-        records: Vec::with_capacity(nlines),
-        line_record: vec![u32::MAX; nlines],
-        origin: [f64::NAN; NAXES],
-        ..Default::default()
-    };
-    let mut st = State {
-        pos: [f64::NAN; NAXES],
-        mode: Mode::None,
-        plane: 0,
-        inch: false,
-        incremental: false,
-        arc_absolute: false,
-        active: Active::default(),
-    };
-    // No motion mode until the program names one, as in LinuxCNC.
-    let mut first_content_seen = false;
-    let mut percent_open = false;
+    let mut ip = Interpreter::new();
+    let mut it = ip.run(lx, 0)?;
+    it.unsupported = ip.unsupported;
+    it.notes = ip.notes;
+    it.summary = ip.summary;
+    Ok(it)
+}
 
-    for li in 0..nlines {
-        let line = &lx.lines[li];
-        let words = lx.line_words(li);
+/// The interpreter's state between runs of lines: a program read piece by piece (a stream) is
+/// interpreted run by run, each continuing where the one before ended.
+#[derive(Debug)]
+pub struct Interpreter {
+    st: State,
+    /// Constructs reported once with every block they affect (E words, unknown M codes).
+    grouped: Vec<(String, usize)>,
+    first_content_seen: bool,
+    percent_open: bool,
+    /// Unsupported constructs, notes and the summary of every run so far.
+    pub unsupported: Vec<Unsupported>,
+    pub notes: Vec<Note>,
+    pub summary: Summary,
+}
+
+impl Default for Interpreter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Interpreter {
+    /// The state at the start of a program (no motion mode, every position unknown).
+    pub fn new() -> Self {
+        Interpreter {
+            st: State {
+                pos: [f64::NAN; NAXES],
+                mode: Mode::None,
+                plane: 0,
+                inch: false,
+                incremental: false,
+                arc_absolute: false,
+                active: Active::default(),
+            },
+            grouped: Vec::new(),
+            first_content_seen: false,
+            percent_open: false,
+            unsupported: Vec::new(),
+            notes: Vec::new(),
+            summary: Summary::default(),
+        }
+    }
+
+    /// The program has ended (M2, M30 or a closing `%`): later lines are not read.
+    pub fn ended(&self) -> bool {
+        self.summary.end_line.is_some()
+    }
+
+    /// Interpret the lines of `lx`, the program's lines from `line_base` on. The records of the
+    /// run come back (their `line` counts from the program's start; `origin` is the position
+    /// before the run); unsupported constructs, notes and the summary accumulate in `self`.
+    pub fn run(&mut self, lx: &Lexed, line_base: usize) -> Result<Interp, NcError> {
+        let nlines = lx.lines.len();
+        let mut out = Interp {
+            records: Vec::with_capacity(nlines),
+            line_record: vec![u32::MAX; nlines],
+            origin: self.st.pos,
+            line_base,
+            unsupported: std::mem::take(&mut self.unsupported),
+            notes: std::mem::take(&mut self.notes),
+            summary: std::mem::take(&mut self.summary),
+        };
+        let r = if out.summary.end_line.is_some() { Ok(()) } else { self.lines(lx, line_base, &mut out) };
+        self.unsupported = std::mem::take(&mut out.unsupported);
+        self.notes = std::mem::take(&mut out.notes);
+        self.summary = std::mem::take(&mut out.summary);
+        r.map(|_| out)
+    }
+
+    fn lines(&mut self, lx: &Lexed, line_base: usize, out: &mut Interp) -> Result<(), NcError> {
+    let nlines = lx.lines.len();
+    let st = &mut self.st;
+    let grouped = &mut self.grouped;
+    let first_content_seen = &mut self.first_content_seen;
+    let percent_open = &mut self.percent_open;
+    for lj in 0..nlines {
+        let li = line_base + lj;
+        let line = &lx.lines[lj];
+        let words = lx.line_words(lj);
         if line.percent {
-            if !first_content_seen {
-                percent_open = true;
-                first_content_seen = true;
+            if !*first_content_seen {
+                *percent_open = true;
+                *first_content_seen = true;
                 continue;
-            } else if percent_open {
+            } else if *percent_open {
                 out.summary.end_line = Some(li as u32);
                 break;
             }
             continue;
         }
+        if let Some(e) = line.error {
+            return Err(lx.errors[e as usize].clone());
+        }
         if words.is_empty() && line.opaque.is_none() {
             continue;
         }
-        first_content_seen = true;
+        *first_content_seen = true;
         if line.block_delete {
             out.summary.block_delete_lines += 1;
         }
@@ -230,7 +313,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 Opaque::OWordFlow => "O-word subroutine or control flow",
                 Opaque::Polar => "polar coordinates (@ ^)",
             };
-            let idx = push_unsupported(&mut out, li, c, construct);
+            let idx = push_unsupported(out, li, c, construct);
             if kind == Opaque::OWordFlow && st.active.flow.is_none() {
                 st.active.flow = Some((li as u32, idx));
             }
@@ -238,7 +321,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
             let assignment_only = words.is_empty() && kind == Opaque::Expression;
             if !assignment_only || kind == Opaque::Polar {
                 st.pos = [f64::NAN; NAXES];
-                push_record(&mut out, &st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
                 out.unsupported[idx].blocks += 1;
             }
             continue;
@@ -256,7 +339,17 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         let mut nm = 0usize;
         let mut named: u16 = 0;
         let mut l_word: Option<f64> = None;
+        let mut e_word: Option<usize> = None;
+        let mut seen: u32 = 0;
         for w in words {
+            // LinuxCNC reads each letter once per block (G and M words excepted)
+            if w.letter.is_ascii_uppercase() && !matches!(w.letter, b'G' | b'M') {
+                let bit = 1u32 << (w.letter - b'A');
+                if seen & bit != 0 {
+                    return Err(ierr(li, col(w), format!("more than one {} word in one block", w.letter as char)));
+                }
+                seen |= bit;
+            }
             match w.letter {
                 b'G' if ng < gs.len() => {
                     gs[ng] = (code(w), col(w));
@@ -283,6 +376,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 b'R' => r = Some((w.value, col(w))),
                 b'P' => p = Some(w.value),
                 b'L' => l_word = Some(w.value),
+                b'E' => e_word = Some(col(w)),
                 b'T' => {
                     let t = w.value.round() as u32;
                     if !out.summary.tools.contains(&t) {
@@ -290,6 +384,60 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                     }
                 }
                 _ => {}
+            }
+        }
+
+        // two codes of one modal group in a block are an error, as in LinuxCNC
+        for a in 0..ng {
+            for b in a + 1..ng {
+                if let (Some(ga), Some(gb)) = (g_group(gs[a].0), g_group(gs[b].0)) {
+                    if ga == gb && gs[a].0 != 800 && gs[b].0 != 800 {
+                        return Err(ierr(li, gs[b].1, format!("{} and {} are of one modal group; a block may have one", g_name(gs[a].0), g_name(gs[b].0))));
+                    }
+                }
+            }
+        }
+        if nm > 4 {
+            return Err(ierr(li, ms[4].1, "more than four M words in one block"));
+        }
+        for a in 0..nm {
+            for b in a + 1..nm {
+                let (ma, mb) = (ms[a].0, ms[b].0);
+                if let (Some(ga), Some(gb)) = (m_group(ma), m_group(mb)) {
+                    if ga == gb {
+                        return Err(ierr(li, ms[b].1, format!("M{ma} and M{mb} are of one modal group; a block may have one")));
+                    }
+                }
+            }
+        }
+        // axis words used by a code other than a motion (G10, G28, G30, G43.1, G52, G92, an M code
+        // the engine does not know, ...) do not move along the motion mode
+        let axis_user_count = gs[..ng].iter().filter(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500)).count();
+        if axis_user_count > 0 && named != 0 {
+            if let Some(&(c, gc)) = gs[..ng].iter().find(|&&(c, _)| g_group(c) == Some(1) && c != 800) {
+                let user = gs[..ng].iter().find(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500)).unwrap().0;
+                return Err(ierr(li, gc, format!("{} and {} in one block both use the axis words", g_name(user), g_name(c))));
+            }
+        }
+        // an E word: a 3D printer's extruder axis (LinuxCNC reads E only for M66/M67/M68 and the
+        // G70/G76 cycles); `G92 E0` alone resets the extruder and moves nothing
+        let g92_e_only = e_word.is_some() && named == 0 && ng == 1 && gs[0].0 == 920;
+        if g92_e_only {
+            ng = 0;
+        }
+        let mut e_construct: Option<usize> = None;
+        if let Some(ec) = e_word {
+            let e_reader = ms[..nm].iter().any(|&(m, _)| matches!(m, 66..=68)) || gs[..ng].iter().any(|&(c, _)| matches!(c, 700 | 760));
+            if !e_reader && !g92_e_only {
+                e_construct = Some(grouped_unsupported(out, grouped, li, ec, "E word (a 3D printer's extruder axis, not RS274NGC)"));
+            }
+        }
+        // M codes the engine does not know may do anything, also with the axis words of the block
+        let mut unknown_m: Option<usize> = None;
+        for &(m, mc) in &ms[..nm] {
+            if m_group(m).is_none() && !matches!(m, 98 | 99) {
+                unknown_m = Some(grouped_unsupported(out, grouped, li, mc, &format!("M code M{m} the engine does not know")));
+                break;
             }
         }
 
@@ -306,6 +454,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 10 => motion_word = Some((Mode::Motion(Motion::Feed), gc)),
                 20 => motion_word = Some((Mode::Motion(Motion::ArcCw), gc)),
                 30 => motion_word = Some((Mode::Motion(Motion::ArcCcw), gc)),
+                // (G80 is handled below; its group shares no conflict with the other motions)
                 40 => {}                                   // dwell
                 170 => st.plane = 0,
                 180 => st.plane = 1,
@@ -319,11 +468,19 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 400 => st.active.cutter_comp = None,
                 410 | 411 | 420 | 421 => {
                     if st.active.cutter_comp.is_none() {
-                        let idx = push_unsupported(&mut out, li, gc, &format!("cutter compensation {}", g_name(c)));
+                        let idx = push_unsupported(out, li, gc, &format!("cutter compensation {}", g_name(c)));
                         st.active.cutter_comp = Some((li as u32, idx));
                     }
                 }
-                430 | 431 | 432 | 490 => {}               // tool length: program coordinates are the tool tip
+                // tool length: program coordinates are the tool tip; G43.1 takes its offsets from
+                // the axis words, and rs274 then traces the spindle, not the tip
+                430 | 490 => st.active.tool_offset = None,
+                432 => {}
+                431 => {
+                    let idx = push_unsupported(out, li, gc, "dynamic tool length offset G43.1");
+                    st.active.tool_offset = Some((li as u32, idx));
+                    nonmodal_axis_user = Some((c, idx));
+                }
                 540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => {
                     let o = c as u16;
                     if !out.summary.work_offsets.contains(&o) {
@@ -335,13 +492,16 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 940 | 950 => st.active.inverse_time = None,
                 930 => {
                     if st.active.inverse_time.is_none() {
-                        let idx = push_unsupported(&mut out, li, gc, "inverse-time feed G93");
+                        let idx = push_unsupported(out, li, gc, "inverse-time feed G93");
                         st.active.inverse_time = Some((li as u32, idx));
                     }
                 }
                 960 | 970 | 980 | 990 => {}                // spindle mode, canned return level
+                // G80 beside another motion code leaves that one in force, as in LinuxCNC
                 800 => {
-                    motion_word = Some((Mode::None, gc));
+                    if motion_word.is_none() {
+                        motion_word = Some((Mode::None, gc));
+                    }
                 }
                 730 | 740 | 760 | 810 | 820 | 830 | 840 | 850 | 860 | 870 | 880 | 890 | 841 | 842 => {
                     motion_word = Some((Mode::Canned(c), gc));
@@ -349,12 +509,12 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 80 => st.active.diameter = None,
                 70 => {
                     if st.active.diameter.is_none() {
-                        let idx = push_unsupported(&mut out, li, gc, "lathe diameter mode G7");
+                        let idx = push_unsupported(out, li, gc, "lathe diameter mode G7");
                         st.active.diameter = Some((li as u32, idx));
                     }
                 }
                 920 | 520 => {
-                    let idx = push_unsupported(&mut out, li, gc, &format!("coordinate shift {}", g_name(c)));
+                    let idx = push_unsupported(out, li, gc, &format!("coordinate shift {}", g_name(c)));
                     if st.active.shift.is_none() {
                         st.active.shift = Some((li as u32, idx));
                     }
@@ -363,12 +523,12 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 // G92.1 / G92.2 clear or suspend G92 offsets: the frame becomes the plain work offset
                 921 | 922 => st.active.shift = None,
                 923 => {
-                    let idx = push_unsupported(&mut out, li, gc, "coordinate shift G92.3");
+                    let idx = push_unsupported(out, li, gc, "coordinate shift G92.3");
                     st.active.shift = Some((li as u32, idx));
                 }
                 100 => {
                     let l = l_word.unwrap_or(0.0).round() as i32;
-                    let idx = push_unsupported(&mut out, li, gc, &format!("offset setting G10 L{l}"));
+                    let idx = push_unsupported(out, li, gc, &format!("offset setting G10 L{l}"));
                     if matches!(l, 2 | 20) && st.active.shift.is_none() {
                         st.active.shift = Some((li as u32, idx));
                     }
@@ -378,22 +538,30 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 // G28.1 / G30.1 store the position and move nothing; with axis words LinuxCNC's
                 // reading is not the documented one, so those are reported
                 281 | 301 if named != 0 => {
-                    let idx = push_unsupported(&mut out, li, gc, &format!("{} with axis words", g_name(c)));
+                    let idx = push_unsupported(out, li, gc, &format!("{} with axis words", g_name(c)));
                     nonmodal_axis_user = Some((c, idx));
                 }
                 281 | 301 => {}
                 680 => {
-                    let idx = push_unsupported(&mut out, li, gc, "coordinate rotation G68");
+                    let idx = push_unsupported(out, li, gc, "coordinate rotation G68");
                     st.active.rotation = Some((li as u32, idx));
                 }
                 690 => st.active.rotation = None,
                 510 => {
-                    let idx = push_unsupported(&mut out, li, gc, "scaling G51");
+                    let idx = push_unsupported(out, li, gc, "scaling G51");
                     st.active.scaling = Some((li as u32, idx));
+                }
+                // G50 with axis words is a Fanuc lathe's coordinate setting; alone, scaling off
+                500 if named != 0 => {
+                    let idx = push_unsupported(out, li, gc, "coordinate setting G50 (Fanuc lathe)");
+                    if st.active.shift.is_none() {
+                        st.active.shift = Some((li as u32, idx));
+                    }
+                    nonmodal_axis_user = Some((c, idx));
                 }
                 500 => st.active.scaling = None,
                 160 => {
-                    let idx = push_unsupported(&mut out, li, gc, "polar coordinates G16");
+                    let idx = push_unsupported(out, li, gc, "polar coordinates G16");
                     st.active.polar = Some((li as u32, idx));
                 }
                 150 => st.active.polar = None,
@@ -406,7 +574,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                         700 | 710 | 720 | 711 | 721 => "lathe cycle",
                         _ => "unknown G code",
                     };
-                    let idx = push_unsupported(&mut out, li, gc, &format!("{what} {}", g_name(c)));
+                    let idx = push_unsupported(out, li, gc, &format!("{what} {}", g_name(c)));
                     // these may move the machine somewhere the engine does not trace
                     untraced = Some(idx);
                 }
@@ -415,7 +583,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         for &(m, mc) in &ms[..nm] {
             match m {
                 98 | 99 => {
-                    let idx = push_unsupported(&mut out, li, mc, &format!("subprogram M{m}"));
+                    let idx = push_unsupported(out, li, mc, &format!("subprogram M{m}"));
                     if st.active.flow.is_none() {
                         st.active.flow = Some((li as u32, idx));
                     }
@@ -434,7 +602,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         if let Some((m, mc)) = motion_word {
             if let Mode::Canned(c) = m {
                 // canned cycles stay modal until G80
-                let idx = push_unsupported(&mut out, li, mc, &format!("canned cycle {}", g_name(c)));
+                let idx = push_unsupported(out, li, mc, &format!("canned cycle {}", g_name(c)));
                 st.active.canned = Some((li as u32, idx));
             } else {
                 st.active.canned = None;
@@ -444,7 +612,19 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         if let Some(idx) = untraced {
             st.pos = [f64::NAN; NAXES];
             st.mode = Mode::None;
-            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+            out.unsupported[idx].blocks += 1;
+            if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                out.summary.end_line = Some(li as u32);
+                break;
+            }
+            continue;
+        }
+
+        if let Some(idx) = unknown_m {
+            // what it does with the machine, and with the block's axis words, is not known
+            st.pos = [f64::NAN; NAXES];
+            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             out.unsupported[idx].blocks += 1;
             if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
                 out.summary.end_line = Some(li as u32);
@@ -474,7 +654,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
         if let Some((_c, idx)) = nonmodal_axis_user {
             if any_axis || matches!(_c, 280 | 300 | 281 | 301) {
                 st.pos = [f64::NAN; NAXES];
-                push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                 out.unsupported[idx].blocks += 1;
             }
             continue;
@@ -487,13 +667,13 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 return Err(ierr(li, gc, format!("{} and a motion code in one block both use the axis words", g_name(c))));
             }
             st.pos = target(&st.pos, &axis, st.incremental, unit);
-            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             for k in 0..NAXES {
                 if named == 0 || named & (1 << k) != 0 {
                     st.pos[k] = f64::NAN;
                 }
             }
-            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             out.notes.push(Note {
                 line: li as u32,
                 message: format!(
@@ -533,17 +713,17 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 }
             }
             st.pos = end;
-            push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             continue;
         }
 
         let blocker = st.active.first();
         match st.mode {
             Mode::None => {
-                let idx = push_unsupported(&mut out, li, axis_col, "axis words with no motion mode (G80 or none yet)");
+                let idx = push_unsupported(out, li, axis_col, "axis words with no motion mode (G80 or none yet)");
                 out.unsupported[idx].blocks += 1;
                 st.pos = [f64::NAN; NAXES];
-                push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             }
             Mode::Canned(c) => {
                 if let Some((_, idx)) = st.active.canned {
@@ -553,7 +733,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                 let _ = c;
                 end[2] = f64::NAN;
                 st.pos = end;
-                push_record(&mut out, &st, li, Motion::Other, false, named, [0.0; 2], 1);
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             }
             Mode::Motion(m) => {
                 let mut center = [0.0; 2];
@@ -617,29 +797,37 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
                         }
                         let r1 = ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2)).sqrt();
                         let r2 = ((e[0] - center[0]).powi(2) + (e[1] - center[1]).powi(2)).sqrt();
-                        let abs_err = (r1 - r2).abs();
-                        if abs_err > ARC_ABS_TOL_MM && abs_err / r1.max(r2) > ARC_REL_TOL {
+                        let abs_err = (r1 - r2).abs() / unit;
+                        let spiral = if st.inch { SPIRAL_ABS_TOL_INCH } else { SPIRAL_ABS_TOL_MM };
+                        if abs_err > 100.0 * spiral || (abs_err > spiral && abs_err * unit / r1.max(r2) > SPIRAL_REL_TOL) {
                             return Err(ierr(li, gcol, format!(
                                 "radius to the end of the arc ({:.4}) differs from radius to its start ({:.4})",
                                 r2 / unit, r1 / unit)));
                         }
-                        if r1 == 0.0 && r2 == 0.0 {
+                        if r1 < ARC_MIN_RADIUS_MM || r2 < ARC_MIN_RADIUS_MM {
                             return Err(ierr(li, gcol, "arc with zero radius"));
                         }
                     }
                 }
                 // correctable when every axis it moves has a known end (a straight move from an
                 // unknown start is corrected at its end only); arcs need their centre
+                // an arc, and an axis other than XYZ that the block moves, needs its start too: their
+                // pieces are interpolated from it (a move is never changed in kind from an unknown start)
                 let known = (0..NAXES).all(|k| {
                     let needed = k < 3 || named & (1 << k) != 0;
                     !needed || end[k].is_finite()
-                }) && center.iter().all(|v| v.is_finite());
-                let supported = blocker.is_none();
+                }) && center.iter().all(|v| v.is_finite())
+                    && (!m.is_arc() || st.pos[..3].iter().all(|v| v.is_finite()))
+                    && (3..NAXES).all(|k| named & (1 << k) == 0 || st.pos[k].is_finite());
+                let supported = blocker.is_none() && e_construct.is_none();
                 if let Some(idx) = blocker {
                     out.unsupported[idx].blocks += 1;
                 }
+                if let Some(idx) = e_construct {
+                    out.unsupported[idx].blocks += 1;
+                }
                 st.pos = end;
-                push_record(&mut out, &st, li, m, supported && known, named, center, turns);
+                push_record(out, st, li, m, supported && known, named, center, turns);
                 let s = &mut out.summary;
                 s.counts[m as usize] += 1;
                 if m.is_arc() {
@@ -656,7 +844,60 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
             break;
         }
     }
-    Ok(out)
+    Ok(())
+    }
+}
+
+/// Modal group of a G code (code × 10) as LinuxCNC groups them; None for codes the engine does
+/// not know (those are reported on their own).
+fn g_group(c: i32) -> Option<u8> {
+    Some(match c {
+        0 | 10 | 20 | 30 | 50 | 51 | 52 | 330 | 331 | 382..=385 | 730 | 740 | 760 | 800..=890 => 1,
+        170 | 180 | 190 | 171 | 181 | 191 => 2,
+        900 | 910 => 3,
+        901 | 911 => 4,
+        930 | 940 | 950 => 5,
+        200 | 210 => 6,
+        400 | 410 | 411 | 420 | 421 => 7,
+        430 | 431 | 432 | 490 => 8,
+        980 | 990 => 10,
+        540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => 12,
+        610 | 611 | 640 => 13,
+        960 | 970 => 14,
+        70 | 80 => 15,
+        40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920 | 921 | 922 | 923 => 0,
+        // other dialects' modal codes the engine reports
+        500 | 510 => 16,
+        680 | 690 => 17,
+        150 | 160 => 18,
+        _ => return None,
+    })
+}
+
+/// Modal group of an M code as LinuxCNC groups them; None for codes the engine does not know.
+fn m_group(m: i32) -> Option<u8> {
+    Some(match m {
+        0 | 1 | 2 | 30 | 60 => 4,
+        3 | 4 | 5 => 7,
+        7 | 8 | 9 => 8,
+        48..=53 => 9,
+        6 | 61 => 6,
+        19 => 11,
+        62..=68 => 5,
+        70..=73 => 12,
+        100..=199 => 10,
+        _ => return None,
+    })
+}
+
+/// An unsupported construct reported once, its blocks counted over the program.
+fn grouped_unsupported(out: &mut Interp, grouped: &mut Vec<(String, usize)>, li: usize, col: usize, construct: &str) -> usize {
+    if let Some((_, idx)) = grouped.iter().find(|(c, _)| c == construct) {
+        return *idx;
+    }
+    let idx = push_unsupported(out, li, col, construct);
+    grouped.push((construct.to_string(), idx));
+    idx
 }
 
 fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) -> usize {
@@ -679,7 +920,7 @@ fn target(pos: &[f64; NAXES], axis: &[Option<f64>; NAXES], incremental: bool, un
 }
 
 fn push_record(out: &mut Interp, st: &State, li: usize, motion: Motion, supported: bool, named: u16, center: [f64; 2], turns: u32) {
-    out.line_record[li] = out.records.len() as u32;
+    out.line_record[li - out.line_base] = out.records.len() as u32;
     out.records.push(Record {
         line: li as u32,
         motion,

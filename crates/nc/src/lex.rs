@@ -57,6 +57,10 @@ pub struct Line {
     pub comment_start: u32,
     /// The rest of the line from some point on could not be lexed into words.
     pub opaque: Option<(Opaque, u32)>,
+    /// The line could not be read: index into [`Lexed::errors`]. The interpreter reports it when
+    /// the program reaches the line (text after M2/M30 or a closing `%` is never read, as in
+    /// LinuxCNC).
+    pub error: Option<u32>,
 }
 
 /// Number style of a program, read from its axis words.
@@ -84,6 +88,8 @@ pub struct Lexed {
     pub style: NumberStyle,
     /// The most common line ending: `\r\n` when most lines end so.
     pub crlf: bool,
+    /// Lines that could not be read: the error of each (see [`Line::error`]).
+    pub errors: Vec<NcError>,
 }
 
 impl Lexed {
@@ -222,9 +228,16 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
         let mut i = pos;
         let mut first = true;
         let mut prev_word_end: Option<usize> = None;
+        let mut bad: Option<NcError> = None;
         while i < end {
             let c = s[i];
             match c {
+                b'\r' if s[i + 1..end].iter().any(|&c| !matches!(c, b' ' | b'\t' | b'\r' | 0x0c)) => {
+                    // LinuxCNC reads a lone CR as a blank, so CR-only line ends make one block of
+                    // the whole file: refused rather than guessed
+                    bad = Some(err(lineno, i - pos, "carriage return inside a line (CR-only line ends?); LinuxCNC does not end a block there: convert the line ends to LF or CRLF"));
+                    break;
+                }
                 b' ' | b'\t' | b'\r' | 0x0c => {
                     i += 1;
                     continue;
@@ -250,7 +263,10 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
                             line.comment = true;
                             i += k + 1;
                         }
-                        None => return Err(err(lineno, i - pos, "comment '(' is not closed on this line")),
+                        None => {
+                            bad = Some(err(lineno, i - pos, "comment '(' is not closed on this line"));
+                            break;
+                        }
                     }
                 }
                 b';' => {
@@ -294,6 +310,10 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
                         continue;
                     }
                     match number(s, j) {
+                        Some((_, _, k, ..)) if k + 1 < end && matches!(s[k], b'e' | b'E') && (s[k + 1].is_ascii_digit() || (matches!(s[k + 1], b'+' | b'-') && k + 2 < end && s[k + 2].is_ascii_digit())) => {
+                            bad = Some(err(lineno, k - pos, "a number with an exponent (such as 1e3) is not an RS274NGC number; write it out in full"));
+                            break;
+                        }
                         Some((value, decimals, k, no_lead, trailing, bare)) => {
                             if letter == b'O' {
                                 // a keyword after the number makes it control flow
@@ -343,11 +363,8 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
                             i = k;
                         }
                         None => {
-                            return Err(err(
-                                lineno,
-                                j - pos,
-                                format!("expected a number after '{}'", letter as char),
-                            ))
+                            bad = Some(err(lineno, j - pos, format!("expected a number after '{}'", letter as char)));
+                            break;
                         }
                     }
                 }
@@ -357,10 +374,15 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
                     } else {
                         format!("byte 0x{c:02x}")
                     };
-                    return Err(err(lineno, i - pos, format!("unexpected {shown}; expected a word such as G1 or X10.5, a comment or a line end")));
+                    bad = Some(err(lineno, i - pos, format!("unexpected {shown}; expected a word such as G1 or X10.5, a comment or a line end")));
+                    break;
                 }
             }
             first = false;
+        }
+        if let Some(e) = bad {
+            line.error = Some(out.errors.len() as u32);
+            out.errors.push(e);
         }
         out.lines.push(line);
         pos = eol_end;
@@ -403,14 +425,20 @@ mod tests {
 
     #[test]
     fn errors_have_positions() {
-        match lex(b"G1 X1\nG1 X\n") {
-            Err(NcError::Parse { line, col, .. }) => assert_eq!((line, col), (2, 5)),
-            other => panic!("{other:?}"),
-        }
-        match lex(b"G1 (open\n") {
-            Err(NcError::Parse { line, col, .. }) => assert_eq!((line, col), (1, 4)),
-            other => panic!("{other:?}"),
-        }
+        let first_error = |src: &[u8]| {
+            let l = lex(src).unwrap();
+            let i = l.lines.iter().find_map(|x| x.error).expect("an error");
+            match &l.errors[i as usize] {
+                NcError::Parse { line, col, .. } => (*line, *col),
+                other => panic!("{other:?}"),
+            }
+        };
+        assert_eq!(first_error(b"G1 X1\nG1 X\n"), (2, 5));
+        assert_eq!(first_error(b"G1 (open\n"), (1, 4));
+        assert_eq!(first_error(b"G1 X1e3\n"), (1, 6));
+        assert_eq!(first_error(b"G0 X0\rG1 X1\r"), (1, 6));
+        // a CR before the line end is a blank, as in LinuxCNC
+        assert!(lex(b"G0 X0\r\r\nG1 X1 \r\n").unwrap().errors.is_empty());
     }
 
     #[test]

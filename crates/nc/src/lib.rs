@@ -27,7 +27,7 @@ impl Program {
     }
 
     /// Sample the program's blocks.
-    pub fn sample(&self, opts: &sample::SampleOpts) -> sample::Samples {
+    pub fn sample(&self, opts: &sample::SampleOpts) -> Result<sample::Samples, NcError> {
         sample::sample(&self.interp, opts)
     }
 

@@ -1,8 +1,14 @@
 //! Toolpath sampler: linear moves split to a maximum segment length, arcs (any plane, helical)
 //! linearised by a chord tolerance, and every piece split again where it crosses a grid line.
 
+use crate::error::NcError;
 use crate::interp::{Interp, Motion, Record, NAXES, PLANE_AXES};
 use std::f64::consts::PI;
+
+/// Most pieces one block may be cut into. A block that would need more (a coordinate of 1e20, an
+/// arc of a billion turns, a segment length of a nanometre) is refused at its line before any
+/// memory is taken for it.
+pub const MAX_PIECES_PER_BLOCK: f64 = 1_000_000.0;
 
 /// Sampling options (lengths in mm).
 #[derive(Clone, Debug)]
@@ -102,13 +108,15 @@ fn pieces_for(len: f64, max: f64) -> f64 {
 }
 
 /// Number of pieces for an arc.
-pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> usize {
+pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> f64 {
     let (_, d, r0, r1) = geom;
     let r = r0.max(r1);
     let ad = d.abs();
     let mut n = (ad / (PI / 2.0)).ceil().max(1.0);
     if r > opts.chord_tol {
-        let dth = 2.0 * (1.0 - opts.chord_tol / r).acos();
+        // the angle whose chord stays within the tolerance: 1 - cos(θ/2) = tol / r, written
+        // with asin so that it keeps its precision for tolerances far below the radius
+        let dth = 4.0 * (opts.chord_tol / (2.0 * r)).sqrt().asin();
         if dth > 0.0 {
             n = n.max((ad / dth).ceil());
         }
@@ -117,7 +125,17 @@ pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> usi
     if opts.max_segment > 0.0 {
         n = n.max(pieces_for(len, opts.max_segment));
     }
-    n as usize
+    n
+}
+
+fn too_many(rec: &Record, n: f64) -> NcError {
+    NcError::Interpret {
+        line: rec.line as usize + 1,
+        col: 1,
+        message: format!(
+            "this move would be cut into {n:.3e} pieces, more than the {MAX_PIECES_PER_BLOCK:.0} allowed for one block; check its coordinates, or raise the segment length or chord tolerance"
+        ),
+    }
 }
 
 fn traceable(rec: &Record) -> bool {
@@ -125,14 +143,14 @@ fn traceable(rec: &Record) -> bool {
 }
 
 /// Sample the blocks of an interpreted program.
-pub fn sample(it: &Interp, opts: &SampleOpts) -> Samples {
+pub fn sample(it: &Interp, opts: &SampleOpts) -> Result<Samples, NcError> {
     let mut s = Samples::default();
-    sample_range(it, opts, 0..it.records.len(), &mut s);
-    s
+    sample_range(it, opts, 0..it.records.len(), &mut s)?;
+    Ok(s)
 }
 
 /// Sample records `recs` into `s`, replacing what it held (its buffers are reused).
-pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>, s: &mut Samples) {
+pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>, s: &mut Samples) -> Result<(), NcError> {
     s.xyz.clear();
     s.t.clear();
     s.rec.clear();
@@ -191,6 +209,10 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
             let geom = arc_sweep(rec, &start);
             let an = PLANE_AXES[rec.plane as usize][2];
             let n = arc_pieces(geom, rec.end[an] - start[an], opts);
+            if !(n <= MAX_PIECES_PER_BLOCK) {
+                return Err(too_many(rec, n));
+            }
+            let n = n as usize;
             for k in 1..=n {
                 let t = k as f64 / n as f64;
                 let p = if k == n { end } else { arc_point(rec, &start, geom, t) };
@@ -198,7 +220,11 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
             }
         } else {
             let len = ((end[0] - prev[0]).powi(2) + (end[1] - prev[1]).powi(2) + (end[2] - prev[2]).powi(2)).sqrt();
-            let n = if opts.max_segment > 0.0 { pieces_for(len, opts.max_segment).max(1.0) as usize } else { 1 };
+            let n = if opts.max_segment > 0.0 { pieces_for(len, opts.max_segment).max(1.0) } else { 1.0 };
+            if !(n <= MAX_PIECES_PER_BLOCK) {
+                return Err(too_many(rec, n));
+            }
+            let n = n as usize;
             let s0 = prev;
             for k in 1..=n {
                 let t = k as f64 / n as f64;
@@ -212,6 +238,7 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
         }
         s.range.push((first as u32, (s.t.len() - first) as u32));
     }
+    Ok(())
 }
 
 /// Fractions u in (0, 1) where the segment a→b crosses one of the sorted lines.
@@ -246,7 +273,7 @@ mod tests {
         let src = b"G0 X10 Y0 Z0\nG3 X10 Y0 I-10 J0\n";
         let l = lex(src).unwrap();
         let it = interpret(&l).unwrap();
-        let s = sample(&it, &opts());
+        let s = sample(&it, &opts()).unwrap();
         let n = s.t.len();
         // full circle of radius 10: pieces from the chord tolerance 0.002 and the 1 mm length
         let dth = 2.0 * (1.0f64 - 0.002 / 10.0).acos();
@@ -267,7 +294,7 @@ mod tests {
         o.max_segment = 100.0;
         o.grid_x = vec![0.0, 1.0, 2.0, 3.0, 4.0];
         o.grid_y = vec![0.0, 1.0];
-        let s = sample(&it, &o);
+        let s = sample(&it, &o).unwrap();
         let xs: Vec<f64> = (0..s.t.len()).map(|k| s.xyz[3 * k]).collect();
         assert_eq!(xs, vec![1.0, 2.0, 3.0, 3.5]);
     }

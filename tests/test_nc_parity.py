@@ -1,0 +1,200 @@
+"""The engine against LinuxCNC's rs274 on the constructs where a program could come out silently
+wrong: each is either run as rs274 runs it or refused at its line with the construct named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import needs_rs274
+from ncadapt import InputError, fields, nc
+from ncadapt.errors import RefusedError
+from rs274 import canonical
+
+pytestmark = [needs_rs274, pytest.mark.rs274]
+
+ZERO = fields.Shift((0, 0, 0))
+
+
+def _write(tmp_path, src: str | bytes, name="p.ngc"):
+    p = tmp_path / name
+    p.write_bytes(src.encode() if isinstance(src, str) else src)
+    return p
+
+
+def _run(tmp_path, src: str, name="c.ngc"):
+    return canonical(_write(tmp_path, src, name))
+
+
+# ------------------------------------------------------------------------------------------ axes
+@pytest.mark.parametrize("axis", list("ABCUVW"))
+def test_a_split_move_carries_its_share_of_another_axis(tmp_path, axis):
+    """G1 X10 A90 cut into four pieces: each piece ends at its quarter of A, as LinuxCNC moves
+    every axis linearly together (closed form), and rs274 runs the output."""
+    src = f"G21 G90 G0 X0 Y0 Z0.2 {axis}0\nG1 X10 Y0 {axis}90 F1200\nM2\n"
+    out = nc.read(_write(tmp_path, src)).correct(fields.Shift((0, 0, 0.01)), max_segment=2.5)
+    text = out.text.splitlines()
+    assert [ln.split(axis)[1].split()[0] for ln in text[1:5]] == ["22.5", "45.0", "67.5", "90.0"]
+    if axis in "ABC":  # rs274 without a machine configuration has no U V W axes
+        canon = canonical(out.write(tmp_path / "c.ngc"))
+        assert canon.error is None, canon.error
+        feeds = canon.ends[[k == "feed" for k in canon.kinds]]
+        np.testing.assert_allclose(feeds[:, :3], [[2.5 * k, 0, 0.21] for k in (1, 2, 3, 4)], atol=1e-4)
+        np.testing.assert_allclose(feeds[:, "ABC".index(axis) + 3], [22.5, 45, 67.5, 90], atol=1e-4)
+
+
+@pytest.mark.parametrize("axis", list("ABCUVW"))
+def test_zero_shift_with_another_axis_is_byte_identical(tmp_path, axis):
+    src = f"G21 G0 X0 Y0 Z0 {axis}0\nG1 X10 {axis}5 F100\nG2 X20 Y0 I5 J0 {axis}7\nM2\n"
+    prog = nc.read(_write(tmp_path, src))
+    assert prog.correct(ZERO).data == prog.data
+
+
+def test_a_field_moves_xyz_and_keeps_a_interpolated(tmp_path):
+    """A field that varies along the move: pieces are not merged, A follows X linearly."""
+    src = "G21 G90 G0 X0 Y0 Z0 A0\nG1 X10 A90 F100\nM2\n"
+    out = nc.read(_write(tmp_path, src)).correct(lambda p: np.column_stack([0 * p[:, 0], 0 * p[:, 0], 0.001 * p[:, 0] ** 2]))
+    canon = canonical(out.write(tmp_path / "c.ngc"))
+    assert canon.error is None
+    feeds = canon.ends[[k == "feed" for k in canon.kinds]]
+    assert len(feeds) == 10
+    np.testing.assert_allclose(feeds[:, 3], 9 * feeds[:, 0], atol=2e-4)
+    np.testing.assert_allclose(feeds[:, 2], 0.001 * feeds[:, 0] ** 2, atol=1e-4)
+
+
+def test_another_axis_from_an_unknown_start_is_kept_and_warned(tmp_path):
+    """A never set before the move: its pieces cannot be interpolated, so the block is copied."""
+    src = "G21 G90 G0 X0 Y0 Z0.2\nG1 X10 Y0 A90 F1200\nM2\n"
+    prog = nc.read(_write(tmp_path, src))
+    out = prog.correct(fields.Shift((0, 0, 0.01)), max_segment=2.5)
+    assert out.data == prog.data
+    assert "NaN" not in out.text
+    (w,) = out.correction.warnings
+    assert "line 2: A not set" in w
+
+
+# ----------------------------------------------------------------------------- unknown starts
+@pytest.mark.parametrize("src", [
+    "G21 G0 X0 Y0\nG2 X10 Y0 Z-1 R5 F100\nM2\n",                   # Z never set
+    "G21 G0 X0 Y0 Z5\nG53 G0 Z0\nG2 X10 Y0 Z-1 R5 F100\nM2\n",      # Z unknown after G53
+    "G21 G0 X0 Y0 Z5\nG28 Z1\nG3 X10 Y0 Z-1 I5 J0 F100\nM2\n",       # Z unknown after G28
+])
+@pytest.mark.parametrize("shift", [(0, 0, 0), (0, 0, 0.05)])
+def test_an_arc_from_an_unknown_start_stays_the_arc_it_was(tmp_path, src, shift):
+    prog = nc.read(_write(tmp_path, src))
+    out = prog.correct(fields.Shift(shift))
+    assert out.data == prog.data
+    assert out.correction.arcs_linearised == 0
+    assert any("not corrected because the position is unknown" in w for w in out.correction.warnings)
+
+
+# ------------------------------------------------------------------------ only moves move
+@pytest.mark.parametrize("src, construct", [
+    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM205 X10.00 Y10.00 Z0.20\nG1 X2\nM2\n", "M code M205"),
+    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM201 X500 Y500\nM2\n", "M code M201"),
+    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM203 X100 Y100 Z5\nM2\n", "M code M203"),
+    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nG50 X100 Z50\nG1 X3\nM2\n", "coordinate setting G50"),
+    ("G21 G0 X0 Y0 Z0\nG1 X99.853 Y103.192 E0.33188 F100\nM2\n", "E word"),
+    ("G21 G0 X0 Y0 Z0\nG43.1 Z5\nG1 X1 F100\nM2\n", "G43.1"),
+])
+def test_axis_words_of_other_codes_are_not_moves(tmp_path, src, construct):
+    """rs274 refuses each of these (an M code above 199, G50, an E word) or moves the spindle
+    rather than the tip (G43.1): the engine names the construct and writes nothing."""
+    p = _write(tmp_path, src)
+    prog = nc.read(p)
+    assert any(construct in u.construct for u in prog.unsupported), prog.unsupported
+    with pytest.raises(RefusedError):
+        prog.correct(fields.Shift((0, 0, 0.01)))
+    canon = canonical(p)
+    if construct != "G43.1":
+        assert canon.error is not None
+    # kept unchanged on request, and no later move is corrected from a position the code may have changed
+    out = prog.correct(fields.Shift((0, 0, 0.01)), keep_unsupported=True)
+    line = next(u.line for u in prog.unsupported if construct in u.construct)
+    assert out.text.splitlines()[line - 1] == src.splitlines()[line - 1]
+
+
+def test_an_extruder_reset_alone_moves_nothing(tmp_path):
+    prog = nc.read(_write(tmp_path, "G21 G0 X0 Y0 Z0\nG92 E0\nG1 X1 F100\nM2\n"))
+    assert not prog.unsupported
+    assert prog.correct(fields.Shift((0, 0, 0.01))).text.splitlines()[2] == "G1 X1 Z0.01 F100"
+
+
+# ------------------------------------------------------------------------ malformed programs
+@pytest.mark.parametrize("src, where, message", [
+    (b"G21 G0 X0 Y0 Z0\nG1 X1 X2 F100\nM2\n", ":2:7:", "more than one X word"),
+    (b"G21 G0 X0 Y0 Z0\nG0 G1 X5 F100\nM2\n", ":2:4:", "G0 and G1 are of one modal group"),
+    (b"G21 G0 X0 Y0 Z0\nG1 X1e3 F100\nM2\n", ":2:6:", "exponent"),
+    (b"G21 G0 X0 Y0 Z0\rG1 X5 F100\rM2\r", ":1:16:", "carriage return"),
+    (b"G21 G0 X0 Y0 Z0\nM3 M4 S100\nM2\n", ":2:4:", "M3 and M4 are of one modal group"),
+    (b"G21 G0 X0 Y0 Z0\nM7 M8\nM2\n", ":2:4:", "M7 and M8 are of one modal group"),
+])
+def test_programs_rs274_rejects_are_refused_at_their_line(tmp_path, src, where, message):
+    p = _write(tmp_path, src)
+    assert canonical(p).error is not None
+    with pytest.raises(InputError, match=where + ".*" + message):
+        nc.read(p)
+
+
+def test_codes_rs274_allows_together_are_read(tmp_path):
+    """G80 beside a motion code is allowed by LinuxCNC (the motion code holds)."""
+    src = "G21 G80 G90 G1 X1 Y2 Z3 F100\nM8\nG1 X2 G80\nM2\n"
+    p = _write(tmp_path, src)
+    assert canonical(p).error is None
+    prog = nc.read(p)
+    assert prog.blocks.end[:, 0].tolist() == [1.0, 2.0]
+
+
+def test_text_after_the_program_end_is_copied(tmp_path):
+    """LinuxCNC reads nothing after M2/M30 or a closing %: text there is copied as it is."""
+    src = "%\nG21 G0 X0 Y0 Z0\nG1 X5 F100\nM30\n( Output Ends Here )\nPost Process Timed at; 32 Min, 50.0 sec\n%\nnot g-code!\n"
+    p = _write(tmp_path, src)
+    assert canonical(p).error is None
+    prog = nc.read(p)
+    assert prog.correct(ZERO).data == prog.data
+    assert prog.correct(fields.Shift((0, 0, 0.01))).text.endswith(src.split("M30\n")[1])
+
+
+# ------------------------------------------------------------------------------- arc radius
+@pytest.mark.parametrize("units, r, limit", [
+    # (program units, radius, the largest start/end radius difference rs274 accepts) — the limit
+    # is LinuxCNC 2.9's: 0.0283 mm (0.00283 in), or 0.1 % of the radius, up to 100 × 0.0283
+    ("G21", 0.5, 0.02828), ("G21", 5, 0.02828), ("G21", 100, 0.1001), ("G21", 10000, 2.8284),
+    ("G20", 0.5, 0.002828), ("G20", 5, 0.005005),
+])
+def test_centre_arc_radius_tolerance_is_linuxcnc_s(tmp_path, units, r, limit):
+    for factor, accepted in ((0.97, True), (1.03, False)):
+        d = limit * factor
+        src = f"{units} G90 G0 X0 Y0 Z0\nG2 X{2 * r + d:.6f} Y0 I{r} J0 F100\nM2\n"
+        p = _write(tmp_path, src, f"arc{factor}.ngc")
+        canon = canonical(p)
+        assert (canon.error is None) == accepted, (src, canon.error)
+        if accepted:
+            end = nc.read(p).blocks.end[-1, :3]
+            np.testing.assert_allclose(end, canon.ends[-1, :3], atol=canon.resolution_mm + 1e-9)
+        else:
+            with pytest.raises(InputError, match=":2:1: radius to the end of the arc"):
+                nc.read(p)
+
+
+# -------------------------------------------------------------------------------- bounds
+@pytest.mark.parametrize("src, kw", [
+    ("G21 G0 X0 Y0 Z0\nG1 X100000000000000000000 F100\nM2\n", {}),
+    ("G21 G0 X0 Y0 Z0\nG2 X0 Y0 I1 J0 P999999999 F100\nM2\n", {}),
+    ("G21 G0 X0 Y0 Z0\nG1 X2000 F100\nM2\n", {"max_segment": 0.001}),
+])
+def test_a_block_that_would_make_too_many_pieces_is_refused(tmp_path, src, kw):
+    prog = nc.read(_write(tmp_path, src))
+    with pytest.raises(InputError, match=r":2:1: this move would be cut into .* pieces, more than the 1000000"):
+        prog.correct(fields.Shift((0, 0, 0.01)), **kw)
+    out = tmp_path / "out.ngc"
+    with pytest.raises(InputError):
+        prog.correct_to(out, fields.Shift((0, 0, 0.01)), **kw)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("kw", [{"max_segment": 1e-9}, {"chord_tol": 1e-300}, {"chord_tol": float("nan")}])
+def test_sampling_options_out_of_range_are_refused(tmp_path, kw):
+    prog = nc.read(_write(tmp_path, "G21 G0 X0 Y0 Z0\nG1 X1 F100\nM2\n"))
+    with pytest.raises(ValueError, match="must be within"):
+        prog.correct(fields.Shift((0, 0, 0.01)), **kw)
