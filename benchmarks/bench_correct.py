@@ -5,6 +5,9 @@
    `ncadapt correct` command (read + correct + write), and `rs274 -g` reading the same file.
 2. A generated 200,000-line program with a 21 x 21 probe map: ncadapt beside bCNC's autolevel
    (its `CNC.py` GCode/Probe classes, without the GUI: load, autolevel, write).
+3. A 50,000,000-line program (the first one's body fifty times, 1.4 GB) corrected with a shift:
+   the peak resident memory of the whole command (`/usr/bin/time`), which the engine bounds by
+   reading, correcting and writing the program piece by piece.
 
 Run with `make bench`. Programs are generated with a fixed seed into benchmarks/out/.
 """
@@ -153,6 +156,30 @@ def main() -> int:
         print(f"   ratio ncadapt / rs274 (lines/s):      {t_rs / t_nc:7.1f} x")
     else:
         print("   rs274 not installed (make test installs linuxcnc-uspace)")
+
+    # 3. memory: a 50,000,000-line program (the 1,000,000-line body fifty times) corrected with a
+    # shift; the peak resident memory of the command, from /usr/bin/time, is bounded by the piece
+    # size, not by the program
+    huge = OUT / "bench_50m.ngc"
+    if not huge.exists():
+        print("\ngenerating 50,000,000-line program ...", flush=True)
+        body = [ln for ln in big.read_bytes().splitlines(keepends=True)[1:-1] if ln not in (b"M30\n", b"G0 Z5.0000\n")]
+        with open(huge, "wb") as f:
+            f.write(b"%\n")
+            for _ in range(50):
+                f.writelines(body)
+            f.write(b"G0 Z5.0000\nM30\n%\n")
+    n_huge = sum(1 for _ in open(huge, "rb"))
+    out_huge = OUT / "bench_50m_c.ngc"
+    t = time.perf_counter()
+    proc = subprocess.run(["/usr/bin/time", "-f", "%M", ncadapt, "correct", str(huge), "--shift", "0,0,0.01",
+                           "--max-segment", "5", "-o", str(out_huge)], check=True, stdout=subprocess.DEVNULL,
+                          stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    t_huge = time.perf_counter() - t
+    peak = int(proc.stderr.strip().splitlines()[-1]) / 1024
+    print(f"\n3. {n_huge:,} lines, --shift 0,0,0.01 --max-segment 5")
+    print(f"   ncadapt correct: {t_huge:7.1f} s  {n_huge / t_huge:>12,.0f} lines/s  peak {peak:,.0f} MiB (target < 500 MiB)")
+    out_huge.unlink()
 
     mid = OUT / "bench_200k.ngc"
     probe = OUT / "map_21.probe"

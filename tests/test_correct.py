@@ -100,16 +100,23 @@ def _bowl(p):
     return np.column_stack([1e-3 * p[:, 1], -1e-3 * p[:, 0], 1e-4 * (p[:, 0] ** 2 + p[:, 1] ** 2)])
 
 
-@pytest.mark.parametrize("chunk", [1, 2, 5, 1 << 16])
-def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, chunk):
-    """Chunked writing (any chunk size) gives the bytes and figures of the in-memory result."""
+@pytest.mark.parametrize("piece", [1, 7, 30, 1 << 16])
+@pytest.mark.parametrize("from_file", [False, True])
+def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, piece, from_file):
+    """Reading and writing in pieces (of any size, from memory or from the file) gives the bytes
+    and figures of the program corrected in one piece."""
     src = (tmp_path / "p.ngc")
     src.write_text(PART.replace("G0 Z5\nM30", "G91 G1 X2 Y1\nG3 X-4 Y0 I-2 J0\nG90 G0 Z5\nM30"))
     prog = nc.read(src)
+    monkeypatch.setattr(nc, "_PIECE_BYTES", 1 << 30)
     whole = prog.correct(_bowl)
-    monkeypatch.setattr(nc, "_CHUNK_LINES", chunk)
-    c = prog.correct_to(tmp_path / "out.ngc", _bowl)
+    monkeypatch.setattr(nc, "_PIECE_BYTES", piece)
+    if from_file:
+        c = nc.correct_file(src, tmp_path / "out.ngc", _bowl)
+    else:
+        c = prog.correct_to(tmp_path / "out.ngc", _bowl)
     assert (tmp_path / "out.ngc").read_bytes() == whole.data
+    assert nc.inspect_file(src) == prog.inspect() | {"file": str(src)}
     assert c.points is None and c.n_points == len(whole.correction.points)
     for key in ("lines_out", "blocks_changed", "lines_added", "arcs_linearised"):
         assert getattr(c, key) == getattr(whole.correction, key)
@@ -119,7 +126,7 @@ def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, chunk):
 
 
 def test_correct_to_refusal_leaves_nothing(tmp_path, monkeypatch):
-    monkeypatch.setattr(nc, "_CHUNK_LINES", 1)
+    monkeypatch.setattr(nc, "_PIECE_BYTES", 1)
     out = tmp_path / "out.ngc"
     out.write_text("old\n")
     with pytest.raises(RefusedError, match="exceeds the limit"):

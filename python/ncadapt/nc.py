@@ -41,14 +41,17 @@ __all__ = [
     "Unsupported",
     "read",
     "parse",
+    "correct_file",
+    "inspect_file",
     "MOTIONS",
 ]
 
 #: Names of the motion codes in :attr:`Toolpath.motion`.
 MOTIONS = ("rapid", "feed", "arc_cw", "arc_ccw", "other")
 _AXES = "XYZABCUVW"
-# lines per chunk of a correction: a few hundred thousand sample points, a few MB at a time
-_CHUNK_LINES = 8192
+# bytes of program per piece of a correction or inspection (about 10,000 lines): a few hundred
+# thousand sample points, a few MB at a time, whatever the program's length
+_PIECE_BYTES = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -141,12 +144,15 @@ class Correction:
     line: np.ndarray | None = field(repr=False)
     unsupported_kept: tuple[Unsupported, ...] = ()
     warnings: tuple[str, ...] = ()
+    #: Remarks on blocks kept but not corrected (G53 moves, G28/G30 returns): (line, message).
+    notes: tuple[tuple[int, str], ...] = ()
 
     def as_dict(self) -> dict:
         """The figures as plain JSON-ready values (no arrays)."""
         d = {k: v for k, v in asdict(self).items() if k not in ("points", "displacements", "line")}
         d["unsupported_kept"] = [asdict(u) for u in self.unsupported_kept]
         d["warnings"] = list(self.warnings)
+        d["notes"] = [{"line": ln, "message": m} for ln, m in self.notes]
         return d
 
 
@@ -159,6 +165,28 @@ def parse(text: str | bytes, name: str | None = None) -> "Program":
     """Read a program from a string or bytes; ``name`` is used in error messages."""
     data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else bytes(text)
     return Program(data, name=name or "<string>")
+
+
+def correct_file(path: str | os.PathLike, output: str | os.PathLike, field: Callable[[np.ndarray], np.ndarray],
+                 **options) -> Correction:
+    """Correct the program in file ``path`` and write it to ``output``, reading and writing it
+    piece by piece: memory stays bounded whatever the program's length.
+
+    Takes the options of :meth:`Program.correct`. The output is written atomically: when a check
+    refuses (an unsupported construct, a displacement over the limit, a point outside the field),
+    nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
+    """
+    p, out = Path(path), Path(output)
+    if out.exists() and os.path.samefile(out, p):
+        raise InputError("refusing to overwrite the input program; choose another output", str(out))
+    with atomic_open(out) as f, _BackgroundWriter(f) as w:
+        return _correct(str(p), str(p), w.write, field, keep_points=False, **options)
+
+
+def inspect_file(path: str | os.PathLike) -> dict:
+    """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
+    piece: memory stays bounded whatever the program's length."""
+    return _inspect(str(path), str(path))
 
 
 def read(path: str | os.PathLike) -> "Program":
@@ -306,30 +334,7 @@ class Program:
 
     def inspect(self) -> dict:
         """Units, planes, motion counts, extents and unsupported constructs, as plain values."""
-        s = self._p.summary()
-        tp = self.toolpath(rapids=True)
-        ext = {}
-        for name, sel in (("all", slice(None)), ("feed", tp.motion != 0)):
-            p = tp.points[sel]
-            p = p[np.isfinite(p).all(axis=1)]
-            ext[name] = (
-                {a: [float(p[:, k].min()), float(p[:, k].max())] for k, a in enumerate("xyz")} if len(p) else None
-            )
-        counts = dict(zip(MOTIONS, s["counts"]))
-        return {
-            "file": self.name,
-            "lines": self.lines,
-            "units": self.units,
-            "planes": {"G17": s["planes"][0], "G18": s["planes"][1], "G19": s["planes"][2]},
-            "motions": counts,
-            "extents": ext,
-            "work_offsets": [_wcs_name(c) for c in s["work_offsets"]],
-            "tools": s["tools"],
-            "block_delete_lines": s["block_delete_lines"],
-            "end_line": s["end_line"],
-            "unsupported": [asdict(u) for u in self.unsupported],
-            "notes": [{"line": ln, "message": m} for ln, m in self.notes],
-        }
+        return _inspect(self._data, self.name)
 
     # ----------------------------------------------------------------------------- correction
     def correct(
@@ -371,203 +376,34 @@ class Program:
             point and its displacement. :meth:`correct_to` writes a file without holding them.
         """
         parts: list[bytes] = []
-        c = self._correct_chunks(parts.append, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit,
-                                 rapids=rapids, keep_unsupported=keep_unsupported, clearance=clearance,
-                                 progress=progress, keep_points=True)
+        self._refuse_unsupported(keep_unsupported)
+        c = _correct(self._data, self.name, parts.append, field, chord_tol=chord_tol, max_segment=max_segment,
+                     limit=limit, rapids=rapids, keep_unsupported=keep_unsupported, clearance=clearance,
+                     progress=progress, keep_points=True)
         # the corrected program is parsed only if it is used as a program again
         result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True)
         result.correction = c
         return result
 
     def correct_to(self, path: str | os.PathLike, field: Callable[[np.ndarray], np.ndarray], **options) -> Correction:
-        """Correct the program and write it to ``path``, one chunk of lines at a time.
+        """Correct the program and write it to ``path``, one piece at a time.
 
-        Takes the options of :meth:`correct`. Memory stays small whatever the program's length:
-        the points and displacements are not kept (``Correction.points`` is None). The file is
-        written atomically: when a check refuses, ``path`` is left as it was.
+        Takes the options of :meth:`correct`. The points and displacements are not kept
+        (``Correction.points`` is None). The file is written atomically: when a check refuses,
+        ``path`` is left as it was. :func:`correct_file` does the same from a file without
+        reading it whole.
         """
         p = Path(path)
         if self.path is not None and p.exists() and os.path.samefile(p, self.path):
             raise InputError("refusing to overwrite the input program; choose another output", str(p))
+        self._refuse_unsupported(options.get("keep_unsupported", False))
         with atomic_open(p) as f, _BackgroundWriter(f) as w:
-            return self._correct_chunks(w.write, field, keep_points=False, **options)
+            return _correct(self._data, self.name, w.write, field, keep_points=False, **options)
 
-    def _correct_chunks(self, write, field, *, chord_tol=constants.CHORD_TOL, max_segment=constants.MAX_SEGMENT,
-                        limit=constants.LIMIT, rapids=False, keep_unsupported=False, clearance=None,
-                        progress=None, keep_points=True) -> Correction:
-        """Sample, evaluate the field and emit, chunk by chunk; ``write`` takes the output bytes.
-
-        Every check runs over the whole program before the caller's output counts as written: a
-        refusal raises after the last chunk, and the callers discard what ``write`` received.
-        """
-        say = progress or (lambda msg: None)
+    def _refuse_unsupported(self, keep_unsupported) -> None:
         uns = self.unsupported
         if uns and not keep_unsupported:
-            raise RefusedError(
-                f"{self.name}: {len(uns)} unsupported construct(s); nothing written "
-                "(--keep-unsupported / keep_unsupported=True copies those blocks unchanged and corrects the rest)",
-                [asdict(u) for u in uns],
-            )
-        self._check_sampling(chord_tol, max_segment)
-        if not limit > 0:
-            raise ValueError(f"limit must be > 0 mm, got {limit}")
-        grid = getattr(field, "grid_lines", None)
-        gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
-        run = _NativeCorrector(self._p, float(chord_tol), float(max_segment), bool(rapids), gx, gy)
-        rec_line = np.frombuffer(self._p.record_lines(), dtype="<u4")
-        n_lines = self.lines
-        kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        outside: list[dict] = []
-        n_outside, domain = 0, ""
-        worst: list[tuple[float, int, np.ndarray, np.ndarray]] = []  # the largest displacements seen
-        n_pts, total, refused = 0, 0.0, False
-        while (chunk := self._next_chunk(run)) is not None:
-            first, end, xyz, rec = chunk
-            say(f"correcting lines {first + 1:,}-{end:,} of {n_lines:,}")
-            pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
-            recs = np.frombuffer(rec, dtype="<u4")
-            lines = rec_line[recs].astype(np.int64) + 1
-            try:
-                if not len(pts):
-                    disp = np.zeros((0, 3))
-                elif getattr(field, "uses_axes", False):
-                    disp = np.ascontiguousarray(field(pts, self._axes_at(pts, recs)), dtype=np.float64)
-                else:
-                    disp = np.ascontiguousarray(field(pts), dtype=np.float64)
-            except _OutsideError as e:
-                refused = True
-                n_outside += len(e.indices)
-                domain = e.domain
-                outside += [{"line": int(lines[i]), "position": pts[i].round(4).tolist()}
-                            for i in e.indices[: max(0, 10 - len(outside))]]
-                run.discard()
-                continue
-            if disp.shape != pts.shape:
-                raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
-            if not np.isfinite(disp).all():
-                bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
-                raise RefusedError(f"{self.name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
-            norms = np.sqrt(np.einsum("ij,ij->i", disp, disp))
-            n_pts += len(norms)
-            total += float(norms.sum())
-            if len(norms):
-                top = np.argpartition(-norms, min(10, len(norms)) - 1)[:10]
-                worst = sorted(worst + [(float(norms[i]), int(lines[i]), pts[i].copy(), disp[i].copy()) for i in top],
-                               key=lambda w: -w[0])[:10]
-                refused |= worst[0][0] > limit
-            if keep_points:
-                kept.append((pts.copy(), disp, lines))
-            if refused:
-                run.discard()  # the output is no longer wanted; the checks still see every chunk
-            else:
-                write(run.emit(disp))
-        if n_outside:
-            raise RefusedError(
-                f"{self.name}: {n_outside:,} point(s) outside the field's domain {domain}; nothing written "
-                f"(first at line {outside[0]['line']}); use outside='clamp' or 'extrapolate' to allow them",
-                outside,
-            )
-        worst_norm = worst[0][0] if worst else 0.0
-        if worst_norm > limit:
-            details = [
-                {"line": ln, "position": p.round(4).tolist(), "displacement": d.round(4).tolist(), "magnitude": round(m, 4)}
-                for m, ln, p, d in worst
-            ]
-            raise RefusedError(
-                f"{self.name}: displacement {worst_norm:.4f} mm at line {details[0]['line']} exceeds the limit "
-                f"{limit:g} mm; nothing written",
-                details,
-            )
-        tail = run.finish()
-        if not refused:
-            write(tail)
-        stats = run.stats()
-        warnings = list(self._unknown_position_warnings()) + list(self._clearance_warnings(field, clearance))
-        if keep_unsupported and uns:
-            warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
-        pts_all = disp_all = line_all = None
-        if keep_points:
-            pts_all = np.concatenate([k[0] for k in kept]) if kept else np.zeros((0, 3))
-            disp_all = np.concatenate([k[1] for k in kept]) if kept else np.zeros((0, 3))
-            line_all = np.concatenate([k[2] for k in kept]) if kept else np.zeros(0, dtype=np.int64)
-        return Correction(
-            lines_in=stats["lines_in"],
-            lines_out=stats["lines_out"],
-            blocks_changed=stats["blocks_changed"],
-            lines_added=stats["lines_added"],
-            arcs_linearised=stats["arcs_linearised"],
-            max_displacement=worst_norm,
-            mean_displacement=total / n_pts if n_pts else 0.0,
-            n_points=n_pts,
-            points=pts_all,
-            displacements=disp_all,
-            line=line_all,
-            unsupported_kept=uns if keep_unsupported else (),
-            warnings=tuple(warnings),
-        )
-
-    def _next_chunk(self, run):
-        try:
-            return run.next(_CHUNK_LINES)
-        except EngineError as e:
-            raise _engine_error(e, self.name) from None
-
-    def _axes_at(self, pts: np.ndarray, rec: np.ndarray) -> np.ndarray:
-        """All nine axes (XYZABCUVW) at sampled points: XYZ as sampled, the others interpolated
-        between the block's start and end by the point's fraction along it (as the sampler and the
-        emitter do on split moves) — for fields that depend on a rotary axis (``uses_axes``)."""
-        end = self._records()["end"]
-        rec = rec.astype(np.int64)
-        e = end[rec]
-        s = np.where(rec[:, None] > 0, end[np.maximum(rec - 1, 0)], e)
-        s = np.where(np.isfinite(s), s, e)
-        a = np.linalg.norm(pts - s[:, :3], axis=1)
-        b = np.linalg.norm(e[:, :3] - pts, axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            t = np.where(a + b > 1e-12, a / (a + b), 1.0)
-        out = s + t[:, None] * (e - s)
-        out[:, :3] = pts
-        return out
-
-    def _unknown_position_warnings(self):
-        """Cutting moves left as written because the program does not say where they are: an axis
-        unknown at their end (after G28, G30, G53, a canned cycle …), or at their start for an arc
-        and for an axis other than XYZ that the block moves (its pieces are interpolated from it)."""
-        r = self._records()
-        end = r["end"]
-        start = np.vstack([np.full((1, 9), np.nan), end[:-1]])
-        cutting = (r["motion"] >= 1) & (r["motion"] <= 3)
-        arc = (r["motion"] == 2) | (r["motion"] == 3)
-        named = ((r["named"][:, None] >> np.arange(9)) & 1).astype(bool)
-        needs_end = named.copy()
-        needs_end[:, :3] = True
-        needs_start = named.copy()
-        needs_start[:, :3] = arc[:, None]
-        unknown = (needs_end & ~np.isfinite(end)) | (needs_start & ~np.isfinite(start))
-        left = np.flatnonzero(cutting & ((r["flags"] & 8) == 0) & unknown.any(axis=1))
-        if len(left):
-            i = left[0]
-            axes = "".join(a for a, u in zip(_AXES, unknown[i]) if u)
-            yield (f"{len(left)} cutting move(s) not corrected because the position is unknown (first at line "
-                   f"{r['line'][i]}: {axes} not set since a move the engine does not trace); give every axis a "
-                   f"G0/G1 after G28, G30, G53 or a canned cycle")
-
-    def _clearance_warnings(self, field, clearance):
-        if clearance is None:
-            return
-        r = self._records()
-        bounds = getattr(field, "bounds", None)
-        rapid = np.flatnonzero(r["motion"] == 0)
-        end = r["end"][rapid]
-        low = end[:, 2] < clearance
-        if bounds is not None:
-            x0, x1, y0, y1 = bounds
-            low &= (end[:, 0] >= x0) & (end[:, 0] <= x1) & (end[:, 1] >= y0) & (end[:, 1] <= y1)
-        for i in np.flatnonzero(low):
-            yield (
-                f"line {r['line'][rapid[i]]}: rapid ends at Z{end[i, 2]:.4f}, below the clearance "
-                f"Z{clearance:g} inside the field's area, and is not corrected"
-            )
+            raise _unsupported_error(self.name, uns)
 
     # ----------------------------------------------------------------------------- output
     def write(self, path: str | os.PathLike) -> Path:
@@ -583,6 +419,253 @@ class Program:
 
     def __repr__(self) -> str:
         return f"<Program {self.name!r}: {self.lines} lines>"
+
+
+def _unsupported_error(name, uns) -> RefusedError:
+    return RefusedError(
+        f"{name}: {len(uns)} unsupported construct(s); nothing written "
+        "(--keep-unsupported / keep_unsupported=True copies those blocks unchanged and corrects the rest)",
+        [asdict(u) for u in uns],
+    )
+
+
+def _piece_records(r: dict) -> dict:
+    """A piece's records as arrays (see ``Program._records``), with ``start`` (m, 9): where each begins."""
+    end = np.frombuffer(r["end"], dtype="<f8").reshape(-1, 9)
+    origin = np.frombuffer(r["origin"], dtype="<f8")
+    return {
+        "line": np.frombuffer(r["line"], dtype="<u4").astype(np.int64) + 1,
+        "motion": np.frombuffer(r["motion"], dtype=np.uint8),
+        "flags": np.frombuffer(r["flags"], dtype=np.uint8),
+        "named": np.frombuffer(r["named"], dtype="<u2"),
+        "end": end,
+        "start": np.vstack([origin[None, :], end[:-1]]),
+    }
+
+
+def _axes_at(pts: np.ndarray, rec: np.ndarray, r: dict) -> np.ndarray:
+    """All nine axes (XYZABCUVW) at sampled points: XYZ as sampled, the others interpolated
+    between the block's start and end by the point's fraction along it (as the sampler and the
+    emitter do on split moves) — for fields that depend on a rotary axis (``uses_axes``)."""
+    rec = rec.astype(np.int64)
+    e = r["end"][rec]
+    s = r["start"][rec]
+    s = np.where(np.isfinite(s), s, e)
+    a = np.linalg.norm(pts - s[:, :3], axis=1)
+    b = np.linalg.norm(e[:, :3] - pts, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(a + b > 1e-12, a / (a + b), 1.0)
+    out = s + t[:, None] * (e - s)
+    out[:, :3] = pts
+    return out
+
+
+class _Warnings:
+    """Warnings gathered piece by piece: cutting moves left as written because the program does
+    not say where they are, and uncorrected rapids below a clearance plane."""
+
+    def __init__(self, field, clearance):
+        self.unknown, self.first = 0, None
+        self.clearance, self.bounds, self.low = clearance, getattr(field, "bounds", None), []
+
+    def add(self, r: dict) -> None:
+        # an axis unknown at the end (after G28, G30, G53, a canned cycle …), or at the start for
+        # an arc and for an axis other than XYZ that the block moves (its pieces are interpolated)
+        cutting = (r["motion"] >= 1) & (r["motion"] <= 3)
+        arc = (r["motion"] == 2) | (r["motion"] == 3)
+        named = ((r["named"][:, None] >> np.arange(9)) & 1).astype(bool)
+        needs_end = named.copy()
+        needs_end[:, :3] = True
+        needs_start = named.copy()
+        needs_start[:, :3] = arc[:, None]
+        unknown = (needs_end & ~np.isfinite(r["end"])) | (needs_start & ~np.isfinite(r["start"]))
+        left = np.flatnonzero(cutting & ((r["flags"] & 8) == 0) & unknown.any(axis=1))
+        if len(left) and self.first is None:
+            i = left[0]
+            self.first = (int(r["line"][i]), "".join(a for a, u in zip(_AXES, unknown[i]) if u))
+        self.unknown += len(left)
+        if self.clearance is not None:
+            rapid = np.flatnonzero(r["motion"] == 0)
+            end = r["end"][rapid]
+            low = end[:, 2] < self.clearance
+            if self.bounds is not None:
+                x0, x1, y0, y1 = self.bounds
+                low &= (end[:, 0] >= x0) & (end[:, 0] <= x1) & (end[:, 1] >= y0) & (end[:, 1] <= y1)
+            self.low += [(int(r["line"][rapid[i]]), float(end[i, 2])) for i in np.flatnonzero(low)]
+
+    def messages(self) -> list[str]:
+        out = []
+        if self.unknown:
+            line, axes = self.first
+            out.append(f"{self.unknown} cutting move(s) not corrected because the position is unknown (first at line "
+                       f"{line}: {axes} not set since a move the engine does not trace); give every axis a "
+                       f"G0/G1 after G28, G30, G53 or a canned cycle")
+        out += [f"line {ln}: rapid ends at Z{z:.4f}, below the clearance Z{self.clearance:g} inside the field's "
+                f"area, and is not corrected" for ln, z in self.low]
+        return out
+
+
+def _engine(fn, name):
+    try:
+        return fn()
+    except EngineError as e:
+        raise _engine_error(e, name) from None
+
+
+def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_segment=constants.MAX_SEGMENT,
+             limit=constants.LIMIT, rapids=False, keep_unsupported=False, clearance=None, progress=None,
+             keep_points=True) -> Correction:
+    """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
+
+    ``source`` is the program's bytes or its file's path. Every check runs over the whole program
+    before the caller's output counts as written: a refusal raises after the last piece, and the
+    callers discard what ``write`` received.
+    """
+    say = progress or (lambda msg: None)
+    Program._check_sampling(chord_tol, max_segment)
+    if not limit > 0:
+        raise ValueError(f"limit must be > 0 mm, got {limit}")
+    grid = getattr(field, "grid_lines", None)
+    gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
+    run = _engine(lambda: _NativeCorrector(source, float(chord_tol), float(max_segment), bool(rapids), True,
+                                           gx, gy, _PIECE_BYTES), name)
+    kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    outside: list[dict] = []
+    n_outside, domain = 0, ""
+    worst: list[tuple[float, int, np.ndarray, np.ndarray]] = []  # the largest displacements seen
+    n_pts, total, refused = 0, 0.0, False
+    notes = _Warnings(field, clearance)
+    while (chunk := _engine(run.next, name)) is not None:
+        first, end, xyz, rec, recs = chunk
+        say(f"correcting lines {first + 1:,}-{end:,}")
+        r = _piece_records(recs)
+        notes.add(r)
+        if run.n_unsupported() and not keep_unsupported:
+            # refused whatever the field does: read on for the whole list, without evaluating it
+            refused = True
+            run.discard()
+            continue
+        pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
+        recs_i = np.frombuffer(rec, dtype="<u4")
+        lines = r["line"][recs_i]
+        try:
+            if not len(pts):
+                disp = np.zeros((0, 3))
+            elif getattr(field, "uses_axes", False):
+                disp = np.ascontiguousarray(field(pts, _axes_at(pts, recs_i, r)), dtype=np.float64)
+            else:
+                disp = np.ascontiguousarray(field(pts), dtype=np.float64)
+        except _OutsideError as e:
+            refused = True
+            n_outside += len(e.indices)
+            domain = e.domain
+            outside += [{"line": int(lines[i]), "position": pts[i].round(4).tolist()}
+                        for i in e.indices[: max(0, 10 - len(outside))]]
+            run.discard()
+            continue
+        if disp.shape != pts.shape:
+            raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
+        if not np.isfinite(disp).all():
+            bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
+            raise RefusedError(f"{name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
+        norms = np.sqrt(np.einsum("ij,ij->i", disp, disp))
+        n_pts += len(norms)
+        total += float(norms.sum())
+        if len(norms):
+            top = np.argpartition(-norms, min(10, len(norms)) - 1)[:10]
+            worst = sorted(worst + [(float(norms[i]), int(lines[i]), pts[i].copy(), disp[i].copy()) for i in top],
+                           key=lambda w: -w[0])[:10]
+            refused |= worst[0][0] > limit
+        if keep_points:
+            kept.append((pts.copy(), disp, lines))
+        if refused:
+            run.discard()  # the output is no longer wanted; the checks still see every piece
+        else:
+            write(_engine(lambda: run.emit(disp), name))
+    uns = tuple(Unsupported(*u) for u in run.unsupported())
+    if uns and not keep_unsupported:
+        raise _unsupported_error(name, uns)
+    if n_outside:
+        raise RefusedError(
+            f"{name}: {n_outside:,} point(s) outside the field's domain {domain}; nothing written "
+            f"(first at line {outside[0]['line']}); use outside='clamp' or 'extrapolate' to allow them",
+            outside,
+        )
+    worst_norm = worst[0][0] if worst else 0.0
+    if worst_norm > limit:
+        details = [
+            {"line": ln, "position": p.round(4).tolist(), "displacement": d.round(4).tolist(), "magnitude": round(m, 4)}
+            for m, ln, p, d in worst
+        ]
+        raise RefusedError(
+            f"{name}: displacement {worst_norm:.4f} mm at line {details[0]['line']} exceeds the limit "
+            f"{limit:g} mm; nothing written",
+            details,
+        )
+    tail = _engine(run.finish, name)
+    if not refused:
+        write(tail)
+    stats = run.stats()
+    warnings = notes.messages()
+    if keep_unsupported and uns:
+        warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
+    pts_all = disp_all = line_all = None
+    if keep_points:
+        pts_all = np.concatenate([k[0] for k in kept]) if kept else np.zeros((0, 3))
+        disp_all = np.concatenate([k[1] for k in kept]) if kept else np.zeros((0, 3))
+        line_all = np.concatenate([k[2] for k in kept]) if kept else np.zeros(0, dtype=np.int64)
+    return Correction(
+        lines_in=stats["lines_in"],
+        lines_out=stats["lines_out"],
+        blocks_changed=stats["blocks_changed"],
+        lines_added=stats["lines_added"],
+        arcs_linearised=stats["arcs_linearised"],
+        max_displacement=worst_norm,
+        mean_displacement=total / n_pts if n_pts else 0.0,
+        n_points=n_pts,
+        points=pts_all,
+        displacements=disp_all,
+        line=line_all,
+        unsupported_kept=uns if keep_unsupported else (),
+        warnings=tuple(warnings),
+        notes=tuple(run.notes()),
+    )
+
+
+def _inspect(source, name) -> dict:
+    """Units, planes, motion counts, extents, unsupported constructs and notes, piece by piece."""
+    run = _engine(lambda: _NativeCorrector(source, constants.CHORD_TOL, constants.MAX_SEGMENT, True, False, [], [],
+                                           _PIECE_BYTES), name)
+    lo = {k: np.full(3, np.inf) for k in ("all", "feed")}
+    hi = {k: np.full(3, -np.inf) for k in ("all", "feed")}
+    while (chunk := _engine(run.next, name)) is not None:
+        _, _, xyz, rec, recs = chunk
+        pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
+        motion = np.frombuffer(recs["motion"], dtype=np.uint8)[np.frombuffer(rec, dtype="<u4")]
+        run.discard()
+        ok = np.isfinite(pts).all(axis=1)
+        for k, sel in (("all", ok), ("feed", ok & (motion != 0))):
+            if sel.any():
+                lo[k] = np.minimum(lo[k], pts[sel].min(axis=0))
+                hi[k] = np.maximum(hi[k], pts[sel].max(axis=0))
+    s = run.summary()
+    ext = {k: ({a: [float(lo[k][i]), float(hi[k][i])] for i, a in enumerate("xyz")} if np.isfinite(lo[k]).all()
+               else None) for k in ("all", "feed")}
+    units = "mixed" if s["inch_lines"] and s["mm_lines"] else ("inch" if s["inch_lines"] else "mm")
+    return {
+        "file": name,
+        "lines": run.lines_read(),
+        "units": units,
+        "planes": {"G17": s["planes"][0], "G18": s["planes"][1], "G19": s["planes"][2]},
+        "motions": dict(zip(MOTIONS, s["counts"])),
+        "extents": ext,
+        "work_offsets": [_wcs_name(c) for c in s["work_offsets"]],
+        "tools": s["tools"],
+        "block_delete_lines": s["block_delete_lines"],
+        "end_line": s["end_line"],
+        "unsupported": [asdict(Unsupported(*u)) for u in run.unsupported()],
+        "notes": [{"line": ln, "message": m} for ln, m in run.notes()],
+    }
 
 
 class _BackgroundWriter:

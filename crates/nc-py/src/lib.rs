@@ -5,6 +5,7 @@
 use nc::emit::{EmitState, EmitStats, Emitter};
 use nc::interp::{Interp, NAXES};
 use nc::sample::{SampleOpts, Samples};
+use nc::stream::{scan_style, Piece, Reader, Stream};
 use nc::NcError;
 use pyo3::buffer::PyBuffer;
 use pyo3::create_exception;
@@ -58,6 +59,51 @@ fn stats_dict<'py>(py: Python<'py>, s: &EmitStats) -> PyResult<Bound<'py, PyDict
     Ok(d)
 }
 
+fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("line", u32_bytes(py, it.records.iter().map(|r| r.line)))?;
+    let motion: Vec<u8> = it.records.iter().map(|r| r.motion as u8).collect();
+    let plane: Vec<u8> = it.records.iter().map(|r| r.plane).collect();
+    let flags: Vec<u8> = it
+        .records
+        .iter()
+        .map(|r| r.inch as u8 | (r.incremental as u8) << 1 | (r.arc_absolute as u8) << 2 | (r.supported as u8) << 3)
+        .collect();
+    let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();
+    d.set_item("motion", PyBytes::new(py, &motion))?;
+    d.set_item("plane", PyBytes::new(py, &plane))?;
+    d.set_item("flags", PyBytes::new(py, &flags))?;
+    d.set_item("named", raw_bytes(py, &named))?;
+    let mut end = Vec::with_capacity(it.records.len() * NAXES);
+    for r in &it.records {
+        end.extend_from_slice(&r.end);
+    }
+    d.set_item("end", raw_bytes(py, &end))?;
+    d.set_item("origin", raw_bytes(py, &it.origin))?;
+    Ok(d)
+}
+
+fn unsupported_list(u: &[nc::interp::Unsupported]) -> Vec<(u32, u32, String, u32)> {
+    u.iter().map(|u| (u.line + 1, u.col + 1, u.construct.clone(), u.blocks)).collect()
+}
+
+fn notes_list(n: &[nc::interp::Note]) -> Vec<(u32, String)> {
+    n.iter().map(|n| (n.line + 1, n.message.clone())).collect()
+}
+
+fn summary_dict<'py>(py: Python<'py>, s: &nc::interp::Summary) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("inch_lines", s.inch_lines)?;
+    d.set_item("mm_lines", s.mm_lines)?;
+    d.set_item("planes", s.planes.to_vec())?;
+    d.set_item("counts", s.counts.to_vec())?;
+    d.set_item("work_offsets", s.work_offsets.clone())?;
+    d.set_item("tools", s.tools.clone())?;
+    d.set_item("block_delete_lines", s.block_delete_lines)?;
+    d.set_item("end_line", s.end_line.map(|l| l + 1))?;
+    Ok(d)
+}
+
 /// A parsed program (native handle).
 #[pyclass(module = "ncadapt._nc", frozen)]
 struct Program {
@@ -84,29 +130,9 @@ impl Program {
     }
 
     /// Records as a dict of byte arrays: line (u32, 0-based), motion, plane, flags (u8 each),
-    /// end (float64, 9 per record, mm / degrees, NaN unknown).
+    /// named (u16), end (float64, 9 per record, mm / degrees, NaN unknown), origin (9 float64).
     fn records<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let it: &Interp = &self.inner.interp;
-        let d = PyDict::new(py);
-        d.set_item("line", u32_bytes(py, it.records.iter().map(|r| r.line)))?;
-        let motion: Vec<u8> = it.records.iter().map(|r| r.motion as u8).collect();
-        let plane: Vec<u8> = it.records.iter().map(|r| r.plane).collect();
-        let flags: Vec<u8> = it
-            .records
-            .iter()
-            .map(|r| r.inch as u8 | (r.incremental as u8) << 1 | (r.arc_absolute as u8) << 2 | (r.supported as u8) << 3)
-            .collect();
-        let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();
-        d.set_item("named", raw_bytes(py, &named))?;
-        d.set_item("motion", PyBytes::new(py, &motion))?;
-        d.set_item("plane", PyBytes::new(py, &plane))?;
-        d.set_item("flags", PyBytes::new(py, &flags))?;
-        let mut end = Vec::with_capacity(it.records.len() * NAXES);
-        for r in &it.records {
-            end.extend_from_slice(&r.end);
-        }
-        d.set_item("end", raw_bytes(py, &end))?;
-        Ok(d)
+        records_dict(py, &self.inner.interp)
     }
 
     /// The 0-based line of every record (u32 bytes).
@@ -116,27 +142,17 @@ impl Program {
 
     /// Unsupported constructs: list of (line 1-based, col 1-based, construct, blocks).
     fn unsupported(&self) -> Vec<(u32, u32, String, u32)> {
-        self.inner.interp.unsupported.iter().map(|u| (u.line + 1, u.col + 1, u.construct.clone(), u.blocks)).collect()
+        unsupported_list(&self.inner.interp.unsupported)
     }
 
     /// Notes: list of (line 1-based, message).
     fn notes(&self) -> Vec<(u32, String)> {
-        self.inner.interp.notes.iter().map(|n| (n.line + 1, n.message.clone())).collect()
+        notes_list(&self.inner.interp.notes)
     }
 
     /// Modal summary as a dict.
     fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let s = &self.inner.interp.summary;
-        let d = PyDict::new(py);
-        d.set_item("inch_lines", s.inch_lines)?;
-        d.set_item("mm_lines", s.mm_lines)?;
-        d.set_item("planes", s.planes.to_vec())?;
-        d.set_item("counts", s.counts.to_vec())?;
-        d.set_item("work_offsets", s.work_offsets.clone())?;
-        d.set_item("tools", s.tools.clone())?;
-        d.set_item("block_delete_lines", s.block_delete_lines)?;
-        d.set_item("end_line", s.end_line.map(|l| l + 1))?;
-        Ok(d)
+        summary_dict(py, &self.inner.interp.summary)
     }
 
     /// Sample the program: (xyz, rec) as bytes of float64 (3 per sample) and uint32 (record
@@ -159,12 +175,12 @@ impl Program {
     }
 }
 
-/// A sampled chunk for Python: first line, end line, xyz bytes, record bytes.
-type ChunkArrays<'py> = (usize, usize, Bound<'py, PyBytes>, Bound<'py, PyBytes>);
+/// A piece sampled for Python: first line, end line, xyz bytes, record bytes, the piece's records.
+type ChunkArrays<'py> = (usize, usize, Bound<'py, PyBytes>, Bound<'py, PyBytes>, Bound<'py, PyDict>);
 
-/// One chunk handed to the emitting thread: its lines, samples and displacements.
+/// One piece handed to the emitting thread: its lines, samples and displacements.
 struct Job {
-    lines: (usize, usize),
+    piece: Piece,
     samples: Samples,
     disp: Vec<f64>,
 }
@@ -172,96 +188,152 @@ struct Job {
 /// What the emitting thread gives back: the output bytes and the buffers to reuse.
 type Done = Result<(Vec<u8>, Samples, Vec<f64>), NcError>;
 
-/// A correction run in chunks of lines: `next` samples the next lines, the caller evaluates its
-/// field there, `emit` hands those lines with their displacements to an emitting thread and
-/// returns the output of the chunk before (so emitting one chunk overlaps sampling and
-/// evaluating the next); `finish` returns the last output. Only two chunks are held at a time.
+/// Bytes shared between the two passes over an in-memory program.
+struct Shared(std::sync::Arc<Vec<u8>>);
+
+impl AsRef<[u8]> for Shared {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+/// The program's bytes, or a file, as a reader.
+enum Source {
+    Bytes(std::sync::Arc<Vec<u8>>),
+    File(std::path::PathBuf),
+}
+
+impl Source {
+    fn open(&self) -> Result<Reader, NcError> {
+        Ok(match self {
+            Source::Bytes(b) => Box::new(std::io::Cursor::new(Shared(b.clone()))),
+            Source::File(p) => Box::new(std::io::BufReader::with_capacity(
+                1 << 20,
+                std::fs::File::open(p).map_err(|e| NcError::Usage(format!("cannot read the program: {e}")))?,
+            )),
+        })
+    }
+}
+
+/// A correction (or an inspection) run over a program read piece by piece: `next` reads,
+/// interprets and samples the next piece, the caller evaluates its field there, `emit` hands the
+/// piece with its displacements to an emitting thread and returns the output of the piece before
+/// (so emitting one overlaps reading and sampling the next), `discard` drops a piece whose output
+/// is not wanted; `finish` returns the last output. At most two pieces are held at a time, so
+/// memory does not grow with the program.
 #[pyclass(module = "ncadapt._nc")]
 struct Corrector {
-    prog: Py<Program>,
+    stream: Stream,
     opts: SampleOpts,
-    /// The chunk sampled by `next` and not yet emitted.
-    current: Option<((usize, usize), Samples)>,
-    next_line: usize,
+    /// The piece sampled by `next` and not yet emitted.
+    current: Option<(Piece, Samples)>,
     /// Buffers back from the emitting thread.
     spare: Vec<(Samples, Vec<f64>)>,
     jobs: Option<std::sync::mpsc::Sender<Job>>,
     done: std::sync::Mutex<std::sync::mpsc::Receiver<Done>>,
     in_flight: bool,
-    worker: Option<std::thread::JoinHandle<EmitState>>,
+    worker: Option<std::thread::JoinHandle<Option<EmitState>>>,
     stats: Option<EmitStats>,
 }
 
 #[pymethods]
 impl Corrector {
+    /// `source`: the program's bytes, or the path of its file (str).
     #[new]
-    #[pyo3(signature = (program, chord_tol, max_segment, include_rapids, grid_x, grid_y))]
-    fn new(py: Python<'_>, program: Py<Program>, chord_tol: f64, max_segment: f64, include_rapids: bool, grid_x: Vec<f64>, grid_y: Vec<f64>) -> Self {
-        let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported: true, grid_x, grid_y };
+    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        source: &Bound<'_, PyAny>,
+        chord_tol: f64,
+        max_segment: f64,
+        include_rapids: bool,
+        only_supported: bool,
+        grid_x: Vec<f64>,
+        grid_y: Vec<f64>,
+        piece_bytes: usize,
+    ) -> PyResult<Self> {
+        let src = if let Ok(b) = source.downcast::<PyBytes>() {
+            Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
+        } else {
+            Source::File(std::path::PathBuf::from(source.extract::<String>()?))
+        };
+        let piece_bytes = piece_bytes.max(1);
+        // the first pass reads the program's number style, which every piece is written in
+        let stream = py
+            .allow_threads(|| -> Result<Stream, NcError> {
+                let (style, crlf) = scan_style(src.open()?, piece_bytes)?;
+                Ok(Stream::new(src.open()?, piece_bytes, style, crlf))
+            })
+            .map_err(to_py)?;
+        let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y };
         let (jobs, job_rx) = std::sync::mpsc::channel::<Job>();
         let (done_tx, done) = std::sync::mpsc::channel::<Done>();
-        let shared = program.clone_ref(py);
         let worker = std::thread::spawn(move || {
-            // a frozen, Sync pyclass: its Rust data is read without the GIL
-            let p = &shared.get().inner;
-            let mut state = EmitState::new(&p.interp);
+            let mut state: Option<EmitState> = None;
             for job in job_rx {
-                let mut out = Vec::new();
-                let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, state);
-                let r = em.lines(job.lines.0..job.lines.1, &job.samples, &job.disp, &mut out);
-                state = em.into_state();
+                let p = &job.piece;
+                let mut out = Vec::with_capacity(p.src.len() + p.src.len() / 4);
+                let st = state.take().unwrap_or_else(|| EmitState::new(&p.interp));
+                let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);
+                let r = em.lines(0..p.lexed.lines.len(), &job.samples, &job.disp, &mut out);
+                state = Some(em.into_state());
                 let failed = r.is_err();
                 if done_tx.send(r.map(|_| (out, job.samples, job.disp))).is_err() || failed {
                     break;
                 }
             }
-            // dropping `shared` without the GIL is deferred by PyO3 to the next time it is held
             state
         });
-        Corrector {
-            prog: program,
+        Ok(Corrector {
+            stream,
             opts,
             current: None,
-            next_line: 0,
             spare: Vec::new(),
             jobs: Some(jobs),
             done: std::sync::Mutex::new(done),
             in_flight: false,
             worker: Some(worker),
             stats: None,
-        }
+        })
     }
 
-    /// Sample the next `max_lines` lines: (first line, end line, xyz bytes, record bytes), or
-    /// None at the end of the program.
-    fn next<'py>(&mut self, py: Python<'py>, max_lines: usize) -> PyResult<Option<ChunkArrays<'py>>> {
+    /// Read and sample the next piece: (first line, end line, xyz bytes, record bytes, the
+    /// piece's records as `Program.records` gives them, with `origin`, the position before
+    /// them), or None at the end of the program.
+    fn next<'py>(&mut self, py: Python<'py>) -> PyResult<Option<ChunkArrays<'py>>> {
         if self.current.is_some() {
-            return Err(PyValueError::new_err("emit the current chunk before sampling the next"));
+            return Err(PyValueError::new_err("emit or discard the current piece before reading the next"));
         }
-        let p = &self.prog.get().inner;
-        let n = p.lexed.lines.len();
-        let a = self.next_line;
-        if a >= n {
-            return Ok(None);
-        }
-        let b = (a + max_lines.max(1)).min(n);
         let mut samples = self.spare.pop().map(|(s, _)| s).unwrap_or_default();
-        let opts = &self.opts;
-        let r = py.allow_threads(|| nc::sample::sample_range(&p.interp, opts, p.records_of_lines(a..b), &mut samples));
-        if let Err(e) = r {
-            self.spare.push((samples, Vec::new()));
-            return Err(to_py(e));
-        }
-        self.next_line = b;
-        let r = (a, b, raw_bytes(py, &samples.xyz), raw_bytes(py, &samples.rec));
-        self.current = Some(((a, b), samples));
+        let (stream, opts) = (&mut self.stream, &self.opts);
+        let r = py.allow_threads(|| -> Result<Option<Piece>, NcError> {
+            let Some(p) = stream.next_piece()? else { return Ok(None) };
+            nc::sample::sample_range(&p.interp, opts, 0..p.interp.records.len(), &mut samples)?;
+            Ok(Some(p))
+        });
+        let piece = match r {
+            Ok(Some(p)) => p,
+            Ok(None) => {
+                self.spare.push((samples, Vec::new()));
+                return Ok(None);
+            }
+            Err(e) => {
+                self.spare.push((samples, Vec::new()));
+                return Err(to_py(e));
+            }
+        };
+        let (a, b) = (piece.line_base, piece.line_base + piece.lexed.lines.len());
+        let recs = records_dict(py, &piece.interp)?;
+        let r = (a, b, raw_bytes(py, &samples.xyz), raw_bytes(py, &samples.rec), recs);
+        self.current = Some((piece, samples));
         Ok(Some(r))
     }
 
-    /// Hand the current chunk with its displacements (C-contiguous float64, 3 per sample) to the
-    /// emitting thread; returns the output of the chunk handed before (empty for the first).
+    /// Hand the current piece with its displacements (C-contiguous float64, 3 per sample) to the
+    /// emitting thread; returns the output of the piece handed before (empty for the first).
     fn emit<'py>(&mut self, py: Python<'py>, disp: PyBuffer<f64>) -> PyResult<Bound<'py, PyBytes>> {
-        let (lines, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no chunk sampled"))?;
+        let (piece, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no piece read"))?;
         let d = f64_slice(&disp)?;
         if d.len() != samples.xyz.len() {
             return Err(PyValueError::new_err(format!("displacements have {} values, expected {}", d.len(), samples.xyz.len())));
@@ -271,26 +343,27 @@ impl Corrector {
         buf.extend_from_slice(d);
         let prev = self.collect(py)?;
         let jobs = self.jobs.as_ref().ok_or_else(|| PyValueError::new_err("the correction has finished"))?;
-        jobs.send(Job { lines, samples, disp: buf }).map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
+        jobs.send(Job { piece, samples, disp: buf }).map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
         self.in_flight = true;
         Ok(PyBytes::new(py, &prev))
     }
 
-    /// Drop the current chunk without emitting it: the run's output is no longer wanted (a check
-    /// refused it), but sampling goes on so the check can see the whole program.
+    /// Drop the current piece without emitting it: the run's output is not wanted (a check
+    /// refused it, or this is an inspection), but reading goes on so the checks see the whole
+    /// program.
     fn discard(&mut self) -> PyResult<()> {
-        let (_, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no chunk sampled"))?;
+        let (_, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no piece read"))?;
         self.spare.push((samples, Vec::new()));
         Ok(())
     }
 
-    /// The output of the last chunk; ends the run (its counts are then in `stats`).
+    /// The output of the last piece; ends the run (its counts are then in `stats`).
     fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
         let last = self.collect(py)?;
         self.jobs = None;
         if let Some(w) = self.worker.take() {
             let st = py.allow_threads(|| w.join()).map_err(|_| PyValueError::new_err("the emitting thread failed"))?;
-            self.stats = Some(st.stats);
+            self.stats = Some(st.map(|s| s.stats).unwrap_or_default());
         }
         Ok(PyBytes::new(py, &last))
     }
@@ -300,10 +373,35 @@ impl Corrector {
         let st = self.stats.as_ref().ok_or_else(|| PyValueError::new_err("call finish first"))?;
         stats_dict(py, st)
     }
+
+    /// Lines read so far.
+    fn lines_read(&self) -> usize {
+        self.stream.lines_read()
+    }
+
+    /// Unsupported constructs of the pieces read: list of (line 1-based, col 1-based, construct, blocks).
+    fn unsupported(&self) -> Vec<(u32, u32, String, u32)> {
+        unsupported_list(&self.stream.interp.unsupported)
+    }
+
+    /// Number of unsupported constructs in the pieces read.
+    fn n_unsupported(&self) -> usize {
+        self.stream.interp.unsupported.len()
+    }
+
+    /// Notes of the pieces read: list of (line 1-based, message).
+    fn notes(&self) -> Vec<(u32, String)> {
+        notes_list(&self.stream.interp.notes)
+    }
+
+    /// Modal summary of the pieces read.
+    fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        summary_dict(py, &self.stream.interp.summary)
+    }
 }
 
 impl Corrector {
-    /// Wait for the chunk in flight, keep its buffers, return its output.
+    /// Wait for the piece in flight, keep its buffers, return its output.
     fn collect(&mut self, py: Python<'_>) -> PyResult<Vec<u8>> {
         if !self.in_flight {
             return Ok(Vec::new());

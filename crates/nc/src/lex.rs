@@ -90,6 +90,21 @@ pub struct Lexed {
     pub crlf: bool,
     /// Lines that could not be read: the error of each (see [`Line::error`]).
     pub errors: Vec<NcError>,
+    /// What the style's `spaced` and `crlf` were decided from: words written after a blank,
+    /// words written right after the word before, CRLF and LF line ends (to merge the style of a
+    /// program read in pieces).
+    pub counts: [usize; 4],
+}
+
+impl NumberStyle {
+    /// The style of two pieces of one program (decimals the larger; a form used in either is used).
+    pub fn merge(&mut self, o: &NumberStyle) {
+        self.max_decimals = self.max_decimals.max(o.max_decimals);
+        self.fixed |= o.fixed;
+        self.no_leading_zero |= o.no_leading_zero;
+        self.bare_point |= o.bare_point;
+        self.padded_g |= o.padded_g;
+    }
 }
 
 impl Lexed {
@@ -186,6 +201,12 @@ fn err(line: usize, col: usize, msg: impl Into<String>) -> NcError {
 
 /// Lex a whole program.
 pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
+    lex_at(src, 0)
+}
+
+/// Lex the lines of `src`, which begin at line `line_base` (0-based) of their program: errors
+/// count lines from the program's start.
+pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
     if src.len() >= u32::MAX as usize {
         return Err(err(0, 0, "program larger than 4 GiB"));
     }
@@ -201,7 +222,7 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
     let mut n_spaced = 0usize;
     let mut n_compact = 0usize;
     let mut pos = 0usize;
-    let mut lineno = 0usize;
+    let mut lineno = line_base;
     while pos < src.len() {
         let nl = memchr(b'\n', &src[pos..]).map(|k| pos + k);
         let (end, eol_end) = match nl {
@@ -391,6 +412,7 @@ pub fn lex(src: &[u8]) -> Result<Lexed, NcError> {
     style.spaced = n_spaced >= n_compact;
     out.style = style;
     out.crlf = n_crlf > n_lf;
+    out.counts = [n_spaced, n_compact, n_crlf, n_lf];
     Ok(out)
 }
 

@@ -8,6 +8,7 @@ pub mod error;
 pub mod interp;
 pub mod lex;
 pub mod sample;
+pub mod stream;
 
 pub use error::NcError;
 

@@ -43,15 +43,13 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
         raise click.UsageError("give exactly one of --field FILE or --shift DX,DY,DZ")
     check_outputs({"input program": program, "field file": field_path}, {"-o": output, "--json": json_path})
     with progress() as say:
-        say(f"reading {program}")
-        prog = nc.read(program)
         if field_path is not None:
             say(f"reading {field_path}")
             field = _fields.read(field_path, method=method, outside=outside)
         else:
             field = _fields.Shift(shift)
-        c = prog.correct_to(
-            output, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
+        c = nc.correct_file(
+            program, output, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
             keep_unsupported=keep_unsupported, clearance=clearance, progress=say)
     echo_err(f"{program} -> {output}")
     echo_err(f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
@@ -66,7 +64,7 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
             echo_err(f"    ... and {len(c.unsupported_kept) - 20} more (see --json)")
     else:
         echo_err("  unsupported constructs: none")
-    for n_line, msg in prog.notes[:20]:
+    for n_line, msg in c.notes[:20]:
         echo_err(f"  note: line {n_line}: {msg}")
     for w in c.warnings:
         echo_err(f"  warning: {w}")
@@ -74,7 +72,6 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
         payload = {"input": str(program), "output": str(output),
                    "field": str(field_path) if field_path else {"shift": shift}}
         payload.update(c.as_dict())
-        payload["notes"] = [{"line": ln, "message": m} for ln, m in prog.notes]
         payload["options"] = {"max_segment": max_segment, "chord_tol": chord_tol, "limit": limit,
                               "outside": outside, "interp": method, "rapids": rapids,
                               "keep_unsupported": keep_unsupported, "clearance": clearance}

@@ -17,7 +17,7 @@ from ._common import check_outputs, handle_errors, write_json
 def inspect(program, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
-    info = nc.read(program).inspect()
+    info = nc.inspect_file(program)
     m = info["motions"]
     click.echo(f"{program}: {info['lines']:,} lines, units {info['units']}")
     click.echo(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
