@@ -609,21 +609,13 @@ impl Interpreter {
             }
             st.mode = m;
         }
-        if let Some(idx) = untraced {
+        // a G code the engine does not know may change the motion mode too; for an unknown M code,
+        // what it does with the machine, and with the block's axis words, is not known
+        if let Some(idx) = untraced.or(unknown_m) {
             st.pos = [f64::NAN; NAXES];
-            st.mode = Mode::None;
-            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            out.unsupported[idx].blocks += 1;
-            if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
-                out.summary.end_line = Some(li as u32);
-                break;
+            if untraced.is_some() {
+                st.mode = Mode::None;
             }
-            continue;
-        }
-
-        if let Some(idx) = unknown_m {
-            // what it does with the machine, and with the block's axis words, is not known
-            st.pos = [f64::NAN; NAXES];
             push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
             out.unsupported[idx].blocks += 1;
             if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
