@@ -7,7 +7,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # rustup installs cargo here; maturin needs it on the PATH
 export PATH := $(HOME)/.cargo/bin:$(PATH)
 
-.PHONY: demo test bench install install-test system-deps rust clean
+.PHONY: demo test fuzz bench install install-test system-deps rust clean
 
 $(VENV)/bin/python:
 	python3 -m venv $(VENV)
@@ -42,6 +42,12 @@ demo: install
 test: install-test
 	cargo test -q --workspace --exclude ncadapt-nc-py
 	$(PY) -m pytest -q
+
+# the generated-program property tests against rs274, and the real programs of ../shared/corpus/nc
+# against rs274 (in progress: not yet in make test, see docs/nc-engine.md)
+fuzz: install-test
+	$(PY) -m pytest -q tests/corpus_check.py
+	NCADAPT_FUZZ_EXAMPLES=2000 $(PY) -m pytest -q tests/fuzz_programs.py
 
 # bCNC is the peer of the benchmark: only its CNC.py is used, so its GUI dependencies are skipped
 bench: install-test

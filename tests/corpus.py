@@ -1,0 +1,708 @@
+"""The NC engine on a corpus of real programs: what it accepts, and whether its corrections are exact.
+
+The corpus (``../shared/corpus/nc`` from the project's root, with ``manifest.tsv``) holds programs
+written by other people and their tools. For each program:
+
+1. read it; a refusal (an :class:`~ncadapt.errors.InputError`, or an unsupported construct the
+   engine will not correct) is an outcome, but it must name its line;
+2. a zero correction must give back the program byte for byte;
+3. it is corrected by a shift of 0.05 mm in Z and by a gentle grid field (``dz`` of at most
+   0.02 mm) over its feed extent;
+4. when LinuxCNC's ``rs274`` runs the input, both corrected programs must run in it too, their rapids
+   must be the input's, and their cutting motion must be rs274's motion of the input displaced by
+   the field (:func:`compare_motion`), within 5 µm (9 µm in inch programs, which rs274 prints to
+   4 decimals of an inch).
+
+``python tests/corpus.py`` prints the outcome per dialect and per program as markdown tables.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from rs274 import _CALL, _PLANES, RS274, Canon  # noqa: E402
+
+from ncadapt import fields, nc  # noqa: E402
+from ncadapt.errors import InputError, RefusedError  # noqa: E402
+
+CORPUS = Path(__file__).resolve().parents[1].parent / "shared" / "corpus" / "nc"
+
+#: The displacements the programs are corrected by: a shift in Z, and a grid field of this amplitude.
+SHIFT = (0.0, 0.0, 0.05)
+AMPLITUDE = 0.02
+#: Agreement of the corrected motion with the displaced input: mm programs, inch (or mixed) programs.
+TOL_MM, TOL_INCH = 0.005, 0.009
+#: Longest corrected piece (mm): coarser than the default (1 mm) to keep the run short.
+MAX_SEGMENT = 5.0
+#: Densification of rs274's motion: longest piece (mm) and chord error of arcs (mm).
+_STEP, _CHORD = 1.0, 0.0002
+
+
+# ------------------------------------------------------------------------------------------ corpus
+@dataclass(frozen=True)
+class Entry:
+    file: str
+    dialect: str
+    source: str
+    lines: int
+
+    @property
+    def path(self) -> Path:
+        return CORPUS / self.file
+
+
+def manifest() -> list[Entry]:
+    """The programs of the corpus (empty when it is absent)."""
+    m = CORPUS / "manifest.tsv"
+    if not m.is_file():
+        return []
+    with m.open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f, delimiter="\t"))
+    return [Entry(r["file"], r["dialect"], r["source"], int(r["lines"])) for r in rows]
+
+
+# ------------------------------------------------------------------------------------------ rs274
+#: Adjustments that let rs274 run programs written for other controls; each is keyed by the error
+#: rs274 gives without it and is applied to the input and to the corrected programs alike.
+def _append_end(data: bytes) -> bytes:
+    return data + b"\nM2\n"
+
+
+_K0 = re.compile(rb"\s?[Kk]\s*[+-]?(?:0+\.?0*|\.0+)(?![\d.])")
+
+
+def _strip_k0(data: bytes) -> bytes:
+    return _K0.sub(b"", data)
+
+
+ADJUSTMENTS = {
+    "File ended with no percent sign or program end": ("M2 appended", _append_end),
+    "K word given for arc in xy plane": ("K0 words removed", _strip_k0),
+}
+
+
+def tool_table(folder: Path) -> Path:
+    """A tool table with tools 1-99 (length and diameter 0), for programs that change tools."""
+    p = folder / "tools.tbl"
+    if not p.exists():
+        p.write_text("".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100)))
+    return p
+
+
+def run_rs274(path: Path, tools: Path, timeout: float = 120) -> Canon:
+    """``rs274 -t tools -g path``: its canonical motion in mm, read as :func:`rs274.canonical` reads
+    it (which takes no tool table)."""
+    out = Path(str(path) + ".canon")
+    # rs274 shares its tool table through $HOME/.tool.mmap: rs274s running at the same time with
+    # another HOME would overwrite it (tools not found) or truncate it under them (bus errors)
+    env = {**os.environ, "HOME": str(tools.parent)}
+    proc = subprocess.run([RS274, "-t", str(tools), "-g", str(path), str(out)], stdin=subprocess.DEVNULL,
+                          capture_output=True, text=True, timeout=timeout, errors="replace", env=env)
+    text = out.read_text(errors="replace") if out.exists() else ""
+    out.unlink(missing_ok=True)
+    scale = 25.4  # rs274 without an ini file works in inches until the program says otherwise
+    plane = "CANON_PLANE_XY"
+    kinds, ends, arcs = [], [], []
+    res = 0.0
+    for line in text.splitlines():
+        m = _CALL.match(line)
+        if not m:
+            continue
+        name, args = m.group(1), m.group(2)
+        if name == "USE_LENGTH_UNITS":
+            scale = 25.4 if "INCHES" in args else (10.0 if "CM" in args else 1.0)
+        elif name == "SELECT_PLANE":
+            plane = args.strip()
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            v = [float(a) for a in args.split(",")]
+            ends.append([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
+            kinds.append("traverse" if name == "STRAIGHT_TRAVERSE" else "feed")
+            arcs.append(None)
+            res = max(res, 0.00005 * scale)
+        elif name == "ARC_FEED":
+            v = [float(a) for a in args.split(",")]
+            a1, a2, an = _PLANES[plane]
+            e = [0.0] * 6
+            e[a1], e[a2], e[an] = v[0] * scale, v[1] * scale, v[5] * scale
+            e[3:6] = v[6:9]
+            ends.append(e)
+            kinds.append("arc")
+            arcs.append((int(v[4]), v[2] * scale, v[3] * scale, plane))
+            res = max(res, 0.00005 * scale)
+    err = None
+    stderr = proc.stderr
+    if proc.returncode != 0 or "error" in stderr.lower() or "executing" in stderr and len(stderr.splitlines()) > 1:
+        tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
+        err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
+    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err)
+
+
+def rs274_input(path: Path, work: Path) -> tuple[Canon, list[str]]:
+    """rs274's motion of a program, with the adjustments it needed (their names)."""
+    tools = tool_table(work)
+    data = path.read_bytes()
+    used: list[str] = []
+    while True:
+        p = work / ("in" + path.suffix)
+        p.write_bytes(adjust(data, used))
+        canon = run_rs274(p, tools)
+        new = [k for k in ADJUSTMENTS if canon.error and k in canon.error and k not in used]
+        if canon.error is None or not new:
+            return canon, used
+        used += new
+
+
+def adjust(data: bytes, used: list[str]) -> bytes:
+    for k in used:
+        data = ADJUSTMENTS[k][1](data)
+    return data
+
+
+# ------------------------------------------------------------------------------------------ geometry
+def densify(canon: Canon, sel: np.ndarray, step: float = _STEP, chord: float = _CHORD):
+    """Points along the moves ``sel`` (indices into ``canon``), each from its start (the previous
+    move's end; rs274 starts at 0) to its end: straight moves in pieces of at most ``step``, arcs in
+    pieces within ``chord`` of the arc (and at most ``step``). Returns the points (n, 3), the offset
+    of each move's points (len(sel) + 1; every move has at least its start and end) and the arc
+    length of every point from its move's start."""
+    ends = canon.ends[:, :3]
+    starts = np.vstack([np.zeros((1, 3)), ends[:-1]])
+    sel = np.asarray(sel, dtype=np.int64)
+    s, e = starts[sel], ends[sel]
+    n = np.ones(len(sel), dtype=np.int64)
+    is_arc = np.array([canon.kinds[k] == "arc" for k in sel], dtype=bool)
+    # straight moves
+    length = np.linalg.norm(e - s, axis=1)
+    if np.isfinite(step):
+        n = np.maximum(1, np.ceil(length / step).astype(np.int64))
+    # arcs: angles in their plane; the radius and the normal coordinate change linearly with angle
+    arc_info = {}
+    for i in np.flatnonzero(is_arc):
+        rot, c1, c2, plane = canon.arcs[sel[i]]
+        a1, a2, an = _PLANES[plane]
+        u0, v0 = s[i, a1] - c1, s[i, a2] - c2
+        u1, v1 = e[i, a1] - c1, e[i, a2] - c2
+        r0, r1 = math.hypot(u0, v0), math.hypot(u1, v1)
+        t0, t1 = math.atan2(v0, u0), math.atan2(v1, u1)
+        sweep = (t1 - t0) % (2 * math.pi) if rot > 0 else (t0 - t1) % (2 * math.pi)
+        if math.hypot(u1 - u0, v1 - v0) <= 3 * canon.resolution_mm + 1e-9 and sweep < 1.0:
+            sweep = 2 * math.pi  # it ends where it starts: a full circle
+        sweep += 2 * math.pi * (abs(rot) - 1)
+        sweep = sweep if rot > 0 else -sweep
+        r = max(r0, r1, 1e-9)
+        da = 2 * math.acos(max(-1.0, 1 - chord / r)) if chord < r else math.pi / 2
+        arc_len = math.hypot(abs(sweep) * r, e[i, an] - s[i, an])
+        n[i] = max(1, math.ceil(abs(sweep) / min(da, math.pi / 2)),
+                   math.ceil(arc_len / step) if np.isfinite(step) else 1)
+        arc_info[i] = (a1, a2, an, c1, c2, r0, r1, t0, sweep)
+    off = np.zeros(len(sel) + 1, dtype=np.int64)
+    off[1:] = np.cumsum(n + 1)
+    move = np.repeat(np.arange(len(sel)), n + 1)
+    t = (np.arange(off[-1]) - off[move]) / n[move]
+    pts = s[move] + t[:, None] * (e[move] - s[move])
+    for i, (a1, a2, an, c1, c2, r0, r1, t0, sweep) in arc_info.items():
+        tt = t[off[i]:off[i + 1]]
+        ang = t0 + tt * sweep
+        rr = r0 + tt * (r1 - r0)
+        q = pts[off[i]:off[i + 1]]
+        q[:, a1] = c1 + rr * np.cos(ang)
+        q[:, a2] = c2 + rr * np.sin(ang)
+        q[0], q[-1] = s[i], e[i]  # exact ends, as rs274 printed them
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    arclen = cum - cum[off[move]]
+    return pts, off, arclen
+
+
+def _near(pts: np.ndarray, grp: np.ndarray, poly: np.ndarray, off: np.ndarray, arclen: np.ndarray, k: int = 4,
+          chunk: int = 200_000):
+    """Distance from every point to the polyline of its group (``poly[off[g]:off[g+1]]``), and the
+    arc length along that polyline of the nearest place.
+
+    The segments tried are those next to the ``k`` vertices of the group nearest to the point: on a
+    polyline that follows a line or an arc, the segment nearest a point ends at one of them.
+    """
+    from scipy.spatial import cKDTree
+
+    dmin = np.full(len(pts), np.inf)
+    where = np.full(len(pts), np.nan)
+    if not len(pts):
+        return dmin, where
+    pg = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    # a fourth coordinate keeps the groups far apart (the same value within a group, exactly)
+    big = 1e7
+    tree = cKDTree(np.column_stack([poly, pg * big]))
+    kk = min(k, len(poly))
+    for i0 in range(0, len(pts), chunk):
+        sl = slice(i0, i0 + chunk)
+        p, g = pts[sl], grp[sl]
+        _, idx = tree.query(np.column_stack([p, g * big]), k=kk)
+        idx = np.asarray(idx).reshape(len(p), kk)
+        lo, hi = off[g][:, None], off[g + 1][:, None] - 1
+        valid = pg[idx] == g[:, None]
+        a = np.concatenate([np.clip(idx - 1, lo, hi), idx], axis=1)
+        b = np.concatenate([idx, np.clip(idx + 1, lo, hi)], axis=1)
+        valid = np.concatenate([valid, valid], axis=1)
+        A, B = poly[a], poly[b]
+        AB = B - A
+        L2 = np.einsum("ijk,ijk->ij", AB, AB)
+        dot = np.einsum("ijk,ijk->ij", p[:, None, :] - A, AB)
+        t = np.clip(np.divide(dot, L2, out=np.zeros_like(dot), where=L2 > 0), 0.0, 1.0)
+        d = np.linalg.norm(A + t[..., None] * AB - p[:, None, :], axis=2)
+        d[~valid] = np.inf
+        best = np.argmin(d, axis=1)
+        r = np.arange(len(p))
+        dmin[sl] = d[r, best]
+        ab, tb = a[r, best], t[r, best]
+        where[sl] = arclen[ab] + tb * np.sqrt(L2[r, best])
+    return dmin, where
+
+
+# ------------------------------------------------------------------------------------------ comparison
+def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: float, lines=None,
+                   max_piece: float | None = None, start_known: np.ndarray | None = None) -> list[str]:
+    """Compare rs274's motion of a corrected program (``out``) with its motion of the input
+    (``inp``): the rapids must be the input's, and each cutting move ``k`` must follow the input's
+    path, displaced by ``field`` where ``displaced[k]`` (the moves the engine can correct), as it
+    is elsewhere.
+
+    The corrected program may split a move into pieces and write arcs as straight pieces: the
+    pieces replacing move ``k`` end where move ``k`` ends (displaced), every point of them is within
+    ``tol`` of the displaced path of move ``k``, in order, and every point of that path is within
+    ``tol`` of them. Rapids are not corrected, so where the motion passes from an uncorrected point
+    to a corrected move (after a rapid, or after a move the engine leaves as written), the first
+    piece connects the two: its end must be on the path, and the path is not required near it
+    before its end. With ``max_piece`` (the correction's max_segment) that holds only for the first
+    ``max_piece`` mm of the move: beyond, the path must be followed even if the first piece goes on
+    (a straight move keeps one piece where it is straight) -- unless the engine does not know where
+    the move starts (``start_known[k]`` False: a straight move is then corrected at its end only).
+
+    ``lines`` (the source line of every input move) names the moves in the problems. Returns the
+    problems found, each with how often it occurs and its first occurrence (empty: the motions agree).
+    """
+    def where(k):
+        return f"line {lines[k]}" if lines is not None else f"move {k}"
+
+    def xyz(v):
+        return np.round(np.asarray(v, dtype=float)[:3], 4).tolist()
+
+    n_in, n_out = len(inp.kinds), len(out.kinds)
+    cut = np.array([k != "traverse" for k in inp.kinds], dtype=bool)
+    displaced = np.asarray(displaced, dtype=bool) & cut
+    # where each cutting move must end
+    target = inp.ends[:, :3].copy()
+    if displaced.any():
+        target[displaced] += np.asarray(field(inp.ends[displaced, :3]), dtype=float)
+    ie6, oe6 = inp.ends, out.ends
+    oe, okind, tgt = out.ends[:, :3].tolist(), out.kinds, target.tolist()
+    istart = np.vstack([np.zeros((1, 3)), inp.ends[:-1, :3]])
+    zero_len = (np.abs(inp.ends[:, :3] - istart).max(axis=1) == 0) & np.array([k == "feed" for k in inp.kinds])
+
+    # 1. the sequence: rapids one for one, each cutting move a run of output moves ending at its target
+    problems: list[str] = []
+    rapids: list[tuple[int, int, int]] = []  # (input move, output move, the cutting move before it or -1)
+    groups = np.full((n_in, 2), -1, dtype=np.int64)
+    j = 0
+    last_cut = -1  # the last cutting move since a rapid
+    for k in range(n_in):
+        if not cut[k]:
+            if j >= n_out or okind[j] != "traverse":
+                got = "the end of the motion" if j >= n_out else f"a {okind[j]} move to {xyz(oe6[j])}"
+                return [f"{where(k)}: the rapid to {xyz(ie6[k])} became {got}"]
+            rapids.append((k, j, last_cut))
+            j += 1
+            last_cut = -1
+            continue
+        last_cut = k
+        t = tgt[k]
+        j0 = j
+        while j < n_out and okind[j] != "traverse":
+            p = oe[j]
+            j += 1
+            if abs(p[0] - t[0]) <= tol and abs(p[1] - t[1]) <= tol and abs(p[2] - t[2]) <= tol:
+                # of the moves in a row that end this near, the nearest: a move may be split a few µm
+                # before its end (at a grid line)
+                best = math.dist(p, t)
+                while j < n_out and okind[j] != "traverse":
+                    q = oe[j]
+                    if max(abs(q[0] - t[0]), abs(q[1] - t[1]), abs(q[2] - t[2])) > tol or math.dist(q, t) >= best:
+                        break
+                    best = math.dist(q, t)
+                    j += 1
+                break
+        else:
+            if zero_len[k]:  # a move that goes nowhere may be left out
+                j = j0
+                continue
+            nxt = "a rapid" if j < n_out else "the end of the motion"
+            what = "displaced " if displaced[k] else ""
+            return [f"{where(k)}: the corrected motion reaches {nxt} without passing the {what}end "
+                    f"{xyz(target[k])} of this {inp.kinds[k]} move"
+                    + (f" (first output move after the previous: to {xyz(oe6[j0])})" if j0 < n_out else "")]
+        groups[k] = (j0, j)
+    if j < n_out:
+        return [f"the corrected motion has {n_out - j} move(s) more after the input's last, first a "
+                f"{okind[j]} move to {xyz(oe6[j])}"]
+    # rapids end where they did (all axes)
+    if rapids:
+        rk, rj, rc = np.array(rapids).T
+        bad = np.flatnonzero(np.abs(oe6[rj] - ie6[rk]).max(axis=1) > tol)
+        if len(bad):
+            k, jj, c = rk[bad[0]], rj[bad[0]], rc[bad[0]]
+            why = ""
+            if c >= 0 and displaced[c] and np.abs(oe6[jj, :3] - ie6[k, :3] - (target[c] - ie6[c, :3])).max() <= tol:
+                why = f" (moved by the displacement of {where(c)}, the cutting move before it)"
+            problems.append(f"{len(bad)} rapid(s) moved, first {where(k)}: the rapid to {xyz(ie6[k])} ends at "
+                            f"{xyz(oe6[jj])}{why}")
+    # rotary axes end where they did
+    gk = np.flatnonzero(groups[:, 1] > groups[:, 0])
+    bad = np.flatnonzero(np.abs(oe6[groups[gk, 1] - 1, 3:] - ie6[gk, 3:]).max(axis=1) > 1e-3) if len(gk) else []
+    if len(bad):
+        k = gk[bad[0]]
+        problems.append(f"{len(bad)} rotary end(s) changed, first {where(k)}: "
+                        f"{oe6[groups[k, 1] - 1, 3:].round(4).tolist()}, not {ie6[k, 3:].round(4).tolist()}")
+
+    # 2. the path of every cutting move: expected points (input densified, displaced) against the
+    # output pieces (arcs densified)
+    ks = np.flatnonzero(cut & (groups[:, 1] > groups[:, 0]))
+    if not len(ks):
+        return problems
+    xp, xoff, xlen = densify(inp, ks)
+    xmove = np.repeat(np.arange(len(ks)), np.diff(xoff))
+    dmask = displaced[ks][xmove]
+    if dmask.any():
+        xp[dmask] += np.asarray(field(xp[dmask]), dtype=float)
+    # the state before each move: a rapid (and the start) leaves the tool at an uncorrected point
+    prev_state = np.zeros(n_in, dtype=bool)
+    state = False
+    for k in range(n_in):
+        prev_state[k] = state
+        state = bool(displaced[k]) if cut[k] else False
+    transition = prev_state[ks] != displaced[ks]
+    # the output pieces of each move, densified; the first point of every piece is the previous end
+    j0s, j1s = groups[ks, 0], groups[ks, 1]
+    osel = np.concatenate([np.arange(a, b) for a, b in zip(j0s, j1s)])
+    op, ooff, _ = densify(out, osel, step=np.inf)
+    opiece = np.repeat(np.arange(len(osel)), np.diff(ooff))
+    omove = np.repeat(np.arange(len(ks)), j1s - j0s)[opiece]
+    is_first = np.zeros(len(osel), dtype=bool)
+    is_first[np.concatenate([[0], np.cumsum(j1s - j0s)[:-1]])] = True
+    piece_start = np.zeros(len(op), dtype=bool)
+    piece_start[ooff[:-1]] = True
+    piece_end = np.zeros(len(op), dtype=bool)
+    piece_end[ooff[1:] - 1] = True
+    conn = transition[omove] & is_first[opiece]  # points of a connecting first piece
+
+    def report(what, idx, moves, pts, dist):
+        if len(idx):
+            k = ks[moves[idx[0]]]
+            problems.append(f"{len(idx)} point(s) {what}, first {where(k)} ({inp.kinds[k]}"
+                            f"{', displaced' if displaced[k] else ''}): {xyz(pts[idx[0]])}, "
+                            f"{dist[idx[0]] * 1000:.1f} µm off")
+
+    # (a) every output point on the expected path, in order (of a connecting piece: its end only)
+    check = ~piece_start & (~conn | piece_end)
+    pa, ga = op[check], omove[check]
+    dmin, along = _near(pa, ga, xp, xoff, xlen)
+    report("of the corrected motion off the input's path", np.flatnonzero(dmin > tol), ga, pa, dmin)
+    # (the last point of a move is its end, which the sequence placed: a closed arc ends where it starts)
+    inner = (ga[1:] == ga[:-1]) & (ga[1:] == np.append(ga[2:], -1))
+    back = np.flatnonzero(inner & (along[1:] < along[:-1] - 2 * tol))
+    back = back[[not _retraces(inp, ks[ga[b + 1]]) for b in back]] if len(back) else back
+    if len(back):
+        k = ks[ga[back[0] + 1]]
+        problems.append(f"{len(back)} point(s) of the corrected motion go back along the path, first {where(k)} "
+                        f"({inp.kinds[k]}) at {xyz(pa[back[0] + 1])}")
+    # (b) every expected point near the output, but for the start of a move after an uncorrected point
+    conn_end = np.flatnonzero(conn[check] & piece_end[check])
+    free = np.zeros(len(ks))  # the length of each move, from its start, the output need not follow
+    free[ga[conn_end]] = along[conn_end]
+    if max_piece is not None and len(conn_end):
+        m = ga[conn_end]
+        known = np.ones(len(m), dtype=bool) if start_known is None else np.asarray(start_known, dtype=bool)[ks[m]]
+        bounded = displaced[ks[m]] & known
+        free[m[bounded]] = np.minimum(free[m[bounded]], 1.05 * max_piece)
+    keep = ~piece_start | is_first[opiece]  # each move: from the start of its first piece
+    pm = omove[keep]  # pieces of one move are contiguous: its kept points follow one another
+    poly = op[keep]
+    poff = np.searchsorted(pm, np.arange(len(ks) + 1))
+    need = xlen > free[xmove] + tol
+    dmin, _ = _near(xp[need], xmove[need], poly, poff, np.zeros(len(poly)))
+    report("of the input's path the corrected motion misses", np.flatnonzero(dmin > tol), xmove[need], xp[need], dmin)
+    return problems
+
+
+def _retraces(canon: Canon, k: int) -> bool:
+    """An arc of more than one turn with no motion along its normal passes its points twice."""
+    a = canon.arcs[k]
+    if a is None or abs(a[0]) <= 1:
+        return False
+    an = _PLANES[a[3]][2]
+    prev = canon.ends[k - 1, an] if k else 0.0
+    return abs(canon.ends[k, an] - prev) < 1e-9
+
+
+def displaced_moves(prog: nc.Program, canon: Canon):
+    """Which of rs274's moves the engine corrects, their lines and whether the engine knows where
+    they start.
+
+    The engine's blocks are rs274's moves one for one; a cutting block whose position the engine
+    knows is corrected; the others are left as written (and the correction warns of them). Returns
+    (displaced, lines, start_known, None), or (None, None, None, why) when the engine's reading is
+    not rs274's.
+    """
+    b = prog.blocks
+    n = len(canon.kinds)
+    m = min(n, len(b))
+    tol = np.full(6, canon.resolution_mm + 1e-9)
+    tol[3:] = 5e-5 + 1e-9
+    ours = b.end[:m, :6]
+    known = np.isfinite(ours)
+    bad = (known & (np.abs(np.where(known, ours, 0.0) - canon.ends[:m]) > tol)).any(axis=1)
+    kinds = np.array(["traverse", "feed", "arc", "arc", ""])[b.motion[:m]]
+    bad |= (kinds != "") & (kinds != np.array(canon.kinds[:m], dtype="<U8"))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        return None, None, None, (f"line {b.line[k]}: the engine reads a {nc.MOTIONS[b.motion[k]]} move to "
+                            f"{np.round(ours[k, :3], 4).tolist()}, rs274 a {canon.kinds[k]} to "
+                            f"{canon.ends[k, :3].round(4).tolist()} (move {k})")
+    if len(b) != n:
+        return None, None, None, f"the engine reads {len(b)} moves, rs274 {n}"
+    displaced = b.supported & (b.motion >= 1) & (b.motion <= 3)
+    start_known = np.zeros(n, dtype=bool)
+    start_known[1:] = np.isfinite(b.end[:-1, :3]).all(axis=1)
+    return displaced, b.line, start_known, None
+
+
+# ------------------------------------------------------------------------------------------ one program
+def gentle_field(extent) -> fields.GridField:
+    """An 11 x 11 grid of ``dz = 0.02 sin(x/L) cos(y/L)`` over the feed extent padded by a tenth (and
+    1 mm), L a third of its width; points outside hold the border value."""
+    if extent:
+        (x0, x1), (y0, y1) = extent["x"], extent["y"]
+    else:
+        x0 = x1 = y0 = y1 = 0.0
+    w = max(x1 - x0, y1 - y0)
+    m = 0.1 * w + 1.0
+    xs = np.linspace(x0 - m, x1 + m, 11)
+    ys = np.linspace(y0 - m, y1 + m, 11)
+    L = (w + 2 * m) / 3
+    X, Y = np.meshgrid(xs, ys)
+    return fields.GridField(xs, ys, AMPLITUDE * np.sin(X / L) * np.cos(Y / L), outside="clamp")
+
+
+@dataclass
+class Result:
+    file: str
+    dialect: str
+    lines: int
+    outcome: str = ""  # "accepted", "refused: line N: why", "error: ..."
+    reason: str = ""  # the refusal without its numbers, for the summary
+    refusal_line: int | None = None
+    units: str = ""
+    identity: bool | None = None
+    identity_detail: str = ""
+    motion: str = ""  # "matched", "mismatch", "no rs274", "rs274 rejects the input"
+    motion_detail: str = ""
+    uncorrected: int = 0  # cutting moves the engine leaves as written (position unknown)
+    adjusted: list[str] = field(default_factory=list)  # what rs274 needed to run the programs
+    seconds: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def accepted(self) -> bool:
+        return self.outcome == "accepted"
+
+    @property
+    def refused(self) -> bool:
+        return self.outcome.startswith("refused")
+
+
+def _first_line(e: BaseException) -> str:
+    return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+
+
+def _refusal_line(e: RefusedError) -> int | None:
+    for d in e.details:
+        if isinstance(d, dict) and d.get("line"):
+            return int(d["line"])
+    m = re.search(r"\bline (\d+)", e.message)
+    return int(m.group(1)) if m else None
+
+
+def _generic(msg: str) -> str:
+    """A message without its numbers (those in words such as G41 stay)."""
+    msg = re.sub(r"\s*\([-+]?\d*\.?\d+\)|(?<![\w.])[-+]?\d*\.?\d+(?![\w.])", "", msg)
+    return re.sub(r"\s+", " ", msg).strip()
+
+
+def _first_difference(a: bytes, b: bytes) -> str:
+    la, lb = a.splitlines(), b.splitlines()
+    for i, (x, y) in enumerate(zip(la, lb)):
+        if x != y:
+            return f"line {i + 1}: {x[:60]!r} became {y[:60]!r}"
+    return f"{len(la)} lines became {len(lb)}" if len(la) != len(lb) else "line ends differ"
+
+
+def run(entry: Entry, work: Path) -> Result:
+    """Everything the corpus test checks, for one program (``work``: a folder for temporary files)."""
+    t0 = time.perf_counter()
+    r = Result(entry.file, entry.dialect, entry.lines)
+    try:
+        _run(entry, work, r)
+    except Exception as e:  # noqa: BLE001 - an unexpected error is an outcome of the corpus run
+        r.outcome = f"error: {type(e).__name__}: {_first_line(e)}"
+        r.reason = f"{type(e).__name__}"
+    r.seconds = time.perf_counter() - t0
+    return r
+
+
+def _run(entry: Entry, work: Path, r: Result) -> None:
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        prog = nc.read(entry.path)
+        uns = prog.unsupported
+    except InputError as e:
+        r.outcome = f"refused: line {e.line}: {e.message}"
+        r.reason, r.refusal_line = _generic(e.message), e.line
+        return
+    r.units = prog.units
+    if uns:
+        u = uns[0]
+        r.outcome = f"refused: line {u.line}: {u.construct}" + (f" (+{len(uns) - 1} more)" if len(uns) > 1 else "")
+        r.reason, r.refusal_line = u.construct, u.line
+        return
+    ms = MAX_SEGMENT
+    try:
+        zero = prog.correct(fields.Shift((0.0, 0.0, 0.0)))
+        r.identity = zero.data == prog.data
+        if not r.identity:
+            r.identity_detail = _first_difference(prog.data, zero.data)
+        grid = gentle_field(prog.inspect()["extents"]["feed"])
+        outs = {"shift": prog.correct(fields.Shift(SHIFT), max_segment=ms),
+                "grid": prog.correct(grid, max_segment=ms)}
+    except RefusedError as e:
+        r.outcome = f"refused: {_first_line(e)}"
+        r.reason, r.refusal_line = _generic(e.message), _refusal_line(e)
+        return
+    r.outcome = "accepted"
+    fieldof = {"shift": fields.Shift(SHIFT), "grid": grid}
+    for name, out in outs.items():
+        c = out.correction
+        if c.warnings:
+            r.notes.append(f"{name}: " + "; ".join(c.warnings))
+    if RS274 is None:
+        r.motion = "no rs274"
+        return
+    canon_in, used = rs274_input(entry.path, work)
+    r.adjusted = [ADJUSTMENTS[k][0] for k in used]
+    if canon_in.error is not None:
+        r.motion = "rs274 rejects the input"
+        r.motion_detail = canon_in.error.replace("\n", " | ")
+        return
+    tol = TOL_MM if r.units == "mm" else TOL_INCH
+    displaced, lines, start_known, why = displaced_moves(prog, canon_in)
+    details = []
+    if why is not None:
+        details.append(f"reading: {why}")
+    else:
+        r.uncorrected = int(((~displaced) & np.array([k != "traverse" for k in canon_in.kinds], dtype=bool)).sum())
+        tools = tool_table(work)
+        for name, out in outs.items():
+            p = out.write(work / (f"out-{name}" + entry.path.suffix))
+            p.write_bytes(adjust(p.read_bytes(), used))
+            canon_out = run_rs274(p, tools)
+            if canon_out.error is not None:
+                why = canon_out.error.replace("\n", " | ")
+                details.append(f"{name}: rs274 rejects the corrected program: {why}")
+                continue
+            problems = compare_motion(canon_in, canon_out, displaced, fieldof[name], tol, lines, ms, start_known)
+            if problems:
+                details.append(f"{name}: " + "; ".join(problems))
+    r.motion = "mismatch" if details else "matched"
+    r.motion_detail = " || ".join(details)
+
+
+# ------------------------------------------------------------------------------------------ report
+def _run_one(args) -> Result:
+    entry, work = args
+    return run(entry, Path(work))
+
+
+def run_all(entries=None, workers: int = 2) -> list[Result]:
+    from concurrent.futures import ProcessPoolExecutor
+
+    entries = manifest() if entries is None else entries
+    with tempfile.TemporaryDirectory(prefix="ncadapt-corpus-") as tmp:
+        jobs = [(e, str(Path(tmp) / e.file)) for e in entries]
+        # the longest first, so the two workers finish together
+        order = sorted(range(len(jobs)), key=lambda i: -entries[i].lines)
+        with ProcessPoolExecutor(workers) as pool:
+            done = dict(zip(order, pool.map(_run_one, [jobs[i] for i in order])))
+    return [done[i] for i in range(len(jobs))]
+
+
+def tables(results: list[Result]) -> str:
+    out = ["| dialect | programs | accepted | refused (top reasons) | identity | motion matched / compared |",
+           "|---|---|---|---|---|---|"]
+    by: dict[str, list[Result]] = {}
+    for r in results:
+        by.setdefault(r.dialect, []).append(r)
+    for d in sorted(by, key=lambda d: (-len(by[d]), d)):
+        rs = by[d]
+        acc = [r for r in rs if r.accepted]
+        ref = [r for r in rs if r.refused]
+        errs = [r for r in rs if r.outcome.startswith("error")]
+        top = Counter(r.reason for r in ref).most_common(3)
+        reasons = "; ".join(f"{why} ({n})" for why, n in top)
+        refused = f"{len(ref)}" + (f": {reasons}" if reasons else "") + (f" — {len(errs)} error(s)" if errs else "")
+        ident = sum(1 for r in acc if r.identity)
+        compared = [r for r in acc if r.motion in ("matched", "mismatch")]
+        matched = sum(1 for r in compared if r.motion == "matched")
+        out.append(f"| {d} | {len(rs)} | {len(acc)} | {refused} | {ident}/{len(acc)} | {matched}/{len(compared)} |")
+    tot = [r for r in results]
+    acc = [r for r in tot if r.accepted]
+    compared = [r for r in acc if r.motion in ("matched", "mismatch")]
+    out.append(f"| **all** | {len(tot)} | {len(acc)} | {sum(r.refused for r in tot)} | "
+               f"{sum(1 for r in acc if r.identity)}/{len(acc)} | "
+               f"{sum(r.motion == 'matched' for r in compared)}/{len(compared)} |")
+    out += ["", "| program | dialect | lines | outcome | identity | motion | s |", "|---|---|---|---|---|---|---|"]
+    for r in sorted(results, key=lambda r: (r.dialect, r.file)):
+        ident = "" if r.identity is None else ("yes" if r.identity else f"no ({r.identity_detail})")
+        notes = ([f"rs274: {', '.join(r.adjusted)}"] if r.adjusted else []) + \
+            ([f"{r.uncorrected} cutting move(s) left as written, position unknown"] if r.uncorrected else [])
+        motion = r.motion + (f" ({'; '.join(notes)})" if notes else "")
+        motion += f": {r.motion_detail}" if r.motion_detail else ""
+        cell = lambda s: s.replace("|", "\\|").replace("\n", " ")  # noqa: E731
+        out.append(f"| {r.file} | {r.dialect} | {r.lines} | {cell(r.outcome)} | {cell(ident)} | "
+                   f"{cell(motion)} | {r.seconds:.1f} |")
+    return "\n".join(out)
+
+
+def main() -> int:
+    if not CORPUS.is_dir():
+        print(f"no corpus at {CORPUS}", file=sys.stderr)
+        return 1
+    t = time.perf_counter()
+    results = run_all()
+    print(tables(results))
+    print(f"\n{len(results)} programs in {time.perf_counter() - t:.0f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,147 @@
+"""The NC engine on real programs (``../shared/corpus/nc``): a refusal names its line, a zero
+correction gives the program back byte for byte, and a corrected program runs in LinuxCNC's rs274
+as the input displaced by the field (see :mod:`corpus`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import corpus
+from rs274 import RS274, Canon
+
+ENTRIES = corpus.manifest()
+
+
+@pytest.mark.parametrize("entry", [pytest.param(e, id=e.file) for e in ENTRIES]
+                         or [pytest.param(None, id="no-corpus")])
+def test_program(entry, tmp_path):
+    if entry is None:
+        pytest.skip(f"no corpus of NC programs at {corpus.CORPUS}")
+    r = corpus.run(entry, tmp_path)
+    outcome, line, identity, motion = r.outcome, r.refusal_line, r.identity, r.motion
+    assert not outcome.startswith("error"), outcome
+    if r.refused:  # a refusal is an outcome, but it says where
+        assert line is not None and line >= 1, f"the refusal names no line: {outcome}"
+        return
+    assert identity, f"a zero correction changed the program: {r.identity_detail}"
+    if RS274 is None:
+        pytest.skip("LinuxCNC's rs274 is not installed: motion not compared")
+    # when rs274 runs the input, it runs the corrected programs as the input displaced
+    assert motion != "mismatch", r.motion_detail
+
+
+# --------------------------------------------------------------------------------- the comparison
+def _field(p):
+    d = np.zeros_like(p)
+    d[:, 2] = 0.01 + 0.002 * p[:, 0]
+    return d
+
+
+def _canon(moves) -> Canon:
+    """moves: (kind, end xyz[, arc])."""
+    kinds = [m[0] for m in moves]
+    ends = np.array([list(m[1]) + [0.0, 0.0, 0.0] for m in moves], dtype=float)
+    arcs = [m[2] if len(m) > 2 else None for m in moves]
+    return Canon(kinds, ends, arcs, 0.00005, None)
+
+
+# a rapid above the start, a plunge, a line, a clockwise half circle, a line, a rapid up
+INPUT = [("traverse", (0, 0, 5)), ("feed", (0, 0, -1)), ("feed", (10, 0, -1)),
+         ("arc", (20, 0, -1), (-1, 15.0, 0.0, "CANON_PLANE_XY")), ("feed", (20, 10, -1)),
+         ("traverse", (20, 10, 5))]
+DISPLACED = np.array([False, True, True, True, True, False])
+
+
+def _corrected(arc_points=8):
+    """What an exact correction of INPUT by _field writes: cutting moves displaced, pieces of them
+    (the arc as straight pieces), rapids as they were."""
+    def d(x, y, z):
+        return (x, y, z + 0.01 + 0.002 * x)
+
+    out = [("traverse", (0, 0, 5)), ("feed", d(0, 0, -1)), ("feed", d(5, 0, -1)), ("feed", d(10, 0, -1))]
+    for a in np.linspace(math.pi, 0, arc_points + 1)[1:]:
+        out.append(("feed", d(15 + 5 * math.cos(a), 5 * math.sin(a), -1)))
+    out += [("feed", d(20, 5, -1)), ("feed", d(20, 10, -1)), ("traverse", (20, 10, 5))]
+    return out
+
+
+def _compare(out_moves):
+    return corpus.compare_motion(_canon(INPUT), _canon(out_moves), DISPLACED, _field, 0.005)
+
+
+def test_comparison_accepts_an_exact_correction():
+    assert _compare(_corrected(arc_points=64)) == []
+
+
+def test_comparison_accepts_a_shifted_arc_and_a_move_left_as_written():
+    """A shift keeps the arc an arc; a move whose position the engine does not know (here the
+    plunge) is left as written, and the next move starts from its uncorrected end."""
+    def shift(p):
+        return np.broadcast_to([0.0, 0.0, 0.03], p.shape).copy()
+
+    out = [("traverse", (0, 0, 5)), ("feed", (0, 0, -1)), ("feed", (10, 0, -0.97)),
+           ("arc", (20, 0, -0.97), (-1, 15.0, 0.0, "CANON_PLANE_XY")), ("feed", (20, 10, -0.97)),
+           ("traverse", (20, 10, 5))]
+    displaced = np.array([False, False, True, True, True, False])
+    assert corpus.compare_motion(_canon(INPUT), _canon(out), displaced, shift, 0.005) == []
+    # ... but not a move it should have corrected
+    assert corpus.compare_motion(_canon(INPUT), _canon(out), DISPLACED, shift, 0.005)
+
+
+def _off(moves, i, dz):
+    m = list(moves)
+    kind, (x, y, z), *rest = m[i]
+    m[i] = (kind, (x, y, z + dz), *rest)
+    return m
+
+
+WRONG = {
+    # a corner of the linearised arc 8 µm off the displaced arc
+    "point_off": lambda: _off(_corrected(64), 20, 0.008),
+    # the arc written with too few pieces: its chords leave the arc by 0.1 mm
+    "coarse_arc": lambda: _corrected(arc_points=4),
+    # the last line left at its programmed depth
+    "not_displaced": lambda: _off(_corrected(64), -2, -(0.01 + 0.04)),
+    # the arc turned the other way (counter-clockwise, through y < 0)
+    "arc_reversed": lambda: _corrected()[:4] + [("arc", (20, 0, -1 + 0.05), (1, 15.0, 0.0, "CANON_PLANE_XY"))]
+    + _corrected()[-3:],
+    # a rapid that no longer ends where it did
+    "rapid_moved": lambda: _off(_corrected(64), -1, 0.05),
+    # a piece of the line missing and another added (the line goes 10 mm back and forth)
+    "extra_piece": lambda: _corrected(64)[:3] + [("feed", (0, 0, -1 + 0.01))] + _corrected(64)[3:],
+    # pieces of the arc out of order
+    "out_of_order": lambda: (lambda m: m[:10] + [m[11], m[10]] + m[12:])(_corrected(64)),
+    # the corrected field is not the field: a constant 0.01 mm
+    "wrong_field": lambda: [(k, (x, y, z - 0.002 * x) if k != "traverse" else (x, y, z), *r)
+                            for k, (x, y, z), *r in _corrected(64)],
+}
+
+
+@pytest.mark.parametrize("name", sorted(WRONG))
+def test_comparison_detects_a_wrong_correction(name):
+    problems = _compare(WRONG[name]())
+    assert problems, f"{name}: not detected"
+
+
+def test_comparison_bounds_the_piece_that_leaves_an_uncorrected_point():
+    """After a rapid the first piece goes from an uncorrected point to the corrected path: beyond the
+    correction's max_segment the path must be followed all the same."""
+    def shift(p):
+        return np.broadcast_to([0.0, 0.0, 0.05], p.shape).copy()
+
+    def compare(inp, out, **kw):
+        return corpus.compare_motion(_canon(inp), _canon(out), [False, True, False], shift, 0.005, max_piece=5.0, **kw)
+
+    inp = [("traverse", (0, 0, -1)), ("feed", (20, 0, -1)), ("traverse", (20, 0, 5))]
+    split = [("traverse", (0, 0, -1)), ("feed", (5, 0, -0.95)), ("feed", (20, 0, -0.95)), ("traverse", (20, 0, 5))]
+    ramp = [("traverse", (0, 0, -1)), ("feed", (20, 0, -0.95)), ("traverse", (20, 0, 5))]
+    assert compare(inp, split) == []
+    assert compare(inp, ramp), "a ramp over the whole move is not the displaced path"
+    # where the engine does not know the start, a straight move is corrected at its end only
+    assert compare(inp, ramp, start_known=[False, False, True]) == []
+    # a plunge stays one straight piece
+    plunge = [("traverse", (0, 0, 10)), ("feed", (0, 0, -1)), ("traverse", (0, 0, 10))]
+    assert compare(plunge, [("traverse", (0, 0, 10)), ("feed", (0, 0, -0.95)), ("traverse", (0, 0, 10))]) == []
