@@ -521,7 +521,6 @@ class Result:
     uncorrected: int = 0  # cutting moves the engine leaves as written (position unknown)
     adjusted: list[str] = field(default_factory=list)  # what rs274 needed to run the programs
     seconds: float = 0.0
-    notes: list[str] = field(default_factory=list)
 
     @property
     def accepted(self) -> bool:
@@ -586,25 +585,20 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.outcome = f"refused: line {u.line}: {u.construct}" + (f" (+{len(uns) - 1} more)" if len(uns) > 1 else "")
         r.reason, r.refusal_line = u.construct, u.line
         return
-    ms = MAX_SEGMENT
     try:
         zero = prog.correct(fields.Shift((0.0, 0.0, 0.0)))
         r.identity = zero.data == prog.data
         if not r.identity:
             r.identity_detail = _first_difference(prog.data, zero.data)
         grid = gentle_field(prog.inspect()["extents"]["feed"])
-        outs = {"shift": prog.correct(fields.Shift(SHIFT), max_segment=ms),
-                "grid": prog.correct(grid, max_segment=ms)}
+        outs = {"shift": prog.correct(fields.Shift(SHIFT), max_segment=MAX_SEGMENT),
+                "grid": prog.correct(grid, max_segment=MAX_SEGMENT)}
     except RefusedError as e:
         r.outcome = f"refused: {_first_line(e)}"
         r.reason, r.refusal_line = _generic(e.message), _refusal_line(e)
         return
     r.outcome = "accepted"
     fieldof = {"shift": fields.Shift(SHIFT), "grid": grid}
-    for name, out in outs.items():
-        c = out.correction
-        if c.warnings:
-            r.notes.append(f"{name}: " + "; ".join(c.warnings))
     if RS274 is None:
         r.motion = "no rs274"
         return
@@ -620,9 +614,16 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
     if why is not None:
         details.append(f"reading: {why}")
     else:
-        r.uncorrected = int(((~displaced) & np.array([k != "traverse" for k in canon_in.kinds], dtype=bool)).sum())
+        b = prog.blocks
+        r.uncorrected = int((~displaced & (b.motion >= 1) & (b.motion <= 3)).sum())
         tools = tool_table(work)
         for name, out in outs.items():
+            # the moves left as written are those the correction warns of
+            said = re.findall(r"([\d,]+) cutting move\(s\) not corrected", " ".join(out.correction.warnings))
+            warned = sum(int(n.replace(",", "")) for n in said)
+            if warned != r.uncorrected:
+                details.append(f"{name}: {r.uncorrected} cutting move(s) left as written, "
+                               f"the correction warns of {warned}")
             p = out.write(work / (f"out-{name}" + entry.path.suffix))
             p.write_bytes(adjust(p.read_bytes(), used))
             canon_out = run_rs274(p, tools)
@@ -630,7 +631,8 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
                 why = canon_out.error.replace("\n", " | ")
                 details.append(f"{name}: rs274 rejects the corrected program: {why}")
                 continue
-            problems = compare_motion(canon_in, canon_out, displaced, fieldof[name], tol, lines, ms, start_known)
+            problems = compare_motion(canon_in, canon_out, displaced, fieldof[name], tol, lines, MAX_SEGMENT,
+                                      start_known)
             if problems:
                 details.append(f"{name}: " + "; ".join(problems))
     r.motion = "mismatch" if details else "matched"
