@@ -16,12 +16,16 @@ Properties:
    corrected points (``points + displacements``) in order, as in ``test_rs274._corrected_matches``
    but with rs274's arcs traced as arcs;
 3. rs274 against rs274, without the engine's predictions: every move end rs274 prints for the
-   corrected program lies on rs274's path of the input displaced by the field (rapids not displaced
-   unless corrected) within 5 µm (9 µm with G20 sections); the ends go forward along the input's
-   moves, block by block, every input block's end is reached, and there A/B/C equal rs274's rotary
-   position of the input at that block's end (inside a block they stay between its start and end).
+   corrected program lies on rs274's path of the input displaced by the field within 5 µm (9 µm
+   with G20 sections); the ends go forward along the input's moves, block by block, every input
+   block's end is reached, and there A/B/C equal rs274's rotary position of the input at that
+   block's end (inside a block they stay between its start and end). Rapids not corrected
+   (``rapids=False``) keep their programmed target: each axis a rapid moves ends where the input's
+   does, an axis it does not move may also stay where the corrected path left it. The program's
+   first move, from a start the program does not give, may be left as written.
 
-``make test`` runs a few examples; ``make fuzz`` runs this file with NCADAPT_FUZZ_EXAMPLES=2000.
+Not collected by ``make test`` (the name does not start with ``test_``): ``pytest
+tests/fuzz_programs.py`` runs 25 examples per test, ``make fuzz`` NCADAPT_FUZZ_EXAMPLES=2000.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, note, settings
 from hypothesis import strategies as st
+from hypothesis.errors import InvalidArgument
 
 from conftest import needs_rs274
 from ncadapt import fields, nc
@@ -51,6 +56,9 @@ TOL_PATH_MM = 0.005
 TOL_PATH_INCH = 0.009
 #: rotary positions: rs274 prints 4 decimals, the engine writes at least 4
 TOL_ROTARY = 1e-4 + 1e-9
+#: NCADAPT_FUZZ_STRICT_RAPIDS=1: an uncorrected rapid must end at the input's end in every axis,
+#: also in the axes it does not move (the engine leaves those where the corrected cut left them)
+STRICT_RAPIDS = os.environ.get("NCADAPT_FUZZ_STRICT_RAPIDS", "") not in ("", "0")
 
 # ============================================================================= the generator
 PLANES = {17: (0, 1, 2), 18: (2, 0, 1), 19: (1, 2, 0)}
@@ -83,6 +91,10 @@ class _Writer:
         self.rot = {a: 0.0 for a in self.rotary}
         self.lines: list[str] = []
         self.n = 0
+
+    def maybe(self, n: int) -> bool:
+        """True once in n draws (shrinks to False: failing programs shrink to plain ones)."""
+        return self.draw(st.integers(0, n - 1)) == n - 1
 
     # ------------------------------------------------------------------ numbers
     @property
@@ -142,7 +154,7 @@ class _Writer:
     def rotary_words(self, force=False) -> list[str]:
         words = []
         for a in self.rotary:
-            if not (force or self.draw(st.integers(0, 3)) == 0):
+            if not (force or self.maybe(4)):
                 continue
             if self.inc and not force:
                 d = self.draw(st.integers(-900, 900)) / 10
@@ -160,16 +172,17 @@ class _Writer:
     # ------------------------------------------------------------------ lines
     def emit(self, words: list[str], motion_line=True):
         d = self.draw
-        if motion_line and d(st.integers(0, 5)) == 0:
+        if motion_line and self.maybe(6):
             words = words + [f"F{d(st.sampled_from(['100', '250', '500.', '20']))}"]
-        if d(st.integers(0, 6)) == 0:
+        if self.maybe(7):
             text = d(st.sampled_from(COMMENTS))
-            words = [f"({text})"] + words if d(st.booleans()) else words + [f"({text})"]
+            at = d(st.integers(0, len(words)))  # before, between or after the words
+            words = words[:at] + [f"({text})"] + words[at:]
         line = self.sep.join(words)
-        if self.numbered and d(st.integers(0, 3)) > 0:
+        if self.numbered and not self.maybe(4):
             self.n += 10
             line = f"N{self.n}{self.sep}{line}"
-        if d(st.integers(0, 7)) == 0:
+        if self.maybe(8):
             line += f"{d(st.sampled_from(['', ' ']))};{d(st.sampled_from(COMMENTS))}"
         self.lines.append(line)
 
@@ -177,10 +190,10 @@ class _Writer:
         """Sometimes switch distance mode or units, in the block or on their own line."""
         d = self.draw
         words = []
-        if d(st.integers(0, 5)) == 0:
+        if self.maybe(6):
             self.inc = not self.inc
             words.append("G91" if self.inc else "G90")
-        if self.has_inch and d(st.integers(0, 5)) == 0:
+        if self.has_inch and self.maybe(6):
             self.inch = not self.inch
             words.append("G20" if self.inch else "G21")
         if words and d(st.booleans()):
@@ -189,7 +202,7 @@ class _Writer:
         return words
 
     def motion_word(self, g: str, words: list[str], may_omit=True) -> list[str]:
-        if may_omit and g == self.motion and words and self.draw(st.integers(0, 2)) == 0:
+        if may_omit and g == self.motion and words and self.maybe(3):
             return words
         self.motion = g
         return [g] + words
@@ -236,9 +249,9 @@ class _Writer:
             centre = (start[0] + oi, start[1] + oj)
             r = math.hypot(oi, oj)
             phi0 = math.atan2(-oj, -oi)
-            full = d(st.integers(0, 5)) == 0
+            full = self.maybe(6)
             sweep = 0.0 if full else math.radians(d(st.integers(30, 3570)) / 10)
-            if d(st.integers(0, 7)) == 0:
+            if self.maybe(8):
                 turns = 2
                 centre_words.append("P2")
         else:
@@ -259,7 +272,7 @@ class _Writer:
                 value = (v - self.pos[k]) / self.unit if self.inc else v / self.unit
                 words.append(self.axis_word(k, value, self.arc_decimals, self.inc))
             words.sort()
-        if d(st.integers(0, 2)) == 0:  # helix
+        if self.maybe(3):  # helix
             lo, hi = self.mm_ticks(-5, 5)
             words.append(self.grid_word(an, d(st.integers(lo, hi))))
         rot = self.rotary_words()
@@ -330,7 +343,7 @@ _CANON_PLANES = {"CANON_PLANE_XY": (0, 1, 2), "CANON_PLANE_XZ": (2, 0, 1), "CANO
 class Move:
     """One canonical move of rs274: a straight line or an arc (helix, turns) from the previous end."""
 
-    def __init__(self, kind: str, start: np.ndarray, end: np.ndarray, arc):
+    def __init__(self, kind: str, start: np.ndarray, end: np.ndarray, arc, res: float = 0.0):
         self.kind, self.start, self.end = kind, start, end
         self.arc = arc
         if arc is not None:
@@ -344,7 +357,9 @@ class Move:
             self.rs, self.re = float(np.hypot(*s)), float(np.hypot(*e))
             self.ts = math.atan2(s[1], s[0])
             base = ((math.atan2(e[1], e[0]) - self.ts) * self.dir) % (2 * math.pi)
-            if base <= 1e-9:  # start and end printed alike: a full circle
+            # start and end alike to the printed resolution `res` (the start may have been printed
+            # in other units): a full circle
+            if np.abs(start[[a1, a2]] - end[[a1, a2]]).max() <= 2 * res + 1e-9:
                 base = 2 * math.pi
             self.sweep = base + 2 * math.pi * (self.turns - 1)
 
@@ -363,20 +378,41 @@ class Move:
         out[:, an] = a[an] + t * (b[an] - a[an])
         return out
 
-    def dist(self, p: np.ndarray) -> float:
-        """Largest coordinate difference between p and the move (for an arc: the point at p's angle)."""
+    def locate(self, p: np.ndarray, t_from: float = 0.0) -> tuple[float, float]:
+        """(largest coordinate difference, fraction t) between p and the nearest point of the move;
+        on an arc, of the first turn at or after fraction t_from that comes within 1 µm of the
+        nearest (a full circle or P turns pass the same angle more than once)."""
         a, b = self.start[:3], self.end[:3]
         if self.arc is None:
             ab = b - a
             L2 = float(ab @ ab)
             t = 0.0 if L2 == 0 else float(np.clip((p - a) @ ab / L2, 0, 1))
-            return float(np.abs(a + t * ab - p).max())
+            return float(np.abs(a + t * ab - p).max()), t
         a1, a2, _ = self.axes
         d = p[[a1, a2]] - self.c
         ang = ((math.atan2(d[1], d[0]) - self.ts) * self.dir) % (2 * math.pi)
-        cands = ang + 2 * math.pi * np.arange(-1, self.turns + 1)
-        t = np.clip(cands / self.sweep, 0, 1)
-        return float(np.abs(self.at(t) - p).max(axis=1).min())
+        t = np.clip((ang + 2 * math.pi * np.arange(-1, self.turns + 1)) / self.sweep, 0, 1)
+        # the nearest point of the helix near each angle: on a steep helix the angle of p, taken
+        # about rs274's rounded centre, is a poor guess of where along the normal axis it is
+        t = self._nearest(p, t)
+        dist = np.abs(self.at(t) - p).max(axis=1)
+        ok = (t >= t_from - 1e-6) & (dist <= dist.min() + 1e-3)
+        i = int(np.flatnonzero(ok)[0]) if ok.any() else int(np.argmin(dist))
+        return float(dist[i]), float(t[i])
+
+    def _nearest(self, p: np.ndarray, t0: np.ndarray, w: float = 0.15) -> np.ndarray:
+        """Fractions of the points of the move nearest to p within each t0 ± w (a grid, refined)."""
+        t = np.asarray(t0, dtype=float)
+        k = np.linspace(-1, 1, 41)
+        for _ in range(5):
+            grid = np.clip(t[:, None] + w * k[None, :], 0, 1)
+            d2 = np.sum((self.at(grid.ravel()) - p) ** 2, axis=1).reshape(grid.shape)
+            t = grid[np.arange(len(t)), np.argmin(d2, axis=1)]
+            w /= 20
+        return t
+
+    def dist(self, p: np.ndarray) -> float:
+        return self.locate(p)[0]
 
     def dense(self, step=0.25, sagitta=1e-4) -> np.ndarray:
         """XYZ along the move, close enough that the polyline stays within `sagitta` of it."""
@@ -393,7 +429,7 @@ def moves(canon: Canon) -> list[Move]:
     out = []
     prev = np.zeros(6)  # rs274 starts at the origin
     for kind, end, arc in zip(canon.kinds, canon.ends, canon.arcs):
-        out.append(Move(kind, prev, end, arc))
+        out.append(Move(kind, prev, end, arc, canon.resolution_mm))
         prev = end
     return out
 
@@ -401,20 +437,21 @@ def moves(canon: Canon) -> list[Move]:
 # ============================================================================= property 2
 def match_moves(predicted: np.ndarray, mv: list[Move], tol: float, tol_arc: float, names) -> None:
     """``helpers.match_path`` with rs274's arcs as arcs: the moves pass through the predicted points
-    in order and every move ends on one of them."""
+    in order and every move ends on one of them (an arc: at its last turn)."""
     j, n = 0, len(predicted)
     for i, m in enumerate(mv):
-        t = tol if m.arc is None else tol_arc
         if np.abs(m.end[:3] - m.start[:3]).max() <= tol and m.arc is None and (j == n or np.abs(predicted[j] - m.end[:3]).max() > tol):
             continue  # a move that goes nowhere need not be predicted (its start was checked)
-        last = None
+        last, t = None, 0.0
         while j < n:
             p = predicted[j]
-            if np.abs(p - m.end[:3]).max() <= tol:
+            d, t = m.locate(p, t)
+            at_end = np.abs(p - m.end[:3]).max() <= tol
+            if at_end and (m.arc is None or t * m.sweep * max(m.rs, m.re) >= m.sweep * max(m.rs, m.re) - 2 * tol_arc):
                 last = j
                 j += 1
                 break
-            if m.dist(p) > t:
+            if d > (tol if m.arc is None else tol_arc):
                 break
             last = j
             j += 1
@@ -455,11 +492,24 @@ def _distance(P: np.ndarray, e: np.ndarray) -> float:
     return float(np.linalg.norm(A + u[:, None] * AB - e, axis=1).min())
 
 
-def align(inp: list[Move], paths: list[np.ndarray], out: list[Move], tol: float, rotary: bool):
+def _kept_rapid_ends(inp: Move, m: Move, tol: float, res: float) -> bool:
+    """An uncorrected rapid keeps its programmed target: every axis it moves ends where the
+    input's does; an axis it does not move (to rs274's printed resolution `res`) may also stay
+    where the corrected path left it."""
+    at_target = np.abs(m.end[:3] - inp.end[:3]) <= tol
+    if STRICT_RAPIDS:
+        return bool(np.all(at_target))
+    stays = (np.abs(inp.start[:3] - inp.end[:3]) <= res) & (np.abs(m.end[:3] - m.start[:3]) <= tol)
+    return bool(np.all(at_target | stays))
+
+
+def align(inp: list[Move], paths: list[np.ndarray], kept: list[bool], out: list[Move], tol: float, res: float,
+          rotary: bool):
     """Assign rs274's moves of the corrected program to the input's moves, in order: each output
     move end on its input move's displaced path at or after the previous one, the last output move
-    of each input move at its displaced end. Returns (assignment [(k, closes)], None) or
-    (None, (output index, states then)) at the first move that fits nowhere."""
+    of each input move at its displaced end (an uncorrected rapid: see ``_kept_rapid_ends``).
+    Returns (assignment [(k, closes)], None) or (None, (output index, states then)) at the first
+    move that fits nowhere."""
     N = len(inp)
     rot_end = [m.end[3:6] for m in inp]
     states = {(-1, True): (None, None)}  # (input move, its end reached) -> (place on its path, trail)
@@ -470,6 +520,11 @@ def align(inp: list[Move], paths: list[np.ndarray], out: list[Move], tol: float,
             kk, (s0, u0) = (k + 1, (0, 0.0)) if closed else (k, place)
             if kk >= N or (m.kind == "traverse") != (inp[kk].kind == "traverse") or (m.kind == "arc" and inp[kk].kind != "arc"):
                 continue
+            rot_ok = not rotary or np.abs(m.end[3:6] - rot_end[kk]).max() <= TOL_ROTARY
+            if kept[kk]:  # one move, not split
+                if _kept_rapid_ends(inp[kk], m, tol, res) and rot_ok:
+                    new[(kk, True)] = (None, (o, kk, True, trail))
+                continue
             P = paths[kk]
             loc = _locate(P, e, s0, u0, tol)
             if loc is None:
@@ -477,8 +532,7 @@ def align(inp: list[Move], paths: list[np.ndarray], out: list[Move], tol: float,
             r0, r1 = inp[kk].start[3:6], inp[kk].end[3:6]
             inside = not rotary or bool(np.all((m.end[3:6] >= np.minimum(r0, r1) - TOL_ROTARY)
                                                & (m.end[3:6] <= np.maximum(r0, r1) + TOL_ROTARY)))
-            ends = np.linalg.norm(P[-1] - e) <= tol and (
-                not rotary or np.abs(m.end[3:6] - rot_end[kk]).max() <= TOL_ROTARY)
+            ends = np.linalg.norm(P[-1] - e) <= tol and rot_ok
             if inside and ((kk, False) not in new or loc < new[(kk, False)][0]):
                 new[(kk, False)] = (loc, (o, kk, False, trail))
             if ends:
@@ -498,7 +552,7 @@ def align(inp: list[Move], paths: list[np.ndarray], out: list[Move], tol: float,
 def check_follows_input(inp_canon: Canon, out_canon: Canon, field, rapids: bool, tol: float, in_lines, out_lines):
     """Property 3 (see the module's docstring)."""
     inp, out = moves(inp_canon), moves(out_canon)
-    paths = []
+    paths, kept = [], []
     for k, m in enumerate(inp):
         P = m.dense()
         # the program's first move comes from where the program does not say: it may be left as
@@ -507,10 +561,12 @@ def check_follows_input(inp_canon: Canon, out_canon: Canon, field, rapids: bool,
         if (m.kind != "traverse" or rapids) and not first_kept:
             P = P + np.asarray(field(P), dtype=float)
         paths.append(P)
-    got, fail = align(inp, paths, out, tol, rotary=True)
+        kept.append(m.kind == "traverse" and not rapids)
+    res = inp_canon.resolution_mm + 1e-9
+    got, fail = align(inp, paths, kept, out, tol, res, rotary=True)
     if got is not None:
         return
-    geo, geo_fail = align(inp, paths, out, tol, rotary=False)
+    geo, geo_fail = align(inp, paths, kept, out, tol, res, rotary=False)
     if geo is not None:  # the path is right: name the first rotary position that is not
         for o, (k, closes) in enumerate(geo):
             ro, ri0, ri1 = out[o].end[3:6], inp[k].start[3:6], inp[k].end[3:6]
@@ -529,15 +585,21 @@ def check_follows_input(inp_canon: Canon, out_canon: Canon, field, rapids: bool,
                              f"{in_lines(len(inp) - 1)}; states {sorted(states)}")
     e = out[o].end[:3]
     near = []
-    for (k, closed) in sorted(states):
-        for kk in {k, k + 1} & set(range(len(inp))):
-            near.append(f"input line {in_lines(kk)} ({inp[kk].kind}) {_distance(paths[kk], e) * 1000:.2f} µm")
+    for kk in sorted({kk for k, _ in states for kk in (k, k + 1) if 0 <= kk < len(inp)}):
+        near.append(f"input line {in_lines(kk)} ({inp[kk].kind}) {_distance(paths[kk], e) * 1000:.2f} µm")
     raise AssertionError(
         f"output line {out_lines(o)}: rs274's {out[o].kind} ends at {e.round(5).tolist()}, not on the displaced "
         f"input path where expected (tol {tol * 1000:g} µm): " + "; ".join(near))
 
 
 # ============================================================================= the checks
+def _note(text: str) -> None:
+    try:
+        note(text)
+    except InvalidArgument:  # called outside a test (to reproduce a failure by hand)
+        pass
+
+
 @contextmanager
 def own_home(d: Path):
     """rs274 maps its tool table at $HOME/.tool.mmap, truncating it first: two rs274 runs at once
@@ -580,7 +642,7 @@ def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) ->
     endpoints_agree(prog, in_canon, "input")  # the engine reads the input as rs274 does
     out = prog.correct(field, rapids=rapids)
     outp = out.write(tmp / "out.ngc")
-    note(f"corrected:\n{out.text}")
+    _note(f"corrected:\n{out.text}")
     out_canon = canonical(outp)
     # rs274 runs the output and reads it as the engine does
     assert out_canon.error is None, f"rs274 refuses the corrected program: {out_canon.error}"
@@ -599,6 +661,7 @@ def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) ->
         assert np.abs(out_moves[0].end[:3] - in_canon.ends[0, :3]).max() <= res + 1e-9, "first move moved, unpredicted"
         sel = sel[1:]
     # property 2: rs274's motion of the output passes through the engine's predicted points
+    # (as _corrected_matches; a mixed program's inch sections are written to 5 inch decimals too)
     ours = 0.5e-5 * 25.4 if prog.units in ("inch", "mixed") else 0.5e-4
     tol = res + ours + 1e-6
     # an arc's centre is printed rounded too

@@ -198,3 +198,14 @@ def test_sampling_options_out_of_range_are_refused(tmp_path, kw):
     prog = nc.read(_write(tmp_path, "G21 G0 X0 Y0 Z0\nG1 X1 F100\nM2\n"))
     with pytest.raises(ValueError, match="must be within"):
         prog.correct(fields.Shift((0, 0, 0.01)), **kw)
+
+
+@pytest.mark.parametrize("stop", ["M0", "M2", "M30"])
+def test_a_program_stop_on_an_arc_made_one_piece_is_kept(tmp_path, stop):
+    """A short arc linearised into a single piece keeps its program stop (found by the fuzz)."""
+    src = f"G21 G90 G0 X0 Y0 Z0\nG2 X-0.0034243 Y-0.0784322 I-0.5 J0 F100 {stop}\n"
+    out = nc.read(_write(tmp_path, src)).correct(fields.Shift((0, 0, 0.05)))
+    assert out.correction.arcs_linearised == 1
+    assert out.text.splitlines()[1].endswith(stop)
+    if stop != "M0":
+        assert canonical(out.write(tmp_path / "c.ngc")).error is None

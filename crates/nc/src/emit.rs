@@ -476,9 +476,11 @@ impl<'a> Emitter<'a> {
         } else {
             self.restore_modal(li, rec, explicit);
         }
-        // program stops move to the last piece
+        // a uniform straight move that starts off the corrected path needs one piece to reach it
+        let pieces: Vec<usize> = if !linearise && uniform && only_xyz { vec![n - 1] } else { (1..n).collect() };
+        // program stops move to the last piece (they stay where they are when there is none)
         let mut stops: Vec<u8> = Vec::new();
-        for w in words.iter().filter(|w| is_stop_m(w)) {
+        for w in words.iter().filter(|w| is_stop_m(w) && !pieces.is_empty()) {
             stops.extend_from_slice(self.sep());
             stops.extend_from_slice(&self.src[w.start as usize..w.end as usize]);
             self.remove_word(li, w);
@@ -486,8 +488,6 @@ impl<'a> Emitter<'a> {
         let first = target_at(0, ts[0]);
         self.set_axes(li, rec, &first);
         let prefix: &[u8] = if self.lx.lines[li].block_delete { b"/" } else { b"" };
-        // a uniform straight move that starts off the corrected path needs one piece to reach it
-        let pieces: Vec<usize> = if !linearise && uniform && only_xyz { vec![n - 1] } else { (1..n).collect() };
         for &k in &pieces {
             let p = target_at(k, ts[k]);
             let t0 = self.st.tail.len();
