@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from rs274 import _CALL, _PLANES, RS274, Canon  # noqa: E402
+from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
 
 from ncadapt import fields, nc  # noqa: E402
 from ncadapt.errors import InputError, RefusedError  # noqa: E402
@@ -104,51 +104,8 @@ def tool_table(folder: Path) -> Path:
 
 
 def run_rs274(path: Path, tools: Path, timeout: float = 120) -> Canon:
-    """``rs274 -t tools -g path``: its canonical motion in mm, read as :func:`rs274.canonical` reads
-    it (which takes no tool table)."""
-    out = Path(str(path) + ".canon")
-    # rs274 shares its tool table through $HOME/.tool.mmap: rs274s running at the same time with
-    # another HOME would overwrite it (tools not found) or truncate it under them (bus errors)
-    env = {**os.environ, "HOME": str(tools.parent)}
-    proc = subprocess.run([RS274, "-t", str(tools), "-g", str(path), str(out)], stdin=subprocess.DEVNULL,
-                          capture_output=True, text=True, timeout=timeout, errors="replace", env=env)
-    text = out.read_text(errors="replace") if out.exists() else ""
-    out.unlink(missing_ok=True)
-    scale = 25.4  # rs274 without an ini file works in inches until the program says otherwise
-    plane = "CANON_PLANE_XY"
-    kinds, ends, arcs = [], [], []
-    res = 0.0
-    for line in text.splitlines():
-        m = _CALL.match(line)
-        if not m:
-            continue
-        name, args = m.group(1), m.group(2)
-        if name == "USE_LENGTH_UNITS":
-            scale = 25.4 if "INCHES" in args else (10.0 if "CM" in args else 1.0)
-        elif name == "SELECT_PLANE":
-            plane = args.strip()
-        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
-            v = [float(a) for a in args.split(",")]
-            ends.append([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
-            kinds.append("traverse" if name == "STRAIGHT_TRAVERSE" else "feed")
-            arcs.append(None)
-            res = max(res, 0.00005 * scale)
-        elif name == "ARC_FEED":
-            v = [float(a) for a in args.split(",")]
-            a1, a2, an = _PLANES[plane]
-            e = [0.0] * 6
-            e[a1], e[a2], e[an] = v[0] * scale, v[1] * scale, v[5] * scale
-            e[3:6] = v[6:9]
-            ends.append(e)
-            kinds.append("arc")
-            arcs.append((int(v[4]), v[2] * scale, v[3] * scale, plane))
-            res = max(res, 0.00005 * scale)
-    err = None
-    stderr = proc.stderr
-    if proc.returncode != 0 or "error" in stderr.lower() or "executing" in stderr and len(stderr.splitlines()) > 1:
-        tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
-        err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
-    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err)
+    """``rs274 -t tools -g path``: its canonical motion in mm."""
+    return canonical(path, timeout=timeout, tools=tools)
 
 
 def rs274_input(path: Path, work: Path) -> tuple[Canon, list[str]]:

@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from contextlib import contextmanager
 from dataclasses import dataclass
 from decimal import Decimal
 from pathlib import Path
@@ -46,6 +45,7 @@ from hypothesis.errors import InvalidArgument
 
 from conftest import needs_rs274
 from ncadapt import fields, nc
+from helpers import endpoints_agree
 from rs274 import Canon, canonical
 
 EXAMPLES = int(os.environ.get("NCADAPT_FUZZ_EXAMPLES", "25"))
@@ -600,37 +600,6 @@ def _note(text: str) -> None:
         pass
 
 
-@contextmanager
-def own_home(d: Path):
-    """rs274 maps its tool table at $HOME/.tool.mmap, truncating it first: two rs274 runs at once
-    (another pytest session) kill each other with SIGBUS. Each example runs them in its own HOME."""
-    old = os.environ.get("HOME")
-    os.environ["HOME"] = str(d)
-    try:
-        yield
-    finally:
-        if old is None:
-            del os.environ["HOME"]
-        else:
-            os.environ["HOME"] = old
-
-
-def endpoints_agree(prog: nc.Program, canon: Canon, what: str) -> None:
-    """``test_rs274._compare_endpoints`` on a canonical run already made: every block end the
-    engine traces equals rs274's (lengths to rs274's printed resolution, A/B/C to 5e-5 degree)."""
-    b = prog.blocks
-    assert len(canon.ends) == len(b), f"{what}: {len(b)} blocks, rs274 printed {len(canon.ends)} moves"
-    ours = b.end[:, :6]
-    known = np.isfinite(ours)
-    tol = np.full(6, canon.resolution_mm + 1e-9)
-    tol[3:] = 5e-5 + 1e-9
-    diff = np.where(known, np.abs(ours - canon.ends), 0.0)
-    bad = np.argwhere(diff > tol)
-    assert not len(bad), (
-        f"{what}: line {b.line[bad[0][0]]} axis {'XYZABC'[bad[0][1]]}: engine {ours[tuple(bad[0])]:.6f}, "
-        f"rs274 {canon.ends[tuple(bad[0])]:.6f}")
-
-
 def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) -> None:
     """Properties 2 and 3 for one program and field."""
     inp = tmp / "in.ngc"
@@ -639,7 +608,7 @@ def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) ->
     assert in_canon.error is None, f"generator bug: rs274 refuses the program: {in_canon.error}"
     prog = nc.read(inp)
     assert not prog.unsupported, f"generator bug: {prog.unsupported}"
-    endpoints_agree(prog, in_canon, "input")  # the engine reads the input as rs274 does
+    endpoints_agree(prog.blocks, in_canon, "input")  # the engine reads the input as rs274 does
     out = prog.correct(field, rapids=rapids)
     outp = out.write(tmp / "out.ngc")
     _note(f"corrected:\n{out.text}")
@@ -647,7 +616,7 @@ def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) ->
     # rs274 runs the output and reads it as the engine does
     assert out_canon.error is None, f"rs274 refuses the corrected program: {out_canon.error}"
     back = nc.read(outp)
-    endpoints_agree(back, out_canon, "corrected")
+    endpoints_agree(back.blocks, out_canon, "corrected")
     # property 3 (first: a wrong path is named as such, a wrong prediction by property 2)
     check_follows_input(in_canon, out_canon, field, rapids, TOL_PATH_INCH if has_inch else TOL_PATH_MM,
                         lambda k: prog.blocks.line[k], lambda o: back.blocks.line[o])
@@ -684,7 +653,7 @@ def test_zero_shift_is_identity(g, rapids):
 @given(programs(), shifts, st.booleans())
 def test_shift_follows_rs274(g, shift, rapids):
     note(g.text)
-    with tempfile.TemporaryDirectory() as tmp, own_home(Path(tmp)):
+    with tempfile.TemporaryDirectory() as tmp:
         check_corrected(g.text, fields.Shift(shift), rapids, g.inch, Path(tmp))
 
 
@@ -694,7 +663,7 @@ def test_shift_follows_rs274(g, shift, rapids):
 @given(programs(), st.sampled_from(sorted(SMOOTH)), st.booleans())
 def test_smooth_field_follows_rs274(g, name, rapids):
     note(g.text)
-    with tempfile.TemporaryDirectory() as tmp, own_home(Path(tmp)):
+    with tempfile.TemporaryDirectory() as tmp:
         check_corrected(g.text, SMOOTH[name], rapids, g.inch, Path(tmp))
 
 
@@ -704,7 +673,7 @@ def test_smooth_field_follows_rs274(g, name, rapids):
 @given(programs())
 def test_generated_programs_run_in_rs274(g):
     """The generator's own check: rs274 runs every program it writes."""
-    with tempfile.TemporaryDirectory() as tmp, own_home(Path(tmp)):
+    with tempfile.TemporaryDirectory() as tmp:
         p = Path(tmp) / "g.ngc"
         p.write_text(g.text)
         c = canonical(p)

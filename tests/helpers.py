@@ -34,3 +34,20 @@ def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol:
             f"segment {i} {a.round(5)} -> {b.round(5)} does not end on the predicted path "
             f"(next predicted {predicted[min(j, n - 1)].round(5)})")
     assert j == n, f"{n - j} predicted point(s) not reached, first {predicted[j].round(5)}"
+
+
+def endpoints_agree(blocks, canon, what: str) -> int:
+    """Assert that every block end the engine traces (``Program.blocks``) equals rs274's canonical
+    move end (``rs274.Canon``): lengths to rs274's 4 printed decimals (5e-5 mm, or 1.27e-3 mm in
+    inch), A/B/C to 5e-5 degree. Returns the number of blocks compared."""
+    assert len(canon.ends) == len(blocks), f"{what}: {len(blocks)} blocks, rs274 printed {len(canon.ends)} moves"
+    ours = blocks.end[:, :6]
+    known = np.isfinite(ours)
+    tol = np.full(6, canon.resolution_mm + 1e-9)
+    tol[3:] = 5e-5 + 1e-9
+    diff = np.where(known, np.abs(ours - canon.ends), 0.0)
+    bad = np.argwhere(diff > tol)
+    assert not len(bad), (
+        f"{what}: line {blocks.line[bad[0][0]]} axis {'XYZABC'[bad[0][1]]}: engine {ours[tuple(bad[0])]:.6f}, "
+        f"rs274 {canon.ends[tuple(bad[0])]:.6f}")
+    return int(known.any(axis=1).sum())

@@ -7,9 +7,11 @@ last set by ``USE_LENGTH_UNITS`` and 4 decimals. :func:`canonical` turns that in
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,11 +36,17 @@ class Canon:
     error: str | None
 
 
-def canonical(path: str | Path, timeout: float = 60) -> Canon:
-    """Run ``rs274 -g`` on ``path`` and parse the motion it prints."""
+def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = None) -> Canon:
+    """Run ``rs274 -g`` (with ``-t tools`` when given) on ``path`` and parse the motion it prints.
+
+    rs274 maps its tool table at ``$HOME/.tool.mmap``, truncating it first, so two runs at once
+    would overwrite it or kill each other with SIGBUS: each run gets a HOME of its own.
+    """
     out = Path(str(path) + ".canon")
-    proc = subprocess.run([RS274, "-g", str(path), str(out)], stdin=subprocess.DEVNULL, capture_output=True,
-                          text=True, timeout=timeout, errors="replace")
+    cmd = [RS274] + (["-t", str(tools)] if tools is not None else []) + ["-g", str(path), str(out)]
+    with tempfile.TemporaryDirectory(prefix="rs274-home-") as home:
+        proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout,
+                              errors="replace", env={**os.environ, "HOME": home})
     text = out.read_text(errors="replace") if out.exists() else ""
     out.unlink(missing_ok=True)
     scale = 25.4  # rs274 without an ini file works in inches until the program says otherwise

@@ -177,8 +177,7 @@ def correct_file(path: str | os.PathLike, output: str | os.PathLike, field: Call
     nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
     """
     p, out = Path(path), Path(output)
-    if out.exists() and os.path.samefile(out, p):
-        raise InputError("refusing to overwrite the input program; choose another output", str(out))
+    _refuse_overwrite(out, p)
     with atomic_open(out) as f, _BackgroundWriter(f) as w:
         return _correct(str(p), str(p), w.write, field, keep_points=False, **options)
 
@@ -394,8 +393,7 @@ class Program:
         reading it whole.
         """
         p = Path(path)
-        if self.path is not None and p.exists() and os.path.samefile(p, self.path):
-            raise InputError("refusing to overwrite the input program; choose another output", str(p))
+        _refuse_overwrite(p, self.path)
         self._refuse_unsupported(options.get("keep_unsupported", False))
         with atomic_open(p) as f, _BackgroundWriter(f) as w:
             return _correct(self._data, self.name, w.write, field, keep_points=False, **options)
@@ -412,13 +410,17 @@ class Program:
         Refuses to write over the file the program was read from.
         """
         p = Path(path)
-        if self.path is not None and p.exists() and os.path.samefile(p, self.path):
-            raise InputError("refusing to overwrite the input program; choose another output", str(p))
+        _refuse_overwrite(p, self.path)
         atomic_write(p, self._data)
         return p
 
     def __repr__(self) -> str:
         return f"<Program {self.name!r}: {self.lines} lines>"
+
+
+def _refuse_overwrite(output: Path, source: Path | None) -> None:
+    if source is not None and output.exists() and os.path.samefile(output, source):
+        raise InputError("refusing to overwrite the input program; choose another output", str(output))
 
 
 def _unsupported_error(name, uns) -> RefusedError:
