@@ -184,3 +184,13 @@ def test_an_input_that_is_not_utf8_is_located(inputs, monkeypatch, name, data, a
     assert r.exit_code == 2, r.output
     assert r.stderr == f"{name}:{where[0]}:{where[1]}: error: not UTF-8 text: byte 0xe9 (invalid continuation byte); " \
                        "save the file as UTF-8\n"
+
+
+@pytest.mark.parametrize("option, value", [("--chord-tol", "nan"), ("--chord-tol", "1e-300"),
+                                           ("--max-segment", "1e-9"), ("--max-segment", "nan")])
+def test_sampling_options_out_of_range_are_usage_errors(tmp_path, option, value):
+    src = tmp_path / "p.ngc"
+    src.write_text("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM2\n")
+    r = run("correct", src, "--shift", "0,0,0.01", option, value, "-o", tmp_path / "out.ngc")
+    assert r.exit_code == 2 and f"Invalid value for '{option}'" in r.output
+    assert not (tmp_path / "out.ngc").exists()

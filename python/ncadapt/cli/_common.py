@@ -65,6 +65,16 @@ def _detail(d) -> str:
     return str(d)
 
 
+class FiniteRange(click.FloatRange):
+    """``click.FloatRange`` that also refuses NaN (which compares false with every bound)."""
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if v != v:
+            self.fail(f"{value!r} is not a number", param, ctx)
+        return v
+
+
 def comma_floats(value: str, n: int, what: str) -> list[float]:
     """``n`` comma-separated numbers of an option, or a click usage error saying ``what``."""
     try:

@@ -9,7 +9,7 @@ import click
 from .. import constants
 from .. import fields as _fields
 from .. import nc
-from ._common import check_outputs, comma_floats, echo_err, handle_errors, progress, write_json
+from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, write_json
 
 
 def _shift(ctx, param, value):
@@ -22,8 +22,8 @@ def _shift(ctx, param, value):
               help="Correction field: grid CSV (x,y,dz), scattered CSV (x,y,z,dx,dy,dz), bCNC .probe or LinuxCNC probe log.")
 @click.option("--shift", callback=_shift, metavar="DX,DY,DZ", help="A constant displacement in mm instead of a field.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Corrected program to write.")
-@click.option("--max-segment", type=click.FloatRange(*constants.MAX_SEGMENT_RANGE), default=constants.MAX_SEGMENT, show_default=True, help="Longest corrected piece, mm.")
-@click.option("--chord-tol", type=click.FloatRange(*constants.CHORD_TOL_RANGE), default=constants.CHORD_TOL, show_default=True, help="Arc chord tolerance, mm.")
+@click.option("--max-segment", type=FiniteRange(*constants.MAX_SEGMENT_RANGE), default=constants.MAX_SEGMENT, show_default=True, help="Longest corrected piece, mm.")
+@click.option("--chord-tol", type=FiniteRange(*constants.CHORD_TOL_RANGE), default=constants.CHORD_TOL, show_default=True, help="Arc chord tolerance, mm.")
 @click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=constants.LIMIT, show_default=True, help="Refuse if any displacement exceeds this, mm.")
 @click.option("--outside", type=click.Choice(_fields.OUTSIDE), default="error", show_default=True, help="Points outside the field's domain.")
 @click.option("--interp", "method", type=click.Choice(["linear", "cubic"]), default="linear", show_default=True, help="Grid interpolation.")
