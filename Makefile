@@ -43,11 +43,9 @@ test: install-test
 	cargo test -q --workspace --exclude ncadapt-nc-py
 	$(PY) -m pytest -q
 
-# the generated-program property tests against rs274, and the real programs of ../shared/corpus/nc
-# against rs274 (in progress: not yet in make test, see docs/nc-engine.md)
+# the generated-program property tests against rs274 with a large budget (make test runs 25 examples)
 fuzz: install-test
-	$(PY) -m pytest -q tests/corpus_check.py
-	NCADAPT_FUZZ_EXAMPLES=2000 $(PY) -m pytest -q tests/fuzz_programs.py
+	NCADAPT_FUZZ_EXAMPLES=2000 $(PY) -m pytest -q tests/test_fuzz_programs.py
 
 # bCNC is the peer of the benchmark: only its CNC.py is used, so its GUI dependencies are skipped
 bench: install-test

@@ -44,7 +44,17 @@ def test_a_cutting_move_after_a_return_to_reference_is_reported_not_guessed():
     assert out.text.splitlines()[:4] == ["G21 G90 G0 X1 Y2 Z3", "G91 G28 Z0", "G90 G1 X5 F100", "G0 Z5"]
     assert out.text.splitlines()[4:6] == ["G1 Z-0.98", "X10"]
     (w,) = out.correction.warnings
-    assert w.startswith("1 cutting move(s) not corrected because the position is unknown (first at line 3: Z not set")
+    assert w.startswith("1 cutting move(s) not corrected because the position is unknown (first at line 3: "
+                        "the end of Z unknown")
+
+
+def test_an_axis_unknown_at_its_start_is_named_as_such():
+    # A is given on line 2 but never before: the move cannot be interpolated in A, it is kept
+    prog = nc.parse("G21 G90 G0 X0 Y0 Z0\nG1 X10 A90 F100\nM30\n")
+    out = prog.correct(fields.Shift((0, 0, 0.02)))
+    assert out.text.splitlines()[1] == "G1 X10 A90 F100"
+    (w,) = out.correction.warnings
+    assert "(first at line 2: the start of A unknown" in w
 
 
 def test_limit_refuses_and_lists_worst_points():

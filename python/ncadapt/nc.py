@@ -480,11 +480,16 @@ class _Warnings:
         needs_end[:, :3] = True
         needs_start = named.copy()
         needs_start[:, :3] = arc[:, None]
-        unknown = (needs_end & ~np.isfinite(r["end"])) | (needs_start & ~np.isfinite(r["start"]))
-        left = np.flatnonzero(cutting & ((r["flags"] & 8) == 0) & unknown.any(axis=1))
+        end_unknown = needs_end & ~np.isfinite(r["end"])
+        start_unknown = needs_start & ~np.isfinite(r["start"])
+        left = np.flatnonzero(cutting & ((r["flags"] & 8) == 0) & (end_unknown | start_unknown).any(axis=1))
         if len(left) and self.first is None:
             i = left[0]
-            self.first = (int(r["line"][i]), "".join(a for a, u in zip(_AXES, unknown[i]) if u))
+            said = []
+            for what, u in (("end", end_unknown[i]), ("start", start_unknown[i])):
+                if u.any():
+                    said.append(f"the {what} of {''.join(a for a, k in zip(_AXES, u) if k)} unknown")
+            self.first = (int(r["line"][i]), " and ".join(said))
         self.unknown += len(left)
         if self.clearance is not None:
             rapid = np.flatnonzero(r["motion"] == 0)
@@ -500,8 +505,8 @@ class _Warnings:
         if self.unknown:
             line, axes = self.first
             out.append(f"{self.unknown} cutting move(s) not corrected because the position is unknown (first at line "
-                       f"{line}: {axes} not set since a move the engine does not trace); give every axis a "
-                       f"G0/G1 after G28, G30, G53 or a canned cycle")
+                       f"{line}: {axes}: no earlier move sets it, or a move the engine does not trace left it unknown); "
+                       f"give every axis a G0/G1 at the start and after G28, G30, G53 or a canned cycle")
         out += [f"line {ln}: rapid ends at Z{z:.4f}, below the clearance Z{self.clearance:g} inside the field's "
                 f"area, and is not corrected" for ln, z in self.low]
         return out

@@ -145,3 +145,21 @@ def test_comparison_bounds_the_piece_that_leaves_an_uncorrected_point():
     # a plunge stays one straight piece
     plunge = [("traverse", (0, 0, 10)), ("feed", (0, 0, -1)), ("traverse", (0, 0, 10))]
     assert compare(plunge, [("traverse", (0, 0, 10)), ("feed", (0, 0, -0.95)), ("traverse", (0, 0, 10))]) == []
+
+
+def test_comparison_lets_a_rapid_keep_the_corrected_depth_of_an_axis_it_does_not_move():
+    def shift(p):
+        return np.broadcast_to([0.0, 0.0, 0.05], p.shape).copy()
+
+    def compare(out):
+        return corpus.compare_motion(_canon(inp), _canon(out), [False, True, False, True], shift, 0.005)
+
+    # a rapid in XY at cutting depth, between two cuts
+    inp = [("traverse", (0, 0, -1)), ("feed", (5, 0, -1)), ("traverse", (9, 0, -1)), ("feed", (10, 0, -1))]
+    stays = [("traverse", (0, 0, -1)), ("feed", (5, 0, -0.95)), ("traverse", (9, 0, -0.95)), ("feed", (10, 0, -0.95))]
+    back = [("traverse", (0, 0, -1)), ("feed", (5, 0, -0.95)), ("traverse", (9, 0, -1)), ("feed", (10, 0, -0.95))]
+    assert compare(stays) == []
+    assert compare(back) == []  # re-aimed at its programmed depth: also the input's target
+    # ... but not to anywhere else, nor elsewhere in an axis it moves
+    assert compare(_off(stays, 2, 0.02))
+    assert compare([m if i != 2 else ("traverse", (9.02, 0, -0.95)) for i, m in enumerate(stays)])

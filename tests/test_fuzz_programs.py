@@ -24,8 +24,7 @@ Properties:
    does, an axis it does not move may also stay where the corrected path left it. The program's
    first move, from a start the program does not give, may be left as written.
 
-Not collected by ``make test`` (the name does not start with ``test_``): ``pytest
-tests/fuzz_programs.py`` runs 25 examples per test, ``make fuzz`` NCADAPT_FUZZ_EXAMPLES=2000.
+``make test`` runs 25 examples per test, ``make fuzz`` 2,000 (NCADAPT_FUZZ_EXAMPLES).
 """
 
 from __future__ import annotations
