@@ -23,6 +23,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 from pathlib import Path
@@ -185,11 +186,18 @@ class GridField(Field):
         return f"GridField({len(self.xs)}x{len(self.ys)}, {self.method}, outside={self.outside!r})"
 
 
+@functools.lru_cache(maxsize=16)
+def _uniform(grid_bytes: bytes) -> bool:
+    grid = np.frombuffer(grid_bytes)
+    step = (grid[-1] - grid[0]) / (len(grid) - 1)
+    return bool(np.allclose(np.diff(grid), step, rtol=1e-12, atol=0))
+
+
 def _cell(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cell index and fraction of x along a grid; the edge cells continue outside."""
     n = len(grid)
     step = (grid[-1] - grid[0]) / (n - 1)
-    if np.allclose(np.diff(grid), step, rtol=1e-12, atol=0):
+    if _uniform(np.ascontiguousarray(grid, dtype=np.float64).tobytes()):
         u = (x - grid[0]) / step
         i = np.clip(np.floor(u), 0, n - 2).astype(np.intp)
         return i, u - i

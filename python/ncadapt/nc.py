@@ -578,7 +578,8 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
         norms = np.sqrt(np.einsum("ij,ij->i", disp, disp))
         n_pts += len(norms)
         total += float(norms.sum())
-        if len(norms):
+        # the ten largest displacements seen (a piece whose largest is below the tenth adds none)
+        if len(norms) and (len(worst) < 10 or float(norms.max()) > worst[-1][0]):
             top = np.argpartition(-norms, min(10, len(norms)) - 1)[:10]
             worst = sorted(worst + [(float(norms[i]), int(lines[i]), pts[i].copy(), disp[i].copy()) for i in top],
                            key=lambda w: -w[0])[:10]

@@ -19,14 +19,14 @@ fn main() {
     let grid: Vec<f64> = (0..=100).map(|i| i as f64).collect();
     let opts = nc::sample::SampleOpts {
         chord_tol: 0.002,
-        max_segment: 1.0,
+        max_segment: std::env::var("MAXSEG").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0),
         include_rapids: false,
         only_supported: true,
         grid_x: grid.clone(),
         grid_y: grid,
     };
     let prog = nc::Program { src, lexed, interp: it };
-    let (mut t_samp, mut t_disp, mut t_emit) = (Duration::ZERO, Duration::ZERO, Duration::ZERO);
+    let (mut t_samp, mut t_disp, mut t_emit, mut t_write) = (Duration::ZERO, Duration::ZERO, Duration::ZERO, Duration::ZERO);
     let mut s = nc::sample::Samples::default();
     let mut disp: Vec<f64> = Vec::new();
     let mut out: Vec<u8> = Vec::new();
@@ -48,14 +48,16 @@ fn main() {
         let t = Instant::now();
         out.clear();
         em.lines(a..b, &s, &disp, &mut out).expect("emit");
-        file.write_all(&out).expect("write");
         t_emit += t.elapsed();
+        let t = Instant::now();
+        file.write_all(&out).expect("write");
+        t_write += t.elapsed();
         n_samples += s.rec.len();
         n_bytes += out.len();
         a = b;
     }
     println!(
-        "read {:?} lex {:?} interp {:?} sample {:?} ({} samples) disp {:?} emit+write {:?} ({} bytes)",
-        t_read, t_lex, t_int, t_samp, n_samples, t_disp, t_emit, n_bytes
+        "read {:?} lex {:?} interp {:?} sample {:?} ({} samples) disp {:?} emit {:?} write {:?} ({} bytes)",
+        t_read, t_lex, t_int, t_samp, n_samples, t_disp, t_emit, t_write, n_bytes
     );
 }

@@ -75,47 +75,75 @@ impl Format {
         }
         // round half away from zero with one conversion (f64::round is a library call)
         let m = if scaled >= 0.0 { (scaled + 0.5) as i64 } else { (scaled - 0.5) as i64 };
-        let a = m.unsigned_abs();
-        let (mut int, mut frac) = (a / scale, a % scale);
-        let mut digits = dec;
+        // the digits of |m| are written from the right into a buffer, two at a time, then copied
+        // once: the last `dec` are the fraction
+        let mut a = m.unsigned_abs();
+        let mut buf = [0u8; 48];
+        let end = buf.len();
+        let mut i = end;
+        let mut k = 0;
+        while k + 2 <= dec {
+            let d = (a % 100) as usize;
+            a /= 100;
+            i -= 2;
+            buf[i..i + 2].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
+            k += 2;
+        }
+        if k < dec {
+            i -= 1;
+            buf[i] = b'0' + (a % 10) as u8;
+            a /= 10;
+        }
+        // the fraction without its trailing zeros, unless the program writes them
+        let mut stop = end;
         if !self.style.fixed {
-            while digits > 0 && frac % 10 == 0 {
-                frac /= 10;
-                digits -= 1;
+            while stop > i && buf[stop - 1] == b'0' {
+                stop -= 1;
             }
         }
-        // digits are written from the right into a buffer, then copied once
-        let mut buf = [0u8; 48];
-        let mut i = buf.len();
-        for _ in 0..digits {
-            i -= 1;
-            buf[i] = b'0' + (frac % 10) as u8;
-            frac /= 10;
-        }
-        if digits == 0 && !self.style.bare_point {
-            i -= 1;
-            buf[i] = b'0';
-        }
-        i -= 1;
-        buf[i] = b'.';
-        if !(self.style.no_leading_zero && int == 0 && digits > 0) {
+        let digits = stop - i;
+        let frac_at = i;
+        // the point (and "0" after it for a whole number, unless the program writes "5.")
+        let mut head = [0u8; 24];
+        let mut h = head.len();
+        h -= 1;
+        head[h] = b'.';
+        if !(self.style.no_leading_zero && a == 0 && digits > 0) {
             loop {
-                i -= 1;
-                buf[i] = b'0' + (int % 10) as u8;
-                int /= 10;
-                if int == 0 {
+                if a >= 10 {
+                    let d = (a % 100) as usize;
+                    a /= 100;
+                    h -= 2;
+                    head[h..h + 2].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
+                    if a == 0 {
+                        break;
+                    }
+                } else {
+                    h -= 1;
+                    head[h] = b'0' + a as u8;
                     break;
                 }
             }
         }
         if m < 0 {
-            i -= 1;
-            buf[i] = b'-';
+            h -= 1;
+            head[h] = b'-';
         }
-        out.extend_from_slice(&buf[i..]);
+        out.extend_from_slice(&head[h..]);
+        if digits > 0 {
+            out.extend_from_slice(&buf[frac_at..stop]);
+        } else if !self.style.bare_point {
+            out.push(b'0');
+        }
         m as f64 / scale as f64
     }
 }
+
+const DIGIT_PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
+2021222324252627282930313233343536373839\
+4041424344454647484950515253545556575859\
+6061626364656667686970717273747576777879\
+8081828384858687888990919293949596979899";
 
 /// One edit of a line: replace bytes [start, end) by the arena's bytes [t0, t1).
 #[derive(Clone, Copy, Debug)]
@@ -650,6 +678,48 @@ mod tests {
         }
         let (out, _) = Emitter::new(src.as_bytes(), &l, &it).run(&s, &d).unwrap();
         String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn numbers_are_the_rounded_values_in_every_style() {
+        // against the standard library's formatting of the rounded value, trimmed by the style
+        let mut seed = 0x2545F4914F6CDD1Du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for (fixed, nlz, bare) in [(true, false, false), (false, false, false), (false, true, false), (false, false, true), (false, true, true)] {
+            let style = NumberStyle { fixed, no_leading_zero: nlz, bare_point: bare, ..NumberStyle::default() };
+            let f = Format::new(style);
+            for k in 0..20000 {
+                let mag = 10f64.powi((next() % 9) as i32 - 4);
+                let v = ((next() >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * mag * if k % 7 == 0 { 1e4 } else { 1.0 };
+                for inch in [false, true] {
+                    let dec = f.decimals(inch);
+                    let mut out = Vec::new();
+                    let got = f.number(v, inch, &mut out);
+                    let scaled = v * 10f64.powi(dec as i32);
+                    let m = if scaled >= 0.0 { (scaled + 0.5).floor() } else { (scaled - 0.5).ceil() };
+                    let mut want = format!("{:.*}", dec, (m / 10f64.powi(dec as i32)).abs());
+                    if !fixed {
+                        want = want.trim_end_matches('0').to_string();
+                        if want.ends_with('.') && !bare {
+                            want.push('0');
+                        }
+                    }
+                    if nlz && want.starts_with("0.") && want.len() > 2 && want != "0.0" {
+                        want.remove(0);
+                    }
+                    if m < 0.0 {
+                        want.insert(0, '-');
+                    }
+                    assert_eq!(String::from_utf8(out).unwrap(), want, "{v} inch={inch} style={style:?}");
+                    assert_eq!(got, m / 10f64.powi(dec as i32));
+                }
+            }
+        }
     }
 
     #[test]
