@@ -70,7 +70,7 @@ def test_another_axis_from_an_unknown_start_is_kept_and_warned(tmp_path):
     assert out.data == prog.data
     assert "NaN" not in out.text
     (w,) = out.correction.warnings
-    assert "line 2: A not set" in w
+    assert "line 2: the start of A unknown" in w
 
 
 # ----------------------------------------------------------------------------- unknown starts
