@@ -4,6 +4,7 @@ target, then an atomic rename."""
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import csv
 import io
 import os
@@ -13,25 +14,86 @@ from pathlib import Path
 from .errors import InputError
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike):
-    """A temporary path beside ``path`` (same suffix) for a writer that wants a file name; it
-    replaces ``path`` only when the block ends without an error, else it is removed and the
-    target is left as it was. The result gets the mode any new file would get."""
-    p = Path(path)
-    d = p.parent if str(p.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix or ".tmp", dir=d)
-    os.close(fd)
+#: Temporary files are named with this prefix (and the target's name, so its suffix is kept).
+TMP_PREFIX = ".ncadapt-tmp-"
+
+#: Files written inside :func:`all_or_nothing`: (temporary, target), renamed together at its end.
+_STAGED: contextvars.ContextVar[list | None] = contextvars.ContextVar("ncadapt_staged", default=None)
+#: Every temporary file not yet renamed or removed, for the signal handlers.
+_LIVE: set[str] = set()
+
+
+def _target(path: Path) -> Path:
+    """Where writing ``path`` lands: a symbolic link's target (the link stays)."""
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
+def _mode_for(target: Path) -> int:
+    """An existing file keeps its permission bits; a new one gets those any new file would get."""
     try:
-        yield tmp
-        # mkstemp makes the file private
+        return os.stat(target).st_mode & 0o7777
+    except OSError:
         umask = os.umask(0)
         os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        return 0o666 & ~umask
+
+
+def _remove(tmp: str) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)
+    _LIVE.discard(tmp)
+
+
+def remove_temporaries() -> None:
+    """Remove every temporary file still open (on a signal that ends the process)."""
+    for tmp in list(_LIVE):
+        _remove(tmp)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike):
+    """A temporary path beside ``path`` (named ``.ncadapt-tmp-*``, ending with the target's name)
+    for a writer that wants a file name; it replaces ``path`` only when the block ends without an
+    error, else it is removed and the target is left as it was. Inside :func:`all_or_nothing` the
+    rename waits for the end of that block. An existing target keeps its permission bits; a
+    symbolic link's target is replaced (the link stays)."""
+    p = _target(Path(path))
+    d = p.parent if str(p.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=TMP_PREFIX, suffix="-" + (p.name or "out"), dir=d)
+    os.close(fd)
+    _LIVE.add(tmp)
+    staged = _STAGED.get()
+    try:
+        yield tmp
+        os.chmod(tmp, _mode_for(p))
+        if staged is not None:
+            staged.append((tmp, p))
+            return
         os.replace(tmp, p)
+        _LIVE.discard(tmp)
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+@contextlib.contextmanager
+def all_or_nothing():
+    """Every file written with :func:`atomic_path`, :func:`atomic_open` or :func:`atomic_write`
+    inside the block replaces its target only when the whole block ends without an error; when it
+    fails (or is interrupted), none does and the temporary files are removed."""
+    staged: list[tuple[str, Path]] = []
+    token = _STAGED.set(staged)
+    try:
+        yield
+    except BaseException:
+        for tmp, _ in staged:
+            _remove(tmp)
+        raise
     finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        _STAGED.reset(token)
+    for tmp, target in staged:
+        os.replace(tmp, target)
+        _LIVE.discard(tmp)
 
 
 @contextlib.contextmanager

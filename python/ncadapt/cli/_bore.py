@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
-from ._common import check_outputs, handle_errors, progress, write_json
+from ._common import check_outputs, handle_errors, progress, summary, write_json
 
 _CLASS = {"type": str, "show_default": True}
 
@@ -57,15 +57,15 @@ def plan_cmd(diameter, final, prefinish, t0, allowance, delta_a, delta_b, measur
                                      k=k, target_diameter=target)
     else:
         p = pb.plan(diameter, final, prefinish, t0, allowance, delta_a, delta_b, k=k, target_diameter=target)
-    click.echo(f"Ø{diameter:g} {prefinish} → {final}: IT {p.it_prefinish * 1000:g} → {p.it_final * 1000:g} µm, "
+    summary(f"Ø{diameter:g} {prefinish} → {final}: IT {p.it_prefinish * 1000:g} → {p.it_final * 1000:g} µm, "
                f"target Ø{p.target_diameter:.4f}")
-    click.echo(f"applicability: δA − δB = {(p.delta_a - p.delta_b) * 1000:.1f} µm ≤ "
+    summary(f"applicability: δA − δB = {(p.delta_a - p.delta_b) * 1000:.1f} µm ≤ "
                f"{pb.APPLICABILITY_SHARE * p.it_prefinish * 1000:.1f} µm: {'yes' if p.applicable else 'NO'}")
-    click.echo(f"t_max {p.t_max:.4f} mm → {p.passes} passes of {p.depth_per_pass:.4f} mm")
+    summary(f"t_max {p.t_max:.4f} mm → {p.passes} passes of {p.depth_per_pass:.4f} mm")
     for i, (a, b) in enumerate(zip(p.predicted, p.predicted_b), start=1):
-        click.echo(f"  pass {i}: predicted δA {_um(a)}, δB {_um(b)}")
+        summary(f"  pass {i}: predicted δA {_um(a)}, δB {_um(b)}")
     da, db = p.predicted_diameters
-    click.echo(f"predicted: form δA − δB {p.predicted_form * 1000:.2f} µm (limit "
+    summary(f"predicted: form δA − δB {p.predicted_form * 1000:.2f} µm (limit "
                f"{pb.FINAL_FORM_SHARE * p.it_final * 1000:.2f}), Ø near A {da:.4f}, near B {db:.4f}: "
                f"{'inside' if p.predicted_ok else 'OUTSIDE'} {final}")
     if not p.applicable:
@@ -106,14 +106,14 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
     c = pb.next_correction(p, meas, pass_done, applied=applied, hardened=hardened)
     block = pb.offset_block(c.correction, controller=controller, tool=tool, radius=tool_radius)
     for circ, e in zip(meas.circles, c.errors):
-        click.echo(f"  plane {circ.plane:>8s}: Ø{circ.diameter:.4f}, roundness {circ.roundness * 1000:.1f} µm, "
+        summary(f"  plane {circ.plane:>8s}: Ø{circ.diameter:.4f}, roundness {circ.roundness * 1000:.1f} µm, "
                    f"error {_um(e)}")
-    click.echo(f"taper {meas.taper * 1000:+.1f} µm, barrel {meas.barrel * 1000:+.1f} µm")
-    click.echo(f"pass {c.next_pass} of {p.passes}: correction δK {_um(c.correction)} ({c.rule}); "
+    summary(f"taper {meas.taper * 1000:+.1f} µm, barrel {meas.barrel * 1000:+.1f} µm")
+    summary(f"pass {c.next_pass} of {p.passes}: correction δK {_um(c.correction)} ({c.rule}); "
                f"cutting edge at R {c.radial_position:.4f}")
     if c.stiffness_ratio is not None:
-        click.echo(f"stiffness ratio (pre-finish / now) {c.stiffness_ratio:.3f}")
-    click.echo(block)
+        summary(f"stiffness ratio (pre-finish / now) {c.stiffness_ratio:.3f}")
+    summary(block)
     if json_path:
         write_json(json_path, {**c.as_dict(), "measurement": meas.as_dict(), "block": block, "controller": controller})
 
@@ -136,10 +136,10 @@ def simulate_cmd(parts, seed, material, diameter, t0, allowance, k, json_path):
     with progress() as say:
         r = sb.simulate(parts, seed, material=material, diameter=diameter, t0=t0, allowance=allowance, k=k, progress=say)
     w = r["without_correction"]
-    click.echo(f"{parts} {material} parts (applicability held for {r['applicable_share']:.1%} of those drawn)")
-    click.echo(f"corrective passes: {r['within_tolerance']:.1%} inside H6 with form ≤ k·IT6, {r['mean_passes']:.2f} "
+    summary(f"{parts} {material} parts (applicability held for {r['applicable_share']:.1%} of those drawn)")
+    summary(f"corrective passes: {r['within_tolerance']:.1%} inside H6 with form ≤ k·IT6, {r['mean_passes']:.2f} "
                f"passes, form error {r['form_error_mean'] * 1000:.2f} µm, diameter {_um(r['diameter_error_mean'])}")
-    click.echo(f"one uncorrected pass: {w['within_tolerance']:.1%} inside, form error {w['form_error_mean'] * 1000:.2f} µm, "
+    summary(f"one uncorrected pass: {w['within_tolerance']:.1%} inside, form error {w['form_error_mean'] * 1000:.2f} µm, "
                f"diameter {_um(w['diameter_error_mean'])}")
     if json_path:
         write_json(json_path, r)

@@ -1,4 +1,4 @@
-"""What every command shares: error reporting, exit codes, JSON output and progress."""
+"""What every command shares: error reporting, exit codes, outputs, JSON and progress."""
 
 from __future__ import annotations
 
@@ -6,32 +6,86 @@ import contextlib
 import functools
 import json
 import os
+import signal
+import stat
 import sys
+import tempfile
+import traceback
 from pathlib import Path
 
 import click
 from rich.console import Console
 
-from .._io import atomic_write
+from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries
 from ..errors import InputError, NcadaptError, RefusedError
 
-#: Exit codes.
-EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT = 0, 1, 2
+#: Exit codes: success, refused by a safety check (nothing written), bad input or usage, internal error.
+EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+#: A message cuts an offending token to about this many characters.
+TOKEN_CHARS = 80
 
 err_console = Console(stderr=True, highlight=False)
+
+#: Where summaries go: stdout, or stderr when stdout carries the JSON (``--json -``).
+_state = {"summary_to_stderr": False}
 
 
 def echo_err(msg: str) -> None:
     click.echo(msg, err=True)
 
 
-def handle_errors(f):
-    """Turn ncadapt errors into compiler-style messages and the documented exit codes."""
+def summary(msg: str = "") -> None:
+    """A line of a command's human summary: on stdout (stderr when ``--json -`` writes there)."""
+    click.echo(msg, err=_state["summary_to_stderr"])
+
+
+def cut(token, n: int = TOKEN_CHARS) -> str:
+    """``repr`` of an offending token, cut to about ``n`` characters."""
+    r = repr(token)
+    return r if len(r) <= n else r[: n - 5] + "…" + r[-4:]
+
+
+def debugging() -> bool:
+    """``ncadapt --debug`` or NCADAPT_DEBUG=1: internal errors show their traceback."""
+    if os.environ.get("NCADAPT_DEBUG", "") not in ("", "0"):
+        return True
+    ctx = click.get_current_context(silent=True)
+    return bool(ctx is not None and ctx.find_root().meta.get("ncadapt.debug"))
+
+
+def internal_error(e: BaseException, what: str) -> None:
+    """Exit 3 with one line (or the traceback with --debug)."""
+    if debugging():
+        traceback.print_exception(e)
+    msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
+    echo_err(f"error: internal error in {what}: {type(e).__name__}{': ' + msg[:200] if msg else ''}; "
+             "this is a bug; rerun with --debug for the traceback")
+    sys.exit(EXIT_INTERNAL)
+
+
+def _on_signal(signum, frame):  # noqa: ARG001 - a signal handler's signature
+    # unwind (the open outputs are removed by all_or_nothing), then exit as the signal asks
+    remove_temporaries()
+    raise SystemExit(128 + signum)
+
+
+def handle_errors(f=None, *, staged: bool = True):
+    """Run a command with the documented exit codes: ncadapt's errors become compiler-style
+    messages (exit 2 bad input, 1 refused), anything unexpected exit 3. Every file the command
+    writes is written all or nothing: to temporary files renamed when the whole command succeeded
+    (``staged=False``: each file on its own, for a command that reads back what it wrote)."""
+    if f is None:
+        return functools.partial(handle_errors, staged=staged)
 
     @functools.wraps(f)
     def wrapper(*args, **kwargs):
+        _state["summary_to_stderr"] = False
+        old = signal.getsignal(signal.SIGTERM)
+        with contextlib.suppress(ValueError):  # not the main thread (tests)
+            signal.signal(signal.SIGTERM, _on_signal)
         try:
-            return f(*args, **kwargs)
+            with all_or_nothing() if staged else contextlib.nullcontext():
+                return f(*args, **kwargs)
         except InputError as e:
             where = e.path or "<input>"
             if e.line:
@@ -46,6 +100,15 @@ def handle_errors(f):
         except NcadaptError as e:  # pragma: no cover - every error has a subclass above
             echo_err(f"error: {e}")
             sys.exit(EXIT_BAD_INPUT)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort, SystemExit,
+                KeyboardInterrupt):
+            raise
+        except Exception as e:  # noqa: BLE001 - the contract: anything unexpected is exit 3
+            ctx = click.get_current_context(silent=True)
+            internal_error(e, " ".join(["ncadapt"] + (ctx.command_path.split()[1:] if ctx else [f.__name__])))
+        finally:
+            with contextlib.suppress(ValueError):
+                signal.signal(signal.SIGTERM, old)
 
     return wrapper
 
@@ -95,11 +158,55 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"))
+
+
+def _check_output(name: str, path: Path) -> None:
+    """An output must be a regular file (or not exist yet) in an existing folder ncadapt can
+    write in; a symbolic link is followed (its target is replaced)."""
+    target = Path(os.path.realpath(path)) if path.is_symlink() else path
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise click.BadParameter(f"{cut(str(path))}: {e.strerror}", param_hint=f"'{name}'") from None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        kind = next((k for test, k in _KINDS if test(st.st_mode)), "not a regular file")
+        raise click.BadParameter(f"{cut(str(path))} is {kind}; ncadapt writes regular files only",
+                                 param_hint=f"'{name}'")
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise click.BadParameter(f"{cut(str(path))}: the folder {cut(str(folder))} does not exist",
+                                 param_hint=f"'{name}'")
+    try:  # what the command will do: a temporary file in the folder
+        fd, probe = tempfile.mkstemp(prefix=TMP_PREFIX, dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise click.BadParameter(f"{cut(str(path))}: cannot write in {cut(str(folder))}: {e.strerror}",
+                                 param_hint=f"'{name}'") from None
+
+
 def check_outputs(inputs: dict, outputs: dict) -> None:
-    """Refuse, before any work, an output that would replace an input (an input error naming the
-    output) or two outputs naming one file (a usage error). Both map a name shown to the user, such
-    as ``"thickness map"`` or ``"--json"``, to a path or None (not given)."""
-    outs = [(name, Path(p)) for name, p in outputs.items() if p is not None]
+    """Refuse, before any work, an output that cannot be written as a regular file (a device, a
+    FIFO, a folder, a missing or read-only folder), that would replace an input (an input error
+    naming the output), or two outputs naming one file (usage errors). Both map a name shown to
+    the user, such as ``"thickness map"`` or ``"--json"``, to a path or None (not given). ``-``
+    as ``--json`` is standard output (the summary then goes to stderr); elsewhere it is refused."""
+    outs = []
+    for name, p in outputs.items():
+        if p is None:
+            continue
+        if str(p) == "-":
+            if name != "--json":
+                raise click.BadParameter("'-' (standard output) is only for --json; name a file",
+                                         param_hint=f"'{name}'")
+            _state["summary_to_stderr"] = True
+            continue
+        _check_output(name, Path(p))
+        outs.append((name, Path(p)))
     ins = [(name, Path(p)) for name, p in inputs.items() if p is not None]
     for name, out in outs:
         for what, inp in ins:
@@ -112,7 +219,12 @@ def check_outputs(inputs: dict, outputs: dict) -> None:
 
 
 def write_json(path, payload: dict) -> None:
-    atomic_write(path, (json.dumps(payload, indent=2, allow_nan=False) + "\n").encode())
+    """The JSON of a command, to a file (all or nothing) or to stdout (``-``)."""
+    text = json.dumps(payload, indent=2, allow_nan=False) + "\n"
+    if str(path) == "-":
+        click.echo(text, nl=False)
+    else:
+        atomic_write(path, text.encode())
 
 
 @contextlib.contextmanager

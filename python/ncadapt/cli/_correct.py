@@ -9,7 +9,7 @@ import click
 from .. import constants
 from .. import fields as _fields
 from .. import nc
-from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, write_json
+from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
 
 
 def _shift(ctx, param, value):
@@ -51,21 +51,21 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
         c = nc.correct_file(
             program, output, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
             keep_unsupported=keep_unsupported, clearance=clearance, progress=say)
-    echo_err(f"{program} -> {output}")
-    echo_err(f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
+    summary(f"{program} -> {output}")
+    summary(f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
              f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}")
-    echo_err(f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm "
+    summary(f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm "
              f"over {c.n_points:,} points")
     if c.unsupported_kept:
-        echo_err(f"  unsupported constructs kept unchanged ({len(c.unsupported_kept)}), their blocks not corrected:")
+        summary(f"  unsupported constructs kept unchanged ({len(c.unsupported_kept)}), their blocks not corrected:")
         for u in c.unsupported_kept[:20]:
-            echo_err(f"    line {u.line}:{u.col}: {u.construct}")
+            summary(f"    line {u.line}:{u.col}: {u.construct}")
         if len(c.unsupported_kept) > 20:
-            echo_err(f"    ... and {len(c.unsupported_kept) - 20} more (see --json)")
+            summary(f"    ... and {len(c.unsupported_kept) - 20} more (see --json)")
     else:
-        echo_err("  unsupported constructs: none")
+        summary("  unsupported constructs: none")
     for n_line, msg in c.notes[:20]:
-        echo_err(f"  note: line {n_line}: {msg}")
+        summary(f"  note: line {n_line}: {msg}")
     for w in c.warnings:
         echo_err(f"  warning: {w}")
     if json_path is not None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ._common import handle_errors, progress
+from ._common import handle_errors, progress, summary
 
 
 @click.command()
@@ -14,7 +14,7 @@ from ._common import handle_errors, progress
               show_default=True, help="Folder for the demo's inputs and outputs.")
 @click.option("--seed", type=int, default=1, show_default=True, help="Seed of the simulated measurement noise.")
 @click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True)
-@handle_errors
+@handle_errors(staged=False)  # it reads back the files it writes
 def demo(out_dir, seed, method):
     """Compensate a shipped freeform part from simulated measurements, end to end.
 
@@ -28,11 +28,11 @@ def demo(out_dir, seed, method):
     with progress() as say:
         r = run_demo.run(out_dir, seed=seed, method=method, say=say)
     s = r.summary
-    click.echo(f"systematic error RMS before: {s['systematic_rms_before'] * 1000:.1f} µm "
+    summary(f"systematic error RMS before: {s['systematic_rms_before'] * 1000:.1f} µm "
                f"(max {s['systematic_max_abs_before'] * 1000:.1f} µm)")
-    click.echo(f"systematic error RMS after one compensation: {s['systematic_rms_after'] * 1000:.1f} µm "
+    summary(f"systematic error RMS after one compensation: {s['systematic_rms_after'] * 1000:.1f} µm "
                f"(max {s['systematic_max_abs_after'] * 1000:.1f} µm), {100 * s['ratio']:.1f} % of before")
     m = s["moran"]
-    click.echo(f"Moran's I {m['I']:.3f}, z {m['z_randomization']:.1f}: systematic {'yes' if m['systematic'] else 'no'}")
+    summary(f"Moran's I {m['I']:.3f}, z {m['z_randomization']:.1f}: systematic {'yes' if m['systematic'] else 'no'}")
     for name, f in r.files.items():
-        click.echo(f"  {name:22s} {out_dir / f}")
+        summary(f"  {name:22s} {out_dir / f}")

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from .. import constants
-from ._common import check_outputs, comma_floats, echo_err, handle_errors, progress, write_json
+from ._common import check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
 
 
 def _moran_options(f):
@@ -36,11 +36,11 @@ def _moran_kw(weights, power, threshold, neighbors, alpha):
 
 def _print_analysis(a) -> None:
     m, d = a.moran, a.deviation
-    click.echo(f"points: {a.n_points:,}")
-    click.echo(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
-    click.echo(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
+    summary(f"points: {a.n_points:,}")
+    summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
+    summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
                f"{m.z_normality:.2f} (normality), p {m.p_value:.3g}")
-    click.echo(f"systematic at alpha {m.alpha:g}: {'yes' if m.systematic else 'no'}")
+    summary(f"systematic at alpha {m.alpha:g}: {'yes' if m.systematic else 'no'}")
 
 
 @click.command()
@@ -136,12 +136,12 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
             cad.write(c.compensated, surface_path)
     _print_analysis(a)
     sysd = d.as_dict()
-    click.echo(f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
+    summary(f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
                f"({d.method}); random part: std {d.noise.std:.4f} mm")
     if not a.moran.systematic:
         echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
     if corr is not None:
-        click.echo(f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
+        summary(f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
                    f"max displacement {corr.max_displacement:.4f} mm")
     if points_out is not None:
         rows = ["x,y,z,deviation,systematic,random,cx,cy,cz"]

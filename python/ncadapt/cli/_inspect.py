@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from .. import nc
-from ._common import check_outputs, handle_errors, write_json
+from ._common import check_outputs, handle_errors, summary, write_json
 
 
 @click.command()
@@ -19,27 +19,27 @@ def inspect(program, json_path):
     check_outputs({"program": program}, {"--json": json_path})
     info = nc.inspect_file(program)
     m = info["motions"]
-    click.echo(f"{program}: {info['lines']:,} lines, units {info['units']}")
-    click.echo(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
+    summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
+    summary(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
     p = info["planes"]
-    click.echo(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")
+    summary(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")
     e = info["extents"]["all"]
     if e:
-        click.echo("  extents (mm): " + ", ".join(f"{a.upper()} {lo:.4f}..{hi:.4f}" for a, (lo, hi) in e.items()))
+        summary("  extents (mm): " + ", ".join(f"{a.upper()} {lo:.4f}..{hi:.4f}" for a, (lo, hi) in e.items()))
     if info["work_offsets"]:
-        click.echo("  work offsets: " + " ".join(info["work_offsets"]))
+        summary("  work offsets: " + " ".join(info["work_offsets"]))
     if info["tools"]:
-        click.echo("  tools: " + " ".join(f"T{t}" for t in info["tools"]))
+        summary("  tools: " + " ".join(f"T{t}" for t in info["tools"]))
     if info["block_delete_lines"]:
-        click.echo(f"  block-delete lines: {info['block_delete_lines']:,} (interpreted as executed)")
+        summary(f"  block-delete lines: {info['block_delete_lines']:,} (interpreted as executed)")
     if info["unsupported"]:
-        click.echo(f"  unsupported constructs ({len(info['unsupported'])}):")
+        summary(f"  unsupported constructs ({len(info['unsupported'])}):")
         for u in info["unsupported"]:
             extra = f" ({u['blocks']} motion block(s))" if u["blocks"] else ""
-            click.echo(f"    line {u['line']}:{u['col']}: {u['construct']}{extra}")
+            summary(f"    line {u['line']}:{u['col']}: {u['construct']}{extra}")
     else:
-        click.echo("  unsupported constructs: none")
+        summary("  unsupported constructs: none")
     for n in info["notes"]:
-        click.echo(f"  note: line {n['line']}: {n['message']}")
+        summary(f"  note: line {n['line']}: {n['message']}")
     if json_path is not None:
         write_json(json_path, info)

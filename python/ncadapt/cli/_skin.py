@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
-from ._common import check_outputs, handle_errors, write_json
+from ._common import check_outputs, handle_errors, summary, write_json
 
 
 @click.group()
@@ -37,13 +37,13 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
         if method in ("none",):
             raise click.UsageError("the protocol compares compensators; choose one")
         r = sk.protocol(method)
-        click.echo(f"{method}: max |error| after {r['compensations']} compensations {r['max_abs_error'] * 1000:.4g} µm")
+        summary(f"{method}: max |error| after {r['compensations']} compensations {r['max_abs_error'] * 1000:.4g} µm")
         if json_path:
             write_json(json_path, r)
         return
     run = sk.run(method, noise=noise, latency_ms=latency_ms, seed=seed)
     d = run.as_dict()
-    click.echo(f"{method}: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
+    summary(f"{method}: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
                f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm; "
                f"{d['compensator_steps']} steps, {d['fallbacks']} fallbacks, {d['rejected_readings']} readings rejected")
     if json_path:
@@ -125,10 +125,10 @@ def correct(program, map_path, target, allowance, into, output, limit, outside, 
         say(f"reading {program}")
         prog = nc.read(program)
         c = prog.correct_to(output, field, limit=limit, progress=say)
-    echo_err(f"{program} -> {output}")
-    echo_err(f"  map: {len(excess)} points, excess thickness min {excess.min():+.4f} max {excess.max():+.4f} "
+    summary(f"{program} -> {output}")
+    summary(f"  map: {len(excess)} points, excess thickness min {excess.min():+.4f} max {excess.max():+.4f} "
              f"mean {excess.mean():+.4f} mm")
-    echo_err(f"  blocks changed {c.blocks_changed:,}, lines added {c.lines_added:,}; displacement max "
+    summary(f"  blocks changed {c.blocks_changed:,}, lines added {c.lines_added:,}; displacement max "
              f"{c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm")
     for w in c.warnings:
         echo_err(f"  warning: {w}")
@@ -202,7 +202,7 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
                        on_step=lambda n, t, w: offsets.append(w))
         sink.close()
         d.update(source=str(replay_path), output=str(output))
-        click.echo(f"{replay_path}: {steps} readings stepped -> {output}", err=True)
+        summary(f"{replay_path}: {steps} readings stepped -> {output}")
     else:
         from asyncua import ua
 
@@ -219,13 +219,13 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
         d.update(source=url, pockets=pockets, latency_median_ms=float(np.median(lat) * 1e3) if lat else None,
                  latency_p99_ms=float(np.percentile(lat, 99) * 1e3) if lat else None)
         if lat:
-            click.echo(f"{url}: {len(lat)} readings, latency median {d['latency_median_ms']:.2f} ms, "
-                       f"p99 {d['latency_p99_ms']:.2f} ms", err=True)
+            summary(f"{url}: {len(lat)} readings, latency median {d['latency_median_ms']:.2f} ms, "
+                    f"p99 {d['latency_p99_ms']:.2f} ms")
     fallbacks = sum(c.fallbacks for c in comps)
     d.update(steps=steps, fallbacks=fallbacks)
     if offsets:
         d.update(w1_offset_min=float(min(offsets)), w1_offset_max=float(max(offsets)))
-    click.echo(f"{method}: {steps} steps, {fallbacks} fallbacks"
+    summary(f"{method}: {steps} steps, {fallbacks} fallbacks"
                + (f"; W1 offset {min(offsets):+.4f} .. {max(offsets):+.4f} mm" if offsets else ""))
     if json_path:
         write_json(json_path, d)
@@ -272,7 +272,7 @@ def serve(endpoint, noise, latency_ms, seed, json_path):
     d["endpoint"] = endpoint
     for key in ("fallbacks", "compensator_steps"):  # the client's to tell
         d.pop(key)
-    click.echo(f"client: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
+    summary(f"client: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
                f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm")
     if json_path:
         write_json(json_path, d)

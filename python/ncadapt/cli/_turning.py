@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import check_outputs, handle_errors, write_json
+from ._common import check_outputs, handle_errors, summary, write_json
 
 
 @click.group()
@@ -37,7 +37,7 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
     cfg = tu.load(config)
     p = tu.plan(cfg, mode, wear_weight=wear_weight)
     d = p.as_dict()
-    click.echo(f"{mode}: diameter error on the model {d['diameter_error_max'] * 1000:.1f} µm "
+    summary(f"{mode}: diameter error on the model {d['diameter_error_max'] * 1000:.1f} µm "
                f"(constant feed {d['constant_feed']:.3f} mm/rev at {d['constant_rpm']:.0f} rpm: "
                f"{d['diameter_error_constant_feed'] * 1000:.1f} µm, ratio {d['diameter_variation_ratio']:.3f}); "
                f"machining time {d['machining_time_s']:.1f} s"
@@ -45,7 +45,7 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
                   f"{d['machining_time_same_error_s']:.1f} s" if d["machining_time_same_error_s"] is not None else ""))
     if output:
         atomic_write(output, tu.program(p, cfg, diameter_mode=not radius_mode, css=css).encode())
-        click.echo(f"wrote {output}", err=True)
+        summary(f"wrote {output}")
     if json_path:
         write_json(json_path, {"config": str(config), **d})
     if report_path:
@@ -70,7 +70,7 @@ def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
     check_outputs({"configuration": config, "program": program}, {"--json": json_path})
     prof = st.simulate(tu.load(config), program, rho_sigma=rho_sigma, stiffness_sigma=stiffness_sigma, seed=seed)
     d = prof.as_dict()
-    click.echo(f"{program}: diameter {d['diameter_min']:.4f} .. {d['diameter_max']:.4f} mm (target "
+    summary(f"{program}: diameter {d['diameter_min']:.4f} .. {d['diameter_max']:.4f} mm (target "
                f"{d['diameter_target']:.3f}, error up to {d['diameter_error_max'] * 1000:.1f} µm, variation "
                f"{d['diameter_variation'] * 1000:.1f} µm), {d['machining_time_s']:.1f} s")
     if json_path:
@@ -137,9 +137,9 @@ def _report(path, cfg, p, css) -> None:
     ax2.set_ylabel("diameter − target, µm")
     ax2.legend(fontsize=8)
     d = p.as_dict()
-    summary = [(_LABELS.get(k, k), v) for k, v in d.items() if k != "profile" and v is not None]
+    figures = [(_LABELS.get(k, k), v) for k, v in d.items() if k != "profile" and v is not None]
     write(path, page(f"Turning plan: {p.mode} mode", cfg.source, [
-        ("Summary", table(summary, ["", "value"])),
+        ("Summary", table(figures, ["", "value"])),
         ("Feed / spindle speed / position: the family keeping the deflection constant", figure_png(fig)),
         ("Diameter along the shaft on the virtual lathe", figure_png(fig2)
          + table(rows, ["program", "max |diameter error|, µm", "diameter variation, µm", "time, s"]))]))

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import check_outputs, echo_err, handle_errors, progress, write_json
+from ._common import check_outputs, echo_err, handle_errors, progress, summary, write_json
 
 _POS = dict(type=click.FloatRange(min=0, min_open=True), required=True)
 
@@ -35,7 +35,7 @@ def tilt(log, tool_radius, diameter, segment, json_path):
     b, z, v = pw.read_tracking(log)
     t = pw.tilt(b, z, v, tool_radius=tool_radius, diameter=diameter, segment=segment)
     d = t.as_dict()
-    click.echo(f"{log}: {len(b)} rows, {d['segments']} segments of {segment}; |E| max {d['max_abs_error'] * 1000:.2f} µm, "
+    summary(f"{log}: {len(b)} rows, {d['segments']} segments of {segment}; |E| max {d['max_abs_error'] * 1000:.2f} µm, "
                f"RMS {d['rms_error'] * 1000:.2f} µm")
     if json_path:
         write_json(json_path, {"tracking": str(log), "tool_radius": tool_radius, "diameter": diameter,
@@ -101,11 +101,11 @@ def correct(program, log, tool_radius, diameter, segment, map_path, target, allo
         say(f"reading {program}")
         prog = nc.read(program)
         c = prog.correct_to(output, field, limit=limit, progress=say)
-    echo_err(f"{program} -> {output}")
-    echo_err(f"  K_dist (tilt): |E| max {np.abs(t.error).max():.4f} mm over {len(b)} tracking rows")
+    summary(f"{program} -> {output}")
+    summary(f"  K_dist (tilt): |E| max {np.abs(t.error).max():.4f} mm over {len(b)} tracking rows")
     if k_fb is not None:
-        echo_err(f"  K_fb (self-tuning): min {k_fb.min():+.4f} max {k_fb.max():+.4f} mm over {len(k_fb)} map points")
-    echo_err(f"  blocks changed {c.blocks_changed:,}, lines added {c.lines_added:,}; correction max "
+        summary(f"  K_fb (self-tuning): min {k_fb.min():+.4f} max {k_fb.max():+.4f} mm over {len(k_fb)} map points")
+    summary(f"  blocks changed {c.blocks_changed:,}, lines added {c.lines_added:,}; correction max "
              f"{c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm")
     for w in c.warnings:
         echo_err(f"  warning: {w}")
@@ -136,7 +136,7 @@ def backlash(path, dt, json_path):
     check_outputs({"signals": path}, {"--json": json_path})
     c, _ = fields.read_columns(path, ("v_ideal", "v_measured"))
     r = pw.estimate_backlash(c["v_ideal"], c["v_measured"], dt)
-    click.echo(f"gap g = {r.gap * 1000:.2f} µm, τ = {r.tau:.4g} s, offset {r.offset * 1000:+.2f} µm; "
+    summary(f"gap g = {r.gap * 1000:.2f} µm, τ = {r.tau:.4g} s, offset {r.offset * 1000:+.2f} µm; "
                f"residual RMS {r.residual_rms * 1000:.2f} µm; web error at reversals up to {r.web_error.__abs__().max() * 1000:.1f} µm")
     if json_path:
         write_json(json_path, {"signals": str(path), "dt": dt, **r.as_dict()})
@@ -157,7 +157,7 @@ def simulate(strategy, seed, json_path, report_path):
     check_outputs({}, {"--json": json_path, "--report": report_path})
     r = sw.simulate(strategy, seed)
     d = r.as_dict()
-    click.echo(f"{strategy}: web thickness error RMS {d['rms_error'] * 1000:.1f} µm (uncorrected "
+    summary(f"{strategy}: web thickness error RMS {d['rms_error'] * 1000:.1f} µm (uncorrected "
                f"{d['rms_error_uncorrected'] * 1000:.1f}), max {d['max_abs_error'] * 1000:.1f} µm; "
                f"{d['retunes']} of {d['cells_total']} cells semi-finished")
     if json_path:
