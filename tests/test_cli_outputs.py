@@ -167,3 +167,47 @@ def test_an_internal_error_is_exit_3_in_one_line(prog, tmp_path, monkeypatch):
 def test_the_exit_codes_are_in_the_help():
     r = run("--help")
     assert "Exit codes: 0 success; 1 refused" in " ".join(r.stdout.split()) and "3 internal error" in r.stdout
+
+
+# ------------------------------------------------------------------ options
+def _options():
+    import click
+
+    def walk(cmd, path):
+        if isinstance(cmd, click.Group):
+            for name, sub in cmd.commands.items():
+                yield from walk(sub, path + [name])
+        else:
+            for p in cmd.params:
+                if isinstance(p, click.Option) and p.name != "help":
+                    yield " ".join(path), p
+
+    return list(walk(main, []))
+
+
+def test_every_option_has_help_and_numbers_are_finite_and_bounded():
+    import click
+
+    from ncadapt.cli._common import FiniteRange
+
+    missing = [f"{c} {p.opts[0]}" for c, p in _options() if not p.help]
+    assert missing == []
+    loose = [f"{c} {p.opts[0]}" for c, p in _options()
+             if type(p.type) in (click.types.FloatParamType, click.types.IntParamType, click.FloatRange)]
+    assert loose == [], "number options without bounds or a finiteness check"
+    for c, p in _options():
+        if isinstance(p.type, FiniteRange):
+            for bad in ("nan", "inf", "-inf"):
+                with pytest.raises(click.BadParameter):
+                    p.type.convert(bad, p, None)
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-1"])
+def test_a_bad_number_is_a_usage_error_naming_the_option(prog, tmp_path, value):
+    r = run("correct", prog, "--shift", "0,0,0.01", "--limit", value, "-o", tmp_path / "o.ngc")
+    assert r.exit_code == 2 and "--limit" in r.stderr, r.output
+
+
+def test_a_non_finite_shift_is_a_usage_error(prog, tmp_path):
+    r = run("correct", prog, "--shift", "0,0,nan", "-o", tmp_path / "o.ngc")
+    assert r.exit_code == 2 and "--shift" in r.stderr and "finite" in r.stderr, r.output

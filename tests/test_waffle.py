@@ -203,3 +203,28 @@ def test_simulate_cli_json_and_report(tmp_path):
     assert len(d["cells"]) == sw.ROWS * sw.CELLS and d["rms_error"] == sw.simulate("combined", 2).as_dict()["rms_error"]
     html = (tmp_path / "w.html").read_text()
     assert html.count("data:image/png") == 2 and "self-tuning" in html
+
+
+@pytest.mark.parametrize("layout", ["pass", "grid", "scattered"])
+def test_depth_field_extrapolates_a_plane_as_the_plane(layout):
+    """outside="extrapolate": a correction linear in (s, Z) continues as that plane beyond the
+    measured area (a single pass: along B only)."""
+    from ncadapt.processes.waffle import DepthField
+
+    D = 360 / np.pi  # 1 mm of arc per degree
+    if layout == "pass":
+        b = np.linspace(0, 10, 6)
+        z = np.full_like(b, 5.0)
+    elif layout == "grid":
+        B, Z = np.meshgrid(np.linspace(0, 10, 6), np.linspace(0, 4, 5))
+        b, z = B.ravel(), Z.ravel()
+    else:
+        rng = np.random.default_rng(3)
+        b, z = rng.uniform(0, 10, 40), rng.uniform(0, 4, 40)
+    k = 0.01 * b - 0.02 * z + 0.1
+    f = DepthField(b, z, k, diameter=D, outside="extrapolate")
+    qb, qz = np.array([-2.0, 12.0, 5.0]), np.array([5.0, 5.0, 5.0]) if layout == "pass" else np.array([-1.0, 6.0, 2.0])
+    want = 0.01 * qb - 0.02 * qz + 0.1
+    np.testing.assert_allclose(f.values(qb, qz), want, atol=1e-6 if layout != "scattered" else 2e-4)
+    with pytest.raises(Exception, match="measured area"):
+        DepthField(b, z, k, diameter=D, outside="error").values(qb, qz)

@@ -129,10 +129,51 @@ def read_text(path: str | os.PathLike) -> str:
             from None
 
 
-def csv_reader(path: str | os.PathLike):
-    """A :func:`csv.reader` over an input file read by :func:`read_text` (its ``line_num`` is the
-    file's line)."""
-    return csv.reader(io.StringIO(read_text(path), newline=""))
+#: The longest CSV field read (characters); a longer one is an error at its line.
+CSV_FIELD_LIMIT = 128 * 1024
+
+
+class CsvRows:
+    """The rows of a CSV input file read by :func:`read_text`, with ``line_num`` the file's line
+    of the row last read. Line ends may be LF, CRLF or CR alone; the delimiter is the comma, or the
+    semicolon (or tab) when the first line that is not blank or a ``#`` comment has one and no
+    comma. A malformed row (a field over :data:`CSV_FIELD_LIMIT`, a stray quote) is an
+    :class:`InputError` at its line."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = str(path)
+        text = read_text(path)
+        if "\r" in text:
+            text = text.replace("\r\n", "\n").replace("\r", "\n")
+        first = next((ln for ln in text.split("\n", 64)[:64] if ln.strip() and not ln.lstrip().startswith("#")), "")
+        self.delimiter = ","
+        if "," not in first:
+            self.delimiter = ";" if ";" in first else ("\t" if "\t" in first else ",")
+        self._rows = csv.reader(io.StringIO(text, newline=""), delimiter=self.delimiter)
+        self.line_num = 0
+
+    def __iter__(self):
+        return self
+
+    def __next__(self) -> list[str]:
+        old = csv.field_size_limit(CSV_FIELD_LIMIT)
+        try:
+            row = next(self._rows)
+        except csv.Error as e:
+            line = self._rows.line_num
+            msg = str(e)
+            if "field larger than field limit" in msg:
+                msg = f"a field longer than {CSV_FIELD_LIMIT // 1024} KB"
+            raise InputError(f"not a readable CSV row: {msg}", self.path, line) from None
+        finally:
+            csv.field_size_limit(old)
+        self.line_num = self._rows.line_num
+        return row
+
+
+def csv_reader(path: str | os.PathLike) -> CsvRows:
+    """The rows of a CSV input file (see :class:`CsvRows`)."""
+    return CsvRows(path)
 
 
 def csv_column(row: list[str], k: int) -> int:

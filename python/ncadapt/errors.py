@@ -7,7 +7,16 @@ where the input was wrong. A safety check that refuses to write raises :class:`R
 
 from __future__ import annotations
 
-__all__ = ["NcadaptError", "InputError", "RefusedError"]
+__all__ = ["NcadaptError", "InputError", "RefusedError", "cut"]
+
+#: A message cuts an offending token to about this many characters.
+TOKEN_CHARS = 80
+
+
+def cut(token, n: int = TOKEN_CHARS) -> str:
+    """``repr`` of an offending token for a message, cut to about ``n`` characters."""
+    r = repr(token)
+    return r if len(r) <= n else r[: n - 5] + "…" + r[-4:]
 
 
 class NcadaptError(Exception):

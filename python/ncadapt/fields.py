@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ._io import csv_column, csv_reader, read_text
-from .errors import InputError, RefusedError
+from .errors import InputError, RefusedError, cut
 
 __all__ = [
     "Field",
@@ -77,6 +77,32 @@ def _check_outside(outside: str) -> str:
     if outside not in OUTSIDE:
         raise ValueError(f'Parameter "outside" must be one of {", ".join(OUTSIDE)}; got {outside!r}')
     return outside
+
+
+def _collinear(xy: np.ndarray) -> bool:
+    """Points (x, y) that span no area (all on one line, within 1e-9 of their extent)."""
+    c = xy - xy.mean(axis=0)
+    sv = np.linalg.svd(c, compute_uv=False)
+    return len(sv) < 2 or not sv[0] > 0 or sv[1] <= 1e-9 * sv[0]
+
+
+def _scattered(points, displacements, linenos, source, outside) -> "ScatteredField":
+    """A :class:`ScatteredField` from read points, with located errors: at least 3 points, no
+    (x, y) given twice, not all on one line."""
+    pts = np.asarray(points, dtype=np.float64)
+    src = None if source is None else str(source)
+    if len(pts) < 3:
+        raise InputError(f"a scattered field needs at least 3 points, found {len(pts)}", src)
+    _, first, counts = np.unique(pts[:, :2], axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        k = int(first[np.flatnonzero(counts > 1)[0]])
+        m = next(m for m in range(len(pts)) if m != k and (pts[m, :2] == pts[k, :2]).all())
+        raise InputError(f"point x={pts[k, 0]:g} y={pts[k, 1]:g} repeats the point at line {linenos[k]}",
+                         src, int(linenos[m]), 1)
+    if _collinear(pts[:, :2]):
+        raise InputError(f"the {len(pts)} points lie on one line (from line {linenos[0]} to {linenos[-1]}); "
+                         "a field needs points that span an area", src)
+    return ScatteredField(pts, displacements, outside=outside, source=src)
 
 
 class Field:
@@ -247,6 +273,10 @@ class ScatteredField(Field):
         xy = self.points[:, :2]
         if len(np.unique(xy, axis=0)) != len(xy):
             raise ValueError("scattered field points must have distinct (x, y)")
+        if not (np.isfinite(self.points).all() and np.isfinite(self.displacements).all()):
+            raise ValueError("scattered field points and displacements must be finite")
+        if _collinear(xy):
+            raise ValueError("scattered field points span no area: they lie on one line")
         self.outside = _check_outside(outside)
         if neighbors is None and len(xy) > 2000:
             neighbors = 64
@@ -304,7 +334,7 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
             try:
                 v = float(row[k])
             except ValueError:
-                raise InputError(f"column {c}: expected a number, found {row[k].strip()!r}", str(path), lineno, col) from None
+                raise InputError(f"column {c}: expected a number, found {cut(row[k].strip())}", str(path), lineno, col) from None
             if not math.isfinite(v):
                 raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno, col)
             cols[c].append(v)
@@ -336,6 +366,9 @@ def _grid_from_points(x, y, dz, linenos, path, method, outside) -> GridField:
         raise InputError(
             f"not a rectangular grid: {n_missing} of {grid.size} points missing, e.g. x={xs[ii]:g} y={ys[jj]:g}",
             str(path))
+    if method == "cubic" and (len(xs) < 4 or len(ys) < 4):
+        raise InputError(f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
+                         f"has {len(xs)} x {len(ys)}: use --interp linear", str(path))
     return GridField(xs, ys, grid, method=method, outside=outside, source=str(path))
 
 
@@ -356,16 +389,8 @@ def from_values(x, y, dz, *, method: str = "linear", outside: str = "error", sou
     pairs = len(counts)
     if len(xs) >= 2 and len(ys) >= 2 and pairs == len(x) == len(xs) * len(ys):
         return _grid_from_points(x, y, dz, linenos, "<map>" if source is None else source, method, outside)
-    if pairs != len(x):
-        k = first[np.flatnonzero(counts > 1)[0]]
-        m = next(m for m in range(len(x)) if m != k and x[m] == x[k] and y[m] == y[k])
-        raise InputError(f"duplicate point x={x[k]:g} y={y[k]:g} (first on line {linenos[k]})",
-                         None if source is None else str(source), int(linenos[m]), 1)
-    if len(x) < 3:
-        raise InputError(f"a map needs at least 3 points, found {len(x)}", None if source is None else str(source))
     zeros = np.zeros_like(x)
-    return ScatteredField(np.column_stack([x, y, zeros]), np.column_stack([zeros, zeros, dz]), outside=outside,
-                          source=None if source is None else str(source))
+    return _scattered(np.column_stack([x, y, zeros]), np.column_stack([zeros, zeros, dz]), linenos, source, outside)
 
 
 def read_grid_csv(path, method: str = "linear", outside: str = "error") -> GridField:
@@ -381,15 +406,7 @@ def read_scattered_csv(path, outside: str = "error") -> ScatteredField:
     c, ln = _read_csv(path, ("x", "y", "z", "dx", "dy", "dz"))
     pts = np.column_stack([c["x"], c["y"], c["z"]])
     d = np.column_stack([c["dx"], c["dy"], c["dz"]])
-    _, first, counts = np.unique(pts[:, :2], axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        dup = np.flatnonzero(counts > 1)[0]
-        k = first[dup]
-        later = [int(ln[m]) for m in range(len(pts)) if (pts[m, :2] == pts[k, :2]).all() and m != k]
-        raise InputError(f"duplicate point x={pts[k, 0]:g} y={pts[k, 1]:g} (first on line {ln[k]})", str(path), later[0], 1)
-    if len(pts) < 3:
-        raise InputError(f"a scattered field needs at least 3 points, found {len(pts)}", str(path))
-    return ScatteredField(pts, d, outside=outside, source=str(path))
+    return _scattered(pts, d, ln, path, outside)
 
 
 def _numbers(path: Path):
@@ -400,10 +417,14 @@ def _numbers(path: Path):
         if not s:
             continue
         try:
-            yield n, [float(v) for v in s.split()]
+            values = [float(v) for v in s.split()]
         except ValueError:
             bad = next(v for v in s.split() if not _is_float(v))
-            raise InputError(f"expected numbers, found {bad!r}", str(path), n, line.find(bad) + 1) from None
+            raise InputError(f"expected numbers, found {cut(bad)}", str(path), n, line.find(bad) + 1) from None
+        for v, word in zip(values, s.split()):
+            if not math.isfinite(v):
+                raise InputError(f"value is not finite ({cut(word)})", str(path), n, line.find(word) + 1)
+        yield n, values
 
 
 def _is_float(v: str) -> bool:
@@ -463,7 +484,7 @@ def read_probe_log(path, method: str = "linear", outside: str = "error") -> Fiel
         return _grid_from_points(xr, yr, a[:, 2], ln, path, method, outside)
     d = np.zeros_like(a)
     d[:, 2] = a[:, 2]
-    return ScatteredField(a, d, outside=outside, source=str(path))
+    return _scattered(a, d, ln, path, outside)
 
 
 def read(path, method: str = "linear", outside: str = "error") -> Field:
@@ -479,7 +500,7 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
         return read_bcnc_probe(path, method, outside)
     if ext == ".csv":
         head = next((ln for ln in io.StringIO(read_text(path)) if ln.strip() and not ln.lstrip().startswith("#")), "")
-        names = [c.strip().lower() for c in head.split(",")]
+        names = [c.strip().lower() for c in head.replace(";", ",").replace("\t", ",").split(",")]
         if "dx" in names:
             return read_scattered_csv(path, outside)
         return read_grid_csv(path, method, outside)

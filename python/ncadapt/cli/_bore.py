@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
-from ._common import check_outputs, handle_errors, progress, summary, write_json
+from ._common import FiniteRange, check_outputs, handle_errors, progress, summary, write_json
 
 _CLASS = {"type": str, "show_default": True}
 
@@ -24,22 +24,22 @@ def _um(v: float) -> str:
 
 
 @bore.command("plan")
-@click.option("--diameter", type=click.FloatRange(min=0, min_open=True), required=True, help="Nominal diameter, mm.")
+@click.option("--diameter", type=FiniteRange(min=0, min_open=True), required=True, help="Nominal diameter, mm.")
 @click.option("--final", default="H6", help="Final hole class.", **_CLASS)
 @click.option("--prefinish", default="H9", help="Class reached by pre-finishing.", **_CLASS)
-@click.option("--t0", type=click.FloatRange(min=0, min_open=True), required=True,
+@click.option("--t0", type=FiniteRange(min=0, min_open=True), required=True,
               help="Radial depth of the last pre-finish pass, mm.")
-@click.option("--allowance", type=click.FloatRange(min=0, min_open=True), required=True,
+@click.option("--allowance", type=FiniteRange(min=0, min_open=True), required=True,
               help="Radial stock z left for the corrective passes, mm.")
-@click.option("--delta-a", type=float, help="Radial deviation near face A (tool entry) after pre-finishing, mm.")
-@click.option("--delta-b", type=float, help="Radial deviation near face B after pre-finishing, mm.")
+@click.option("--delta-a", type=FiniteRange(), help="Radial deviation near face A (tool entry) after pre-finishing, mm.")
+@click.option("--delta-b", type=FiniteRange(), help="Radial deviation near face B after pre-finishing, mm.")
 @click.option("--measured", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Probe points of the pre-finished bore, CSV plane,x,y,z (instead of --delta-a/--delta-b).")
 @click.option("--entry", type=click.Choice(["top", "bottom"]), default="top", show_default=True,
               help="Where the tool enters (face A) in the probe file's z.")
-@click.option("--k", type=click.FloatRange(0, 1, min_open=True), default=0.25, show_default=True,
+@click.option("--k", type=FiniteRange(0, 1, min_open=True), default=0.25, show_default=True,
               help="Share of the final tolerance allowed for form error.")
-@click.option("--target", type=float, help="Target diameter, mm (default: the middle of the final class).")
+@click.option("--target", type=FiniteRange(), help="Target diameter, mm (default: the middle of the final class).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the plan as JSON.")
 @handle_errors
 def plan_cmd(diameter, final, prefinish, t0, allowance, delta_a, delta_b, measured, entry, k, target, json_path):
@@ -81,16 +81,18 @@ def plan_cmd(diameter, final, prefinish, t0, allowance, delta_a, delta_b, measur
               help="Probe points after the pass, CSV plane,x,y,z.")
 @click.option("--pass", "pass_done", type=click.IntRange(min=0), default=0, show_default=True,
               help="The pass just measured (0: after pre-finishing).")
-@click.option("--applied", type=float, default=0.0, show_default=True,
+@click.option("--applied", type=FiniteRange(), default=0.0, show_default=True,
               help="The correction δ_K the measured pass was made with, mm.")
 @click.option("--hardened", is_flag=True, help="Hardened material: three planes every time, first pass uncorrected.")
-@click.option("--entry", type=click.Choice(["top", "bottom"]), default="top", show_default=True)
+@click.option("--entry", type=click.Choice(["top", "bottom"]), default="top", show_default=True,
+              help="Where the tool enters (face A) in the probe file's z.")
 @click.option("--controller", type=click.Choice(["linuxcnc", "fanuc", "plain"]), default="plain", show_default=True,
               help="Form of the offset block.")
 @click.option("--tool", type=click.IntRange(min=1), default=1, show_default=True, help="Tool / offset number.")
-@click.option("--tool-radius", type=click.FloatRange(min=0, min_open=True),
+@click.option("--tool-radius", type=FiniteRange(min=0, min_open=True),
               help="The tool's current radius in the LinuxCNC tool table, mm.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controller, tool, tool_radius, json_path):
     """The correction for the next pass and its tool-offset block."""
@@ -119,15 +121,22 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
 
 
 @bore.command("simulate")
-@click.option("--parts", type=click.IntRange(min=1), default=1000, show_default=True)
-@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("--parts", type=click.IntRange(1, 1_000_000), default=1000, show_default=True,
+              help="Number of simulated parts (at most 1,000,000).")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
+              help="Seed of the simulation's random numbers: the same seed gives the same run.")
 @click.option("--material", type=click.Choice(["steel", "titanium", "aluminium", "hardened"]), default="steel",
-              show_default=True)
-@click.option("--diameter", type=click.FloatRange(min=0, min_open=True), default=40.0, show_default=True)
-@click.option("--t0", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True)
-@click.option("--allowance", type=click.FloatRange(min=0, min_open=True), default=0.1, show_default=True)
-@click.option("--k", type=click.FloatRange(0, 1, min_open=True), default=0.25, show_default=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+              show_default=True, help="Material of the simulated parts (sets the cutting behaviour of the model).")
+@click.option("--diameter", type=FiniteRange(min=0, min_open=True), default=40.0, show_default=True,
+              help="Nominal diameter, mm.")
+@click.option("--t0", type=FiniteRange(min=0, min_open=True), default=0.5, show_default=True,
+              help="Radial depth of the last pre-finish pass, mm.")
+@click.option("--allowance", type=FiniteRange(min=0, min_open=True), default=0.1, show_default=True,
+              help="Radial stock z left for the corrective passes, mm.")
+@click.option("--k", type=FiniteRange(0, 1, min_open=True), default=0.25, show_default=True,
+              help="Share of the final tolerance allowed for form error.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def simulate_cmd(parts, seed, material, diameter, t0, allowance, k, json_path):
     """Run the plan and the pass-by-pass loop on seeded virtual parts, against one uncorrected pass."""

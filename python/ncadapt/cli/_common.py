@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
+import math
 import os
 import signal
 import stat
@@ -17,13 +18,10 @@ import click
 from rich.console import Console
 
 from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries
-from ..errors import InputError, NcadaptError, RefusedError
+from ..errors import InputError, NcadaptError, RefusedError, cut
 
 #: Exit codes: success, refused by a safety check (nothing written), bad input or usage, internal error.
 EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
-#: A message cuts an offending token to about this many characters.
-TOKEN_CHARS = 80
-
 err_console = Console(stderr=True, highlight=False)
 
 #: Where summaries go: stdout, or stderr when stdout carries the JSON (``--json -``).
@@ -37,12 +35,6 @@ def echo_err(msg: str) -> None:
 def summary(msg: str = "") -> None:
     """A line of a command's human summary: on stdout (stderr when ``--json -`` writes there)."""
     click.echo(msg, err=_state["summary_to_stderr"])
-
-
-def cut(token, n: int = TOKEN_CHARS) -> str:
-    """``repr`` of an offending token, cut to about ``n`` characters."""
-    r = repr(token)
-    return r if len(r) <= n else r[: n - 5] + "…" + r[-4:]
 
 
 def debugging() -> bool:
@@ -129,12 +121,17 @@ def _detail(d) -> str:
 
 
 class FiniteRange(click.FloatRange):
-    """``click.FloatRange`` that also refuses NaN (which compares false with every bound)."""
+    """``click.FloatRange`` that also refuses NaN (which compares false with every bound) and
+    infinities: every number option of ncadapt is a finite quantity."""
+
+    name = "number"
 
     def convert(self, value, param, ctx):
         v = super().convert(value, param, ctx)
         if v != v:
-            self.fail(f"{value!r} is not a number", param, ctx)
+            self.fail(f"{cut(value)} is not a number", param, ctx)
+        if v in (float("inf"), float("-inf")):
+            self.fail(f"{cut(value)} is not a finite number", param, ctx)
         return v
 
 
@@ -145,7 +142,9 @@ def comma_floats(value: str, n: int, what: str) -> list[float]:
     except ValueError:
         parts = []
     if len(parts) != n:
-        raise click.BadParameter(f"expected {what}, got {value!r}")
+        raise click.BadParameter(f"expected {what}, got {cut(value)}")
+    if not all(math.isfinite(v) for v in parts):
+        raise click.BadParameter(f"expected {what} (finite), got {cut(value)}")
     return parts
 
 

@@ -24,12 +24,12 @@ def _shift(ctx, param, value):
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Corrected program to write.")
 @click.option("--max-segment", type=FiniteRange(*constants.MAX_SEGMENT_RANGE), default=constants.MAX_SEGMENT, show_default=True, help="Longest corrected piece, mm.")
 @click.option("--chord-tol", type=FiniteRange(*constants.CHORD_TOL_RANGE), default=constants.CHORD_TOL, show_default=True, help="Arc chord tolerance, mm.")
-@click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=constants.LIMIT, show_default=True, help="Refuse if any displacement exceeds this, mm.")
+@click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True, help="Refuse if any displacement exceeds this, mm.")
 @click.option("--outside", type=click.Choice(_fields.OUTSIDE), default="error", show_default=True, help="Points outside the field's domain.")
 @click.option("--interp", "method", type=click.Choice(["linear", "cubic"]), default="linear", show_default=True, help="Grid interpolation.")
 @click.option("--rapids", is_flag=True, help="Correct rapid (G0) moves too.")
 @click.option("--keep-unsupported", is_flag=True, help="Copy blocks with unsupported constructs unchanged instead of refusing.")
-@click.option("--clearance", type=float, default=None, help="Report uncorrected rapids ending below this Z inside the field.")
+@click.option("--clearance", type=FiniteRange(), default=None, help="Report uncorrected rapids ending below this Z inside the field.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
 def correct(program, field_path, shift, output, max_segment, chord_tol, limit, outside, method, rapids,

@@ -6,14 +6,15 @@ from pathlib import Path
 
 import click
 
-from ._common import handle_errors, progress, summary
+from ._common import FiniteRange, handle_errors, progress, summary
 
 
 @click.command()
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("demo-out"),
               show_default=True, help="Folder for the demo's inputs and outputs.")
-@click.option("--seed", type=int, default=1, show_default=True, help="Seed of the simulated measurement noise.")
-@click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True)
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True, help="Seed of the simulated measurement noise.")
+@click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True,
+              help="How the systematic error is separated from the noise.")
 @handle_errors(staged=False)  # it reads back the files it writes
 def demo(out_dir, seed, method):
     """Compensate a shipped freeform part from simulated measurements, end to end.

@@ -7,20 +7,20 @@ from pathlib import Path
 import click
 
 from .. import constants
-from ._common import check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
+from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
 
 
 def _moran_options(f):
     opts = [
         click.option("--weights", type=click.Choice(["idw", "knn"]), default="idw", show_default=True,
                      help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours."),
-        click.option("--power", type=click.FloatRange(min=1), default=1.0, show_default=True, help="K of idw weights."),
-        click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=None,
+        click.option("--power", type=FiniteRange(min=1), default=1.0, show_default=True, help="K of idw weights."),
+        click.option("--threshold", type=FiniteRange(min=0, min_open=True), default=None,
                      help="Distance band for idw weights, mm (default: all pairs)."),
         click.option("--neighbors", type=click.IntRange(min=1), default=8, show_default=True, help="N of knn weights."),
-        click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.05,
+        click.option("--alpha", type=FiniteRange(0, 1, min_open=True, max_open=True), default=0.05,
                      show_default=True, help="Significance of the 'systematic' decision."),
-        click.option("--probe-radius", type=click.FloatRange(min=0), default=0.0, show_default=True,
+        click.option("--probe-radius", type=FiniteRange(min=0), default=0.0, show_default=True,
                      help="The measured points are probe-tip centres of this radius, mm."),
         click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."),
         click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."),
@@ -83,18 +83,18 @@ def _extent(ctx, param, value):
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True,
               help="How the systematic part is separated from noise.")
-@click.option("--sigma-c", type=click.FloatRange(min=0, min_open=True), help="Bilateral spatial sigma, mm (default 1.5 x spacing).")
-@click.option("--sigma-s", type=click.FloatRange(min=0, min_open=True), help="Bilateral range sigma, mm (default 3 x noise).")
-@click.option("--p", "p", type=click.FloatRange(0, 1), help="Smoothing-spline parameter (csaps' p).")
+@click.option("--sigma-c", type=FiniteRange(min=0, min_open=True), help="Bilateral spatial sigma, mm (default 1.5 x spacing).")
+@click.option("--sigma-s", type=FiniteRange(min=0, min_open=True), help="Bilateral range sigma, mm (default 3 x noise).")
+@click.option("--p", "p", type=FiniteRange(0, 1), help="Smoothing-spline parameter (csaps' p).")
 @click.option("--auto", is_flag=True, help="Smoothest filter whose random part has no significant Moran's I.")
 @click.option("--program", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="NC program to correct.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Corrected NC program.")
-@click.option("--tool-radius", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--tool-radius", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre).")
 @click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX",
               help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
                    "extrapolated into it (default: the measured area).")
-@click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
+@click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any program displacement exceeds this, mm.")
 @click.option("--surface", "surface_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Compensated surface, .step/.stp or .igs/.iges.")

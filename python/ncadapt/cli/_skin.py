@@ -8,7 +8,8 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
-from ._common import check_outputs, handle_errors, summary, write_json
+from .. import constants
+from ._common import FiniteRange, check_outputs, handle_errors, summary, write_json
 
 
 @click.group()
@@ -19,12 +20,14 @@ def skin() -> None:
 @skin.command("simulate")
 @click.option("--method", type=click.Choice(["none", "mirror", "secant", "kalman"]), default="kalman",
               show_default=True, help="Compensator (kalman: ours).")
-@click.option("--noise", type=click.FloatRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
-@click.option("--latency-ms", type=click.FloatRange(min=0), default=45.0, show_default=True,
+@click.option("--noise", type=FiniteRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
+@click.option("--latency-ms", type=FiniteRange(min=0), default=45.0, show_default=True,
               help="Dead time from reading to axis motion, ms.")
-@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
+              help="Seed of the simulation's random numbers: the same seed gives the same run.")
 @click.option("--protocol", is_flag=True, help="The paper's noise-free protocol at the checkpoints instead.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report with the error along the toolpath.")
 @handle_errors
@@ -97,17 +100,19 @@ def _report(path, run) -> None:
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--thickness", "map_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), required=True,
               help="Thickness map: CSV with columns x,y,thickness (mm), on a grid or scattered.")
-@click.option("--target", type=float, required=True, help="Target wall thickness T, mm.")
-@click.option("--allowance", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--target", type=FiniteRange(), required=True, help="Target wall thickness T, mm.")
+@click.option("--allowance", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Material the finishing pass was planned to remove (0: the map is after finishing), mm.")
 @click.option("--into", type=click.Choice(["-z", "+z"]), default="-z", show_default=True,
               help="Direction in which the tool cuts deeper.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True)
-@click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Corrected program to write.")
+@click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any correction exceeds this, mm.")
 @click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
               help="Program points outside the map.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def correct(program, map_path, target, allowance, into, output, limit, outside, json_path):
     """Correct a finishing PROGRAM from a thickness MAP measured after the previous pass: the
@@ -155,11 +160,11 @@ def _quiet_asyncua() -> None:
 @skin.command("loop")
 @click.option("--method", type=click.Choice(["mirror", "secant", "kalman"]), default="kalman", show_default=True,
               help="Compensator (kalman: ours).")
-@click.option("--target", type=click.FloatRange(min=0, min_open=True), required=True,
+@click.option("--target", type=FiniteRange(min=0, min_open=True), required=True,
               help="Target wall thickness T_g, mm.")
-@click.option("--depth", type=click.FloatRange(min=0, min_open=True), required=True,
+@click.option("--depth", type=FiniteRange(min=0, min_open=True), required=True,
               help="Target depth a_g = T_s − T_g of the finishing pass, mm.")
-@click.option("--noise", type=click.FloatRange(min=0, min_open=True), default=0.005, show_default=True,
+@click.option("--noise", type=FiniteRange(min=0, min_open=True), default=0.005, show_default=True,
               help="The gauge's noise σ, mm (kalman and secant).")
 @click.option("--replay", "replay_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Recorded gauge readings: CSV with a column thickness (empty or NaN: rejected).")
@@ -170,7 +175,8 @@ def _quiet_asyncua() -> None:
               help="The controller's OPC UA server (namespace urn:ncadapt:skin, object Controller).")
 @click.option("--pockets", type=click.IntRange(min=1), default=1, show_default=True,
               help="With --opcua: pockets to finish before stopping.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, json_path):
     """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
@@ -233,11 +239,13 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
 
 @skin.command("serve")
 @click.option("--endpoint", default=_ENDPOINT, show_default=True, help="Where the virtual controller listens.")
-@click.option("--noise", type=click.FloatRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
-@click.option("--latency-ms", type=click.FloatRange(min=0), default=45.0, show_default=True,
+@click.option("--noise", type=FiniteRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
+@click.option("--latency-ms", type=FiniteRange(min=0), default=45.0, show_default=True,
               help="Dead time from reading to axis motion, ms.")
-@click.option("--seed", type=int, default=1, show_default=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
+              help="Seed of the simulation's random numbers: the same seed gives the same run.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def serve(endpoint, noise, latency_ms, seed, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1

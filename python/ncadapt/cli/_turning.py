@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import check_outputs, handle_errors, summary, write_json
+from ._common import FiniteRange, check_outputs, handle_errors, summary, write_json
 
 
 @click.group()
@@ -22,9 +22,10 @@ def turning() -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Lathe program to write.")
 @click.option("--radius-mode", is_flag=True, help="X words as radii (G8) instead of diameters (G7).")
 @click.option("--css", is_flag=True, help="Constant surface speed (G96) instead of per-block S words (G97).")
-@click.option("--wear-weight", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--wear-weight", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Weight of tool wear (Taylor's law) in the cost, s per tool life.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report: the feed/speed/position family and the diameter profiles.")
 @handle_errors
@@ -55,12 +56,14 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
 @turning.command("simulate")
 @click.argument("config", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--rho-sigma", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--rho-sigma", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Relative scatter of the cutting pressure ρ.")
-@click.option("--stiffness-sigma", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--stiffness-sigma", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Relative scatter of the stiffness.")
-@click.option("--seed", type=int, default=1, show_default=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
+              help="Seed of the simulation's random numbers: the same seed gives the same run.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
     """Turn the shaft of CONFIG with PROGRAM on the virtual lathe: the diameter along the shaft."""

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import click
 
-from ._common import check_outputs, echo_err, handle_errors, progress, summary, write_json
+from .. import constants
+from ._common import FiniteRange, check_outputs, echo_err, handle_errors, progress, summary, write_json
 
-_POS = dict(type=click.FloatRange(min=0, min_open=True), required=True)
+_POS = dict(type=FiniteRange(min=0, min_open=True), required=True)
 
 
 @click.group()
@@ -24,7 +25,8 @@ def waffle() -> None:
 @click.option("--diameter", help="Shell diameter D, mm.", **_POS)
 @click.option("--segment", type=click.IntRange(min=2), default=10, show_default=True,
               help="Points per least-squares segment (restarting where Z changes).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def tilt(log, tool_radius, diameter, segment, json_path):
     """The web-thickness error from the spindle's tilt to the back wall: E = R·(360/(πD))·k per
@@ -48,25 +50,30 @@ def tilt(log, tool_radius, diameter, segment, json_path):
               help="Tracking pre-measurement: CSV with columns B, Z, V.")
 @click.option("--tool-radius", help="Cutter radius R, mm.", **_POS)
 @click.option("--diameter", help="Shell diameter D, mm.", **_POS)
-@click.option("--segment", type=click.IntRange(min=2), default=10, show_default=True)
+@click.option("--segment", type=click.IntRange(min=2), default=10, show_default=True,
+              help="Points per least-squares segment of the tracking log (restarting where Z changes).")
 @click.option("--thickness", "map_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Thickness map of a semi-finished cell: CSV with columns B, Z, thickness (self-tuning K_fb).")
-@click.option("--target", type=float, help="Target web thickness T_ref, mm (with --thickness).")
-@click.option("--allowance", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--target", type=FiniteRange(), help="Target web thickness T_ref, mm (with --thickness).")
+@click.option("--allowance", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Semi-finishing allowance b, mm (with --thickness).")
 @click.option("--depth-axis", type=click.Choice(["X", "Y", "Z"], case_sensitive=False), default="Y", show_default=True,
               help="The axis along the spindle.")
 @click.option("--axial-axis", type=click.Choice(["X", "Y", "Z", "U", "V", "W"], case_sensitive=False), default="Z",
               show_default=True, help="The axis along the shell.")
-@click.option("--rotary-axis", type=click.Choice(["A", "B", "C"], case_sensitive=False), default="B", show_default=True)
-@click.option("--into", type=click.Choice(["+", "-"]), default="+", show_default=True,
-              help="Sign of the depth axis that cuts deeper (thinner web).")
-@click.option("--outside", type=click.Choice(["error", "clamp"]), default="error", show_default=True,
+@click.option("--rotary-axis", type=click.Choice(["A", "B", "C"], case_sensitive=False), default="B", show_default=True,
+              help="The rotary axis turning the shell (degrees).")
+@click.option("--into", type=click.Choice(["+x", "-x", "+y", "-y", "+z", "-z"], case_sensitive=False), default=None,
+              help="Direction of the depth axis in which the tool cuts deeper (thinner web), e.g. +y; "
+                   "default + along --depth-axis.")
+@click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
               help="Program points outside the measured B × Z area.")
-@click.option("--limit", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
+@click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any correction exceeds this, mm.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Corrected program to write.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def correct(program, log, tool_radius, diameter, segment, map_path, target, allowance, depth_axis, axial_axis,
             rotary_axis, into, outside, limit, output, json_path):
@@ -85,7 +92,11 @@ def correct(program, log, tool_radius, diameter, segment, map_path, target, allo
     check_outputs({"input program": program, "tracking log": log, "thickness map": map_path},
                   {"-o": output, "--json": json_path})
     axes = dict(diameter=diameter, depth_axis=depth_axis, axial_axis=axial_axis, rotary_axis=rotary_axis, outside=outside)
-    sign = 1.0 if into == "+" else -1.0
+    into = (into or "+" + depth_axis).lower()
+    if into[1] != depth_axis.lower():
+        raise click.BadParameter(f"{into} is not along the depth axis {depth_axis.upper()}; give "
+                                 f"+{depth_axis.lower()} or -{depth_axis.lower()}", param_hint="'--into'")
+    sign = 1.0 if into[0] == "+" else -1.0
     with progress() as say:
         say(f"reading {log}")
         b, z, v = pw.read_tracking(log)
@@ -124,9 +135,10 @@ def correct(program, log, tool_radius, diameter, segment, map_path, target, allo
 @waffle.command("backlash")
 @click.option("--signals", "path", type=click.Path(exists=True, dir_okay=False, path_type=Path), required=True,
               help="CSV with columns V_ideal (one-way pre-measurement) and V_measured (while machining), mm.")
-@click.option("--dt", type=click.FloatRange(min=0, min_open=True), default=1.0, show_default=True,
+@click.option("--dt", type=FiniteRange(min=0, min_open=True), default=1.0, show_default=True,
               help="Sampling period, s (τ comes out in the same unit).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @handle_errors
 def backlash(path, dt, json_path):
     """Estimate the copying system's gap g (and drive τ) by least squares from a pair of signals."""
@@ -144,9 +156,11 @@ def backlash(path, dt, json_path):
 
 @waffle.command("simulate")
 @click.option("--strategy", type=click.Choice(["none", "disturbance", "self-tuning", "combined"]), default="combined",
-              show_default=True)
-@click.option("--seed", type=int, default=1, show_default=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+              show_default=True, help="Correction: none, the tilt disturbance K_dist, self-tuning K_fb cell to cell, or both.")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
+              help="Seed of the simulation's random numbers: the same seed gives the same run.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the figures as JSON (- for standard output).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report: thickness maps of the shell before and after, every strategy compared.")
 @handle_errors

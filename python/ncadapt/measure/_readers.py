@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import re
 from pathlib import Path
 
 import numpy as np
 
-from .._io import read_text
+from .._io import csv_reader, read_text
 from ..errors import InputError
 from ._core import Measurements, from_arrays
 
@@ -32,8 +30,8 @@ def _number(s: str, src: str, line: int, what: str) -> float:
 
 def read_csv(path, probe_radius: float = 0.0) -> Measurements:
     """CSV with a header naming ``x,y,z,i,j,k`` and ``mx,my,mz`` or ``dev`` (optional ``id``)."""
-    text, src = _text(path)
-    rows = csv.reader(io.StringIO(text))
+    src = str(Path(path))
+    rows = csv_reader(path)
     try:
         header = [h.strip().lower() for h in next(rows)]
     except StopIteration:

@@ -164,7 +164,9 @@ class DepthField:
     interpolates B along split moves); the displacement is put on the depth axis. Points are
     interpolated linearly over a triangulation of (s, Z), s = B·πD/360 the arc length (so that
     both coordinates are millimetres); outside the measured area the nearest value is held
-    (``outside="clamp"``) or the program is refused (``"error"``).
+    (``outside="clamp"``), extended linearly (``"extrapolate"``: from the end segments of a single
+    pass, the edge cells of a grid, a thin-plate spline through scattered points) or the program is
+    refused (``"error"``).
     """
 
     uses_axes = True
@@ -177,8 +179,8 @@ class DepthField:
         for name, a, allowed in (("depth", depth_axis, "XYZ"), ("axial", axial_axis, "XYZUVW"), ("rotary", rotary_axis, "ABC")):
             if a.upper() not in allowed:
                 raise ValueError(f"the {name} axis must be one of {', '.join(allowed)}, got {a!r}")
-        if outside not in ("error", "clamp"):
-            raise ValueError(f'outside must be "error" or "clamp", got {outside!r}')
+        if outside not in ("error", "clamp", "extrapolate"):
+            raise ValueError(f'outside must be "error", "clamp" or "extrapolate", got {outside!r}')
         self.depth = "XYZ".index(depth_axis.upper())
         self.axial = axes.index(axial_axis.upper())
         self.rotary = axes.index(rotary_axis.upper())
@@ -204,9 +206,11 @@ class DepthField:
             grid = np.empty((len(xs), len(zs)))
             grid[np.searchsorted(xs, pts[:, 0]), np.searchsorted(zs, pts[:, 1])] = vals
             self._grid = RegularGridInterpolator((xs, zs), grid, bounds_error=False, fill_value=np.nan)
+            self._grid_out = RegularGridInterpolator((xs, zs), grid, bounds_error=False, fill_value=None)
         else:
             self._lin = LinearNDInterpolator(pts, vals)
         self._near = NearestNDInterpolator(pts, vals)
+        self._pts, self._vals = pts, vals
         self.bounds = (float(self.b.min()), float(self.b.max()), float(self.z.min()), float(self.z.max()))
 
     def values(self, b, z) -> np.ndarray:
@@ -225,8 +229,21 @@ class DepthField:
 
                 raise OutsideError(np.flatnonzero(bad), f"the measured area B {self.bounds[0]:g}..{self.bounds[1]:g} deg, "
                                                         f"Z {self.bounds[2]:g}..{self.bounds[3]:g} mm")
-            out[bad] = self._near(q[bad])
+            out[bad] = self._near(q[bad]) if self.outside == "clamp" else self._extrapolate(q[bad])
         return out
+
+    def _extrapolate(self, q: np.ndarray) -> np.ndarray:
+        if self._1d is not None:
+            j, xs, vs = self._1d
+            t = q[:, j]
+            lo = vs[0] + (t - xs[0]) * (vs[1] - vs[0]) / (xs[1] - xs[0])
+            hi = vs[-1] + (t - xs[-1]) * (vs[-1] - vs[-2]) / (xs[-1] - xs[-2])
+            return np.where(t < xs[0], lo, hi)
+        if self._grid is not None:
+            return self._grid_out(q)
+        from scipy.interpolate import RBFInterpolator
+
+        return RBFInterpolator(self._pts, self._vals, kernel="thin_plate_spline")(q)
 
     def __call__(self, points, axes=None) -> np.ndarray:
         points = np.asarray(points, float)
