@@ -173,3 +173,29 @@ def test_plan_cli_json(tmp_path):
     bad.write_text("[shaft]\ndiameter = 20\n")
     r = CliRunner().invoke(main, ["turning", "plan", str(bad)])
     assert r.exit_code == 2 and "bad.toml" in r.output and "missing" in r.output
+
+
+@pytest.mark.parametrize("old,new,line,says", [
+    ("step = 1.0 ", "step = nan ", 39, "[plan] step must be finite"),
+    ("step = 1.0 ", "step = 1e-9 ", 39, "at most 100,000 stations"),
+    ("speeds = 21 ", "speeds = 100000000000000000000000 ", 40, "[plan] speeds must be within 2..1000"),
+    ("speeds = 21 ", 'speeds = "x" ', 40, "[plan] speeds must be a whole number"),
+    ("diameter = 20.0 ", 'diameter = "twenty" ', 8, "[shaft] diameter must be a number"),
+    ("depth = 2.0 ", "depth = [1, 2] ", 13, "[cut] depth must be a number"),
+    ("depth = 2.0 ", "depth = 12.0 ", 13, "[cut] depth must be <= 10"),
+    ("feed_change = 0.05 ", "feed_change = -0.05 ", 0, "[bounds] feed_change must be > 0"),
+])
+def test_a_bad_configuration_value_is_located(tmp_path, examples, old, new, line, says):
+    from ncadapt.errors import InputError
+
+    text = (examples / "turning" / "shaft_d20_l430.toml").read_text()
+    assert old in text
+    p = tmp_path / "c.toml"
+    p.write_text(text.replace(old, new, 1))
+    with pytest.raises(InputError) as e:
+        tu.load(p)
+    assert says in e.value.message
+    if line:
+        assert e.value.line == line
+    else:
+        assert e.value.line > 0

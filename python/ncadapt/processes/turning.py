@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import read_text
-from ..errors import InputError
+from ..errors import InputError, cut
 
 KGF = 9.80665  # N
 __all__ = ["Config", "load", "Model", "Plan", "plan", "program"]
@@ -90,47 +90,109 @@ class Config:
     source: str = ""
 
 
-def load(path) -> Config:
-    """Read a turning configuration (TOML, the paper's units) and convert it to SI."""
-    path = Path(path)
-    try:
-        d = tomllib.loads(read_text(path))
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"not valid TOML: {e}", str(path)) from None
+#: Bounds of the planning work: stations along the shaft, spindle speeds of the family, and both.
+STATIONS_MAX = 100_000
+SPEEDS_MAX = 1_000
+WORK_MAX = 5_000_000  # stations x spindle speeds of the planning family
 
-    def get(section, key, n=None):
-        try:
-            v = d[section][key]
-        except KeyError:
-            raise InputError(f"missing [{section}] {key}", str(path)) from None
-        if n is not None and (not isinstance(v, list) or len(v) != n):
-            raise InputError(f"[{section}] {key} must be a list of {n} numbers", str(path))
+
+def load(path) -> Config:
+    """Read a turning configuration (TOML, the paper's units) and convert it to SI. A missing key,
+    a value of the wrong type, a number that is not finite or out of its bounds is an
+    :class:`InputError` at the key's line."""
+    path = Path(path)
+    text = read_text(path)
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"not valid TOML: {e}", str(path), getattr(e, "lineno", 0) or 0,
+                         getattr(e, "colno", 0) or 0) from None
+    lines = text.splitlines()
+
+    def where(section, key) -> int:
+        """The line of ``key = …`` in ``[section]`` (0 when not found)."""
+        inside = False
+        for n, ln in enumerate(lines, 1):
+            t = ln.strip()
+            if t.startswith("["):
+                inside = t.split("]")[0].strip("[ ") == section
+            elif inside and t.split("=")[0].strip() == key:
+                return n
+        return 0
+
+    def fail(section, key, msg):
+        raise InputError(f"[{section}] {key} {msg}", str(path), where(section, key), 1)
+
+    def raw(section, key):
+        sec = d.get(section)
+        if not isinstance(sec, dict) or key not in sec:
+            raise InputError(f"missing [{section}] {key}", str(path))
+        return sec[key]
+
+    def number(section, key, lo=None, hi=None, v=None, positive=False):
+        v = raw(section, key) if v is None else v
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            fail(section, key, f"must be a number, got {cut(v)}")
+        v = float(v)
+        if not math.isfinite(v):
+            fail(section, key, f"must be finite, got {v}")
+        if positive and not v > 0:
+            fail(section, key, f"must be > 0, got {v:g}")
+        if lo is not None and v < lo:
+            fail(section, key, f"must be >= {lo:g}, got {v:g}")
+        if hi is not None and v > hi:
+            fail(section, key, f"must be <= {hi:g}, got {v:g}")
+        return v
+
+    def numbers(section, key, n=None, **bounds):
+        v = raw(section, key)
+        if not isinstance(v, list) or (n is not None and len(v) != n) or (n is None and len(v) < 2):
+            fail(section, key, f"must be a list of {n if n is not None else 'at least 2'} numbers")
+        return [number(section, key, v=x, **bounds) for x in v]
+
+    def integer(section, key, lo, hi):
+        v = raw(section, key)
+        if isinstance(v, bool) or not isinstance(v, int):
+            fail(section, key, f"must be a whole number, got {cut(v)}")
+        if not lo <= v <= hi:
+            fail(section, key, f"must be within {lo}..{hi}, got {cut(v)}")
         return v
 
     mm = 1e-3
-    rs = np.asarray(get("cut", "rho_speed"), float)
-    rho = np.asarray(get("cut", "rho"), float)
-    if len(rs) != len(rho) or len(rs) < 2 or np.any(np.diff(rs) <= 0):
-        raise InputError("[cut] rho_speed must increase and match rho in length", str(path))
+    rs = np.asarray(numbers("cut", "rho_speed", positive=True))
+    rho = np.asarray(numbers("cut", "rho", positive=True))
+    if len(rs) != len(rho) or np.any(np.diff(rs) <= 0):
+        fail("cut", "rho_speed", "must increase and match rho in length")
+    diameter = number("shaft", "diameter", positive=True, hi=1e4)
+    length = number("shaft", "length", positive=True, hi=1e5)
+    start, end = number("plan", "start", lo=0), number("plan", "end", lo=0)
+    step = number("plan", "step", positive=True)
+    speeds = integer("plan", "speeds", 2, SPEEDS_MAX)
+    if not 0 <= start < end <= length:
+        fail("plan", "end", "needs 0 <= start < end <= shaft length")
+    stations = (end - start) / step
+    if stations > STATIONS_MAX or stations * speeds > WORK_MAX:
+        fail("plan", "step", f"gives {stations:,.0f} stations x {speeds} speeds; at most {STATIONS_MAX:,} "
+                             f"stations and {WORK_MAX:,} stations x speeds")
     cfg = Config(
-        diameter=float(get("shaft", "diameter")) * mm, length=float(get("shaft", "length")) * mm,
-        youngs=float(get("shaft", "youngs_modulus")) * 1e6, depth=float(get("cut", "depth")) * mm,
-        phi=math.radians(float(get("cut", "plan_angle"))), phi1=math.radians(float(get("cut", "trailing_angle"))),
-        lam=np.asarray(get("cut", "lambda", 3), float), rho_speed=rs, rho=rho * KGF * 1e6,
-        chuck=_sym(get("stiffness", "chuck", 6), KGF / mm), tail=_sym(get("stiffness", "tailstock", 6), KGF / mm),
-        tool=_sym(get("stiffness", "tool", 6), KGF / mm),
-        feed_bounds=tuple(float(x) * mm for x in get("bounds", "feed", 2)),
-        rpm_bounds=tuple(float(x) for x in get("bounds", "spindle_rpm", 2)),
-        feed_change=float(get("bounds", "feed_change")) * mm, rpm_change=float(get("bounds", "rpm_change")),
-        start=float(get("plan", "start")) * mm, end=float(get("plan", "end")) * mm, step=float(get("plan", "step")) * mm,
-        speeds=int(get("plan", "speeds")), source=str(path))
-    if not 0 <= cfg.start < cfg.end <= cfg.length:
-        raise InputError("[plan] needs 0 <= start < end <= shaft length", str(path))
+        diameter=diameter * mm, length=length * mm,
+        youngs=number("shaft", "youngs_modulus", positive=True, hi=1e7) * 1e6,
+        depth=number("cut", "depth", positive=True, hi=diameter / 2) * mm,
+        phi=math.radians(number("cut", "plan_angle", positive=True, hi=179)),
+        phi1=math.radians(number("cut", "trailing_angle", positive=True, hi=179)),
+        lam=np.asarray(numbers("cut", "lambda", 3), float), rho_speed=rs, rho=rho * KGF * 1e6,
+        chuck=_sym(numbers("stiffness", "chuck", 6), KGF / mm), tail=_sym(numbers("stiffness", "tailstock", 6), KGF / mm),
+        tool=_sym(numbers("stiffness", "tool", 6), KGF / mm),
+        feed_bounds=tuple(x * mm for x in numbers("bounds", "feed", 2)),
+        rpm_bounds=tuple(numbers("bounds", "spindle_rpm", 2)),
+        feed_change=number("bounds", "feed_change", positive=True) * mm,
+        rpm_change=number("bounds", "rpm_change", positive=True),
+        start=start * mm, end=end * mm, step=step * mm, speeds=speeds, source=str(path))
     if not 0 < cfg.feed_bounds[0] < cfg.feed_bounds[1] or not 0 < cfg.rpm_bounds[0] <= cfg.rpm_bounds[1]:
-        raise InputError("[bounds] feed and spindle_rpm must be increasing positive pairs", str(path))
-    for name in ("chuck", "tail", "tool"):
+        fail("bounds", "feed", "and spindle_rpm must be increasing positive pairs")
+    for name, key in (("chuck", "chuck"), ("tail", "tailstock"), ("tool", "tool")):
         if np.any(np.linalg.eigvalsh(getattr(cfg, name)) <= 0):
-            raise InputError(f"[stiffness] {name} is not positive definite", str(path))
+            fail("stiffness", key, "is not positive definite")
     return cfg
 
 
