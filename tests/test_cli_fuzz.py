@@ -16,7 +16,7 @@ command must keep its contract:
 
 Budget: ``NCADAPT_CLI_FUZZ_EXAMPLES`` examples per target (default 100; a few slow targets get a
 fixed share of it, see ``scale``). The runs are derandomized, so the default run is reproducible.
-``NCADAPT_CLI_FUZZ_TIMEOUT`` (seconds, default 30) fails a single call that hangs.
+``NCADAPT_CLI_FUZZ_TIMEOUT`` (seconds, default 10) fails a single call that hangs.
 ``NCADAPT_CLI_FUZZ_COLLECT=FILE`` is a tool for triage: failures are appended to FILE as JSON
 lines instead of failing the test, so that one run lists every distinct failure.
 
@@ -38,6 +38,8 @@ import shutil
 import signal
 import stat
 import tempfile
+import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,7 +52,7 @@ from ncadapt.cli import main
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 BUDGET = int(os.environ.get("NCADAPT_CLI_FUZZ_EXAMPLES", "100"))
-TIMEOUT = float(os.environ.get("NCADAPT_CLI_FUZZ_TIMEOUT", "30"))
+TIMEOUT = float(os.environ.get("NCADAPT_CLI_FUZZ_TIMEOUT", "10"))
 COLLECT = os.environ.get("NCADAPT_CLI_FUZZ_COLLECT")
 TMP_PREFIX = ".ncadapt-tmp-"
 TRACEBACK = "Traceback (most recent call last)"
@@ -457,13 +459,17 @@ def run_case(target: Target, args: list[str], files: dict[str, bytes], preexisti
                 (folder / name).write_bytes(PREVIOUS)
         before = snapshot(folder)
         problems = []
-        with contextlib.chdir(folder):
+        t0 = time.monotonic()
+        # warnings as the installed command shows them (pytest's configuration makes them errors)
+        with contextlib.chdir(folder), warnings.catch_warnings():
+            warnings.simplefilter("default")
             try:
                 with time_limit(TIMEOUT):
                     r = CliRunner().invoke(main, args)
             except CallTimeout as e:
                 problems.append(f"hang: {e}")
                 r = None
+        elapsed = time.monotonic() - t0
         if r is not None:
             out = r.stdout + r.stderr
             after = snapshot(folder)
@@ -484,6 +490,14 @@ def run_case(target: Target, args: list[str], files: dict[str, bytes], preexisti
                                  if n not in files and not n.startswith(TMP_PREFIX) and before.get(n) != after.get(n))
                 if touched:
                     problems.append(f"exit {r.exit_code} but outputs created or changed: {touched}")
+        if COLLECT and r is not None and not problems:  # for triage: what the contract does not cover
+            notes = [f"slow: {elapsed:.1f} s"] if elapsed > 1.0 else []
+            if "Warning: " in r.stderr:
+                notes.append("warning printed")
+            if r.exit_code == 0 and re.search(r"\bnan\b|\binf\b", r.stdout):
+                notes.append("nan or inf in the summary")
+            if notes:
+                _collect(target, args, files, preexisting, case, ["note: " + n for n in notes], r)
         if problems:
             report = (f"[{target.id}] ncadapt {' '.join(args)}\n  {case}\n  problems: {'; '.join(problems)}\n"
                       + (f"  exit {r.exit_code}; output:\n{_tail(out)}" if r is not None else ""))

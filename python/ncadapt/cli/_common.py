@@ -55,6 +55,18 @@ def internal_error(e: BaseException, what: str) -> None:
     sys.exit(EXIT_INTERNAL)
 
 
+@contextlib.contextmanager
+def about(path):
+    """Problems a computation finds in the data of input ``path`` (a ``ValueError`` of a process
+    function: too few rows, a constant column) are errors of that input."""
+    try:
+        yield
+    except InputError:
+        raise
+    except ValueError as e:
+        raise InputError(str(e), str(path)) from None
+
+
 def _on_signal(signum, frame):  # noqa: ARG001 - a signal handler's signature
     # unwind (the open outputs are removed by all_or_nothing), then exit as the signal asks
     remove_temporaries()
@@ -79,10 +91,11 @@ def handle_errors(f=None, *, staged: bool = True):
             with all_or_nothing() if staged else contextlib.nullcontext():
                 return f(*args, **kwargs)
         except InputError as e:
-            where = e.path or "<input>"
-            if e.line:
-                where += f":{e.line}:{e.col or 1}"
-            echo_err(f"{where}: error: {e.message}")
+            if e.path:
+                where = e.path + (f":{e.line}:{e.col or 1}" if e.line else "")
+                echo_err(f"{where}: error: {e.message}")
+            else:  # a value given on the command line
+                echo_err(f"error: {e.message}")
             sys.exit(EXIT_BAD_INPUT)
         except RefusedError as e:
             echo_err(f"error: {e.message}")

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from .. import constants
-from ._common import FiniteRange, check_outputs, echo_err, handle_errors, progress, summary, write_json
+from ._common import FiniteRange, about, check_outputs, echo_err, handle_errors, progress, summary, write_json
 
 _POS = dict(type=FiniteRange(min=0, min_open=True), required=True)
 
@@ -35,7 +35,8 @@ def tilt(log, tool_radius, diameter, segment, json_path):
 
     check_outputs({"tracking log": log}, {"--json": json_path})
     b, z, v = pw.read_tracking(log)
-    t = pw.tilt(b, z, v, tool_radius=tool_radius, diameter=diameter, segment=segment)
+    with about(log):
+        t = pw.tilt(b, z, v, tool_radius=tool_radius, diameter=diameter, segment=segment)
     d = t.as_dict()
     summary(f"{log}: {len(b)} rows, {d['segments']} segments of {segment}; |E| max {d['max_abs_error'] * 1000:.2f} µm, "
                f"RMS {d['rms_error'] * 1000:.2f} µm")
@@ -100,14 +101,16 @@ def correct(program, log, tool_radius, diameter, segment, map_path, target, allo
     with progress() as say:
         say(f"reading {log}")
         b, z, v = pw.read_tracking(log)
-        t = pw.tilt(b, z, v, tool_radius=tool_radius, diameter=diameter, segment=segment)
-        parts = [pw.DepthField(b, z, sign * t.correction, **axes)]
+        with about(log):
+            t = pw.tilt(b, z, v, tool_radius=tool_radius, diameter=diameter, segment=segment)
+            parts = [pw.DepthField(b, z, sign * t.correction, **axes)]
         k_fb = None
         if map_path is not None:
             say(f"reading {map_path}")
             bt, zt, th, _ = pw.read_thickness(map_path)
             k_fb = pw.feedback_correction(th, target, allowance)
-            parts.append(pw.DepthField(bt, zt, sign * k_fb, **axes))
+            with about(map_path):
+                parts.append(pw.DepthField(bt, zt, sign * k_fb, **axes))
         field = pw.Sum(parts)
         say(f"reading {program}")
         prog = nc.read(program)
@@ -147,7 +150,8 @@ def backlash(path, dt, json_path):
 
     check_outputs({"signals": path}, {"--json": json_path})
     c, _ = fields.read_columns(path, ("v_ideal", "v_measured"))
-    r = pw.estimate_backlash(c["v_ideal"], c["v_measured"], dt)
+    with about(path):
+        r = pw.estimate_backlash(c["v_ideal"], c["v_measured"], dt)
     summary(f"gap g = {r.gap * 1000:.2f} µm, τ = {r.tau:.4g} s, offset {r.offset * 1000:+.2f} µm; "
                f"residual RMS {r.residual_rms * 1000:.2f} µm; web error at reversals up to {r.web_error.__abs__().max() * 1000:.1f} µm")
     if json_path:

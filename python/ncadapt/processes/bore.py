@@ -265,6 +265,10 @@ def predict(delta_a: float, delta_b: float, t: float, t0: float, passes: int) ->
     return a[1:], b[1:]
 
 
+#: The most corrective passes a plan may have (each is a finishing pass with probing).
+MAX_PASSES = 100
+
+
 def plan(diameter: float, final: str = "H6", prefinish: str = "H9", t0: float = 0.1, allowance: float = 0.1,
          delta_a: float = 0.0, delta_b: float = 0.0, *, k: float = 0.25, target_diameter: float | None = None) -> Plan:
     """The corrective-pass plan (all lengths mm, deviations and depths radial).
@@ -290,6 +294,11 @@ def plan(diameter: float, final: str = "H6", prefinish: str = "H9", t0: float = 
                          f"({it_p * 1000:g} µm)")
     target = diameter + (lo_f + hi_f) / 2 if target_diameter is None else float(target_diameter)
     t_max = t0 * k * it_f / it_p
+    if allowance / t_max > MAX_PASSES:
+        raise InputError(f"an allowance of {allowance:g} mm needs {allowance / t_max:.3g} corrective passes of at most "
+                         f"{t_max * 1000:.3g} µm; at most {MAX_PASSES} are planned: pre-finish closer to size")
+    if allowance >= diameter / 2:
+        raise InputError(f"the allowance {allowance:g} mm (radial) is not smaller than the radius {diameter / 2:g} mm")
     passes = max(1, math.ceil(allowance / t_max - 1e-9))
     t = allowance / passes
     pa, pb = predict(delta_a, delta_b, t, t0, passes)
