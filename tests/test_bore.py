@@ -143,6 +143,15 @@ def test_cli_plan_next_simulate(tmp_path):
     assert res.exit_code == 0, res.output
     n = json.loads((tmp_path / "next.json").read_text())
     assert n["correction"] == pytest.approx(0.030, abs=1e-6) and n["block"] == "G10 L1 P1 R5.9700"
+    # the plan saved by an editor that writes a byte-order mark reads the same; a broken one is located
+    bom = tmp_path / "plan_bom.json"
+    bom.write_bytes(b"\xef\xbb\xbf" + (tmp_path / "plan.json").read_bytes())
+    res = run(main, ["bore", "next", "--plan", str(bom), "--measured", str(probe), "--pass", "0",
+                     "--controller", "linuxcnc", "--tool-radius", "6"])
+    assert res.exit_code == 0 and "G10 L1 P1 R5.9700" in res.output, res.output
+    bom.write_text('{\n  "diameter": 40,\n  oops\n}\n')
+    res = run(main, ["bore", "next", "--plan", str(bom), "--measured", str(probe), "--pass", "0"])
+    assert res.exit_code == 2 and f"{bom}:3:3: error: not a plan (JSON)" in res.output, res.output
     res = run(main, ["bore", "simulate", "--parts", "50", "--seed", "3", "--json", str(tmp_path / "sim.json")])
     assert res.exit_code == 0, res.output
     s = json.loads((tmp_path / "sim.json").read_text())

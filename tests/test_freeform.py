@@ -84,6 +84,11 @@ def test_dmis_with_continuations(tmp_path):
     with pytest.raises(InputError, match="no actual FA") as e:
         measure.read(p)
     assert e.value.line == 10
+    # a header longer than 4 KB before the first point, with a byte-order mark
+    header = "".join(f"$$ report line {k}: operator notes and machine set-up\n" for k in range(200))
+    p.write_text("\ufeff" + header + "\n".join(lines) + "\nENDFIL\n")
+    assert len(header) > 4096
+    np.testing.assert_allclose(measure.read(p).deviation, DEV, atol=1e-12)
 
 
 def test_qif_results(tmp_path):
@@ -323,3 +328,11 @@ def test_demo_report_renders_in_chromium(demo_out, tmp_path):
     red = (rgb[..., 0] > 0.6) & (rgb[..., 2] < 0.35)
     blue = (rgb[..., 2] > 0.5) & (rgb[..., 0] < 0.3)
     assert red.sum() > 500 and blue.sum() > 200
+
+
+def test_a_repeated_point_names_both_lines(tmp_path):
+    rows = [",".join(map(str, (*NOM[k], *NRM[k], DEV[k]))) for k in range(4)]
+    rows.append(rows[1])
+    with pytest.raises(InputError) as e:
+        measure.read(_csv(tmp_path, rows, "x,y,z,i,j,k,dev"))
+    assert e.value.line == 6 and "repeats the point at line 3" in e.value.message and e.value.path

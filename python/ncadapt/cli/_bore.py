@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
+from .._io import read_text
 from ._common import FiniteRange, check_outputs, handle_errors, progress, summary, write_json
 
 _CLASS = {"type": str, "show_default": True}
@@ -100,9 +101,9 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
 
     check_outputs({"plan": plan_path, "probe file": measured}, {"--json": json_path})
     try:
-        data = json.loads(plan_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise InputError(f"cannot read the plan: {err}", str(plan_path)) from None
+        data = json.loads(read_text(plan_path))  # with or without a byte-order mark
+    except json.JSONDecodeError as err:
+        raise InputError(f"not a plan (JSON): {err.msg}", str(plan_path), err.lineno, err.colno) from None
     p = pb.Plan.from_dict(data, str(plan_path))
     meas = pb.read_probe(measured, entry)
     c = pb.next_correction(p, meas, pass_done, applied=applied, hardened=hardened)

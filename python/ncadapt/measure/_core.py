@@ -64,6 +64,14 @@ def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, pro
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             fail(i, f"{name} is not a number (NaN or infinite) at point {i + 1}")
+    _, first, inverse = np.unique(p, axis=0, return_index=True, return_inverse=True)
+    inverse = np.asarray(inverse).ravel()
+    rep = np.flatnonzero(first[inverse] != np.arange(n))
+    if len(rep):
+        i = int(rep[0])
+        k = int(first[inverse[i]])
+        where = f"line {ln[k]}" if lines is not None else f"point {k + 1}"
+        fail(i, f"point {' '.join(f'{v:g}' for v in p[i])} repeats the point at {where}")
     length = np.linalg.norm(nn, axis=1)
     bad = np.abs(length - 1) > NORMAL_TOL
     if bad.any():

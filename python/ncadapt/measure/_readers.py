@@ -205,10 +205,12 @@ def read(path, probe_radius: float = 0.0) -> Measurements:
     p = Path(path)
     if not p.is_file():
         raise InputError("no such file", str(p))
-    head = p.read_bytes()[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
+    data = p.read_bytes()
+    head = data[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
     if head.startswith("<"):
         return read_qif(p, probe_radius)
-    if re.search(r"FEAT\s*/\s*POINT", head, re.I):
+    # DMIS: a point feature anywhere (a long header may come first), or a DMIS header statement
+    if re.search(rb"FEAT\s*/\s*POINT", data, re.I) or re.match(r"(DMISMN|DMISMD)\s*/", head, re.I):
         return read_dmis(p, probe_radius)
     first = head.splitlines()[0] if head else ""
     if re.search(r"[A-Za-z]", first) and "," in first and re.search(r"\bx\b", first, re.I):
