@@ -23,7 +23,7 @@ _STAGED: contextvars.ContextVar[list | None] = contextvars.ContextVar("ncadapt_s
 _LIVE: set[str] = set()
 
 
-def _target(path: Path) -> Path:
+def write_target(path: Path) -> Path:
     """Where writing ``path`` lands: a symbolic link's target (the link stays)."""
     return Path(os.path.realpath(path)) if path.is_symlink() else path
 
@@ -57,7 +57,7 @@ def atomic_path(path: str | os.PathLike):
     error, else it is removed and the target is left as it was. Inside :func:`all_or_nothing` the
     rename waits for the end of that block. An existing target keeps its permission bits; a
     symbolic link's target is replaced (the link stays)."""
-    p = _target(Path(path))
+    p = write_target(Path(path))
     d = p.parent if str(p.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=TMP_PREFIX, suffix="-" + (p.name or "out"), dir=d)
     os.close(fd)

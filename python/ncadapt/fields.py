@@ -23,7 +23,6 @@ Examples
 
 from __future__ import annotations
 
-import functools
 import io
 import math
 from pathlib import Path
@@ -182,6 +181,7 @@ class GridField(Field):
         self.outside = _check_outside(outside)
         self.bounds = (float(self.xs[0]), float(self.xs[-1]), float(self.ys[0]), float(self.ys[-1]))
         self.grid_lines = (self.xs, self.ys)
+        self._steps = (_step(self.xs), _step(self.ys))
         self._spline = None
 
     def _eval(self, p):
@@ -194,7 +194,7 @@ class GridField(Field):
             x, y = np.clip(x, x0, x1), np.clip(y, y0, y1)
         d = np.zeros_like(p)
         if self.method == "linear":
-            d[:, 2] = _bilinear(self.xs, self.ys, self.dz, x, y)
+            d[:, 2] = _bilinear(self.xs, self.ys, self._steps, self.dz, x, y)
         elif self.outside == "extrapolate" and out.any():
             from scipy.interpolate import RegularGridInterpolator  # imported where needed: it is slow to import
 
@@ -212,18 +212,17 @@ class GridField(Field):
         return f"GridField({len(self.xs)}x{len(self.ys)}, {self.method}, outside={self.outside!r})"
 
 
-@functools.lru_cache(maxsize=16)
-def _uniform(grid_bytes: bytes) -> bool:
-    grid = np.frombuffer(grid_bytes)
+def _step(grid: np.ndarray) -> float | None:
+    """The spacing of a uniform grid (equal steps to 1e-12), None for an irregular one."""
     step = (grid[-1] - grid[0]) / (len(grid) - 1)
-    return bool(np.allclose(np.diff(grid), step, rtol=1e-12, atol=0))
+    return float(step) if np.allclose(np.diff(grid), step, rtol=1e-12, atol=0) else None
 
 
-def _cell(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cell index and fraction of x along a grid; the edge cells continue outside."""
+def _cell(grid: np.ndarray, step: float | None, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cell index and fraction of x along a grid of spacing ``step`` (None: irregular); the edge
+    cells continue outside."""
     n = len(grid)
-    step = (grid[-1] - grid[0]) / (n - 1)
-    if _uniform(np.ascontiguousarray(grid, dtype=np.float64).tobytes()):
+    if step is not None:
         u = (x - grid[0]) / step
         i = np.clip(np.floor(u), 0, n - 2).astype(np.intp)
         return i, u - i
@@ -231,10 +230,11 @@ def _cell(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return i, (x - grid[i]) / (grid[i + 1] - grid[i])
 
 
-def _bilinear(xs, ys, v, x, y):
-    """Bilinear interpolation of v (ny, nx) at (x, y); outside, the edge cells are extended linearly."""
-    i, a = _cell(xs, x)
-    j, b = _cell(ys, y)
+def _bilinear(xs, ys, steps, v, x, y):
+    """Bilinear interpolation of v (ny, nx) at (x, y) on a grid of spacings ``steps`` (see
+    :func:`_step`); outside, the edge cells are extended linearly."""
+    i, a = _cell(xs, steps[0], x)
+    j, b = _cell(ys, steps[1], y)
     flat = v.ravel()
     k = j * len(xs) + i
     v00, v01 = flat[k], flat[k + 1]
@@ -385,8 +385,7 @@ def from_values(x, y, dz, *, method: str = "linear", outside: str = "error", sou
     if linenos is None:
         linenos = np.arange(1, len(x) + 1)
     xs, ys = np.unique(x), np.unique(y)
-    _, first, counts = np.unique(np.column_stack([x, y]), axis=0, return_index=True, return_counts=True)
-    pairs = len(counts)
+    pairs = len(np.unique(np.column_stack([x, y]), axis=0))
     if len(xs) >= 2 and len(ys) >= 2 and pairs == len(x) == len(xs) * len(ys):
         return _grid_from_points(x, y, dz, linenos, "<map>" if source is None else source, method, outside)
     zeros = np.zeros_like(x)

@@ -10,7 +10,7 @@ import click
 
 from ..errors import InputError
 from .._io import read_text
-from ._common import FiniteRange, check_outputs, handle_errors, progress, summary, write_json
+from ._common import FiniteRange, check_outputs, handle_errors, json_option, progress, seed_option, summary, write_json
 
 _CLASS = {"type": str, "show_default": True}
 
@@ -92,8 +92,7 @@ def plan_cmd(diameter, final, prefinish, t0, allowance, delta_a, delta_b, measur
 @click.option("--tool", type=click.IntRange(min=1), default=1, show_default=True, help="Tool / offset number.")
 @click.option("--tool-radius", type=FiniteRange(min=0, min_open=True),
               help="The tool's current radius in the LinuxCNC tool table, mm.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controller, tool, tool_radius, json_path):
     """The correction for the next pass and its tool-offset block."""
@@ -124,8 +123,7 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
 @bore.command("simulate")
 @click.option("--parts", type=click.IntRange(1, 1_000_000), default=1000, show_default=True,
               help="Number of simulated parts (at most 1,000,000).")
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
-              help="Seed of the simulation's random numbers: the same seed gives the same run.")
+@seed_option
 @click.option("--material", type=click.Choice(["steel", "titanium", "aluminium", "hardened"]), default="steel",
               show_default=True, help="Material of the simulated parts (sets the cutting behaviour of the model).")
 @click.option("--diameter", type=FiniteRange(min=0, min_open=True), default=40.0, show_default=True,
@@ -136,8 +134,7 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
               help="Radial stock z left for the corrective passes, mm.")
 @click.option("--k", type=FiniteRange(0, 1, min_open=True), default=0.25, show_default=True,
               help="Share of the final tolerance allowed for form error.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def simulate_cmd(parts, seed, material, diameter, t0, allowance, k, json_path):
     """Run the plan and the pass-by-pass loop on seeded virtual parts, against one uncorrected pass."""

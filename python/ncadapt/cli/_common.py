@@ -17,7 +17,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries
+from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries, write_target
 from ..errors import InputError, NcadaptError, RefusedError, cut
 
 #: Exit codes: success, refused by a safety check (nothing written), bad input or usage, internal error.
@@ -26,6 +26,13 @@ err_console = Console(stderr=True, highlight=False)
 
 #: Where summaries go: stdout, or stderr when stdout carries the JSON (``--json -``).
 _state = {"summary_to_stderr": False}
+
+
+#: The options many commands share.
+json_option = click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+                           help="Write the figures as JSON (- for standard output).")
+seed_option = click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
+                           help="Seed of the simulation's random numbers: the same seed gives the same run.")
 
 
 def echo_err(msg: str) -> None:
@@ -177,7 +184,7 @@ _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"), (
 def _check_output(name: str, path: Path) -> None:
     """An output must be a regular file (or not exist yet) in an existing folder ncadapt can
     write in; a symbolic link is followed (its target is replaced)."""
-    target = Path(os.path.realpath(path)) if path.is_symlink() else path
+    target = write_target(path)
     try:
         st = os.stat(target)
     except FileNotFoundError:

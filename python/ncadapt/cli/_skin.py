@@ -9,7 +9,7 @@ import click
 
 from ..errors import InputError
 from .. import constants
-from ._common import FiniteRange, check_outputs, handle_errors, summary, write_json
+from ._common import FiniteRange, check_outputs, handle_errors, json_option, seed_option, summary, write_json
 
 
 @click.group()
@@ -23,11 +23,9 @@ def skin() -> None:
 @click.option("--noise", type=FiniteRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
 @click.option("--latency-ms", type=FiniteRange(min=0), default=45.0, show_default=True,
               help="Dead time from reading to axis motion, ms.")
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
-              help="Seed of the simulation's random numbers: the same seed gives the same run.")
+@seed_option
 @click.option("--protocol", is_flag=True, help="The paper's noise-free protocol at the checkpoints instead.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report with the error along the toolpath.")
 @handle_errors
@@ -111,8 +109,7 @@ def _report(path, run) -> None:
               help="Refuse if any correction exceeds this, mm.")
 @click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
               help="Program points outside the map.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def correct(program, map_path, target, allowance, into, output, limit, outside, json_path):
     """Correct a finishing PROGRAM from a thickness MAP measured after the previous pass: the
@@ -175,8 +172,7 @@ def _quiet_asyncua() -> None:
               help="The controller's OPC UA server (namespace urn:ncadapt:skin, object Controller).")
 @click.option("--pockets", type=click.IntRange(min=1), default=1, show_default=True,
               help="With --opcua: pockets to finish before stopping.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, json_path):
     """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
@@ -242,10 +238,8 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
 @click.option("--noise", type=FiniteRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
 @click.option("--latency-ms", type=FiniteRange(min=0), default=45.0, show_default=True,
               help="Dead time from reading to axis motion, ms.")
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
-              help="Seed of the simulation's random numbers: the same seed gives the same run.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@seed_option
+@json_option
 @handle_errors
 def serve(endpoint, noise, latency_ms, seed, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1

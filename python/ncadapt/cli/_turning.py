@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ._common import FiniteRange, check_outputs, handle_errors, summary, write_json
+from ._common import FiniteRange, check_outputs, handle_errors, json_option, seed_option, summary, write_json
 
 
 @click.group()
@@ -24,8 +24,7 @@ def turning() -> None:
 @click.option("--css", is_flag=True, help="Constant surface speed (G96) instead of per-block S words (G97).")
 @click.option("--wear-weight", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Weight of tool wear (Taylor's law) in the cost, s per tool life.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report: the feed/speed/position family and the diameter profiles.")
 @handle_errors
@@ -60,10 +59,8 @@ def plan(config, mode, output, radius_mode, css, wear_weight, json_path, report_
               help="Relative scatter of the cutting pressure ρ.")
 @click.option("--stiffness-sigma", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Relative scatter of the stiffness.")
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
-              help="Seed of the simulation's random numbers: the same seed gives the same run.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@seed_option
+@json_option
 @handle_errors
 def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
     """Turn the shaft of CONFIG with PROGRAM on the virtual lathe: the diameter along the shaft."""

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from .. import constants
-from ._common import FiniteRange, about, check_outputs, echo_err, handle_errors, progress, summary, write_json
+from ._common import FiniteRange, about, check_outputs, echo_err, handle_errors, json_option, progress, seed_option, summary, write_json
 
 _POS = dict(type=FiniteRange(min=0, min_open=True), required=True)
 
@@ -25,8 +25,7 @@ def waffle() -> None:
 @click.option("--diameter", help="Shell diameter D, mm.", **_POS)
 @click.option("--segment", type=click.IntRange(min=2), default=10, show_default=True,
               help="Points per least-squares segment (restarting where Z changes).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def tilt(log, tool_radius, diameter, segment, json_path):
     """The web-thickness error from the spindle's tilt to the back wall: E = R·(360/(πD))·k per
@@ -73,8 +72,7 @@ def tilt(log, tool_radius, diameter, segment, json_path):
               help="Refuse if any correction exceeds this, mm.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Corrected program to write.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def correct(program, log, tool_radius, diameter, segment, map_path, target, allowance, depth_axis, axial_axis,
             rotary_axis, into, outside, limit, output, json_path):
@@ -140,8 +138,7 @@ def correct(program, log, tool_radius, diameter, segment, map_path, target, allo
               help="CSV with columns V_ideal (one-way pre-measurement) and V_measured (while machining), mm.")
 @click.option("--dt", type=FiniteRange(min=0, min_open=True), default=1.0, show_default=True,
               help="Sampling period, s (τ comes out in the same unit).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@json_option
 @handle_errors
 def backlash(path, dt, json_path):
     """Estimate the copying system's gap g (and drive τ) by least squares from a pair of signals."""
@@ -161,10 +158,8 @@ def backlash(path, dt, json_path):
 @waffle.command("simulate")
 @click.option("--strategy", type=click.Choice(["none", "disturbance", "self-tuning", "combined"]), default="combined",
               show_default=True, help="Correction: none, the tilt disturbance K_dist, self-tuning K_fb cell to cell, or both.")
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
-              help="Seed of the simulation's random numbers: the same seed gives the same run.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the figures as JSON (- for standard output).")
+@seed_option
+@json_option
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report: thickness maps of the shell before and after, every strategy compared.")
 @handle_errors
