@@ -48,6 +48,8 @@ def test_csv_deviation_sign_and_probe_radius(tmp_path):
     (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.9,1,0,1.1"), 3, "not a unit vector"),
     (lambda r: r.__setitem__(3, r[3].replace("P3", "P0")), 5, "duplicate id"),
     (lambda r: r.__setitem__(0, r[0] + ",7"), 2, "fields"),
+    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.8,1,0,1.7e308"), 3, "beyond ±1e\\+06 mm"),
+    (lambda r: r.__setitem__(2, "P2,0,2e6,0.9,0,0,1,0,1,0.9"), 4, "nominal point 2e\\+06 mm"),
 ])
 def test_csv_errors_name_the_line(tmp_path, bad, line, what):
     rows = _rows()
@@ -336,3 +338,69 @@ def test_a_repeated_point_names_both_lines(tmp_path):
     with pytest.raises(InputError) as e:
         measure.read(_csv(tmp_path, rows, "x,y,z,i,j,k,dev"))
     assert e.value.line == 6 and "repeats the point at line 3" in e.value.message and e.value.path
+
+
+def test_the_surface_grid_and_its_extent_are_checked():
+    # a 9 x 5 grid of points 10 mm apart
+    pts = np.array([(x, y, 0.0) for x in range(0, 81, 10) for y in range(0, 41, 10)])
+    s = pf.fit_height_surface(pts, extent=(-10, 90, -10, 50))
+    assert (s.u[0], s.u[-1], len(s.u), s.v[0], s.v[-1], len(s.v)) == (-10, 90, 11, -10, 50, 7)
+    with pytest.raises(InputError, match="100,000,000,002 x 7 nodes, more than 4,000,000; give a smaller extent"):
+        pf.fit_height_surface(pts, extent=(-10, 1e12, -10, 50))
+    with pytest.raises(InputError, match="narrower than the point spacing 10 mm"):
+        pf.fit_height_surface(pts, extent=(0, 80, -1e-194, 0))
+    with pytest.raises(InputError, match="cover 0 nodes"):
+        pf.fit_height_surface(pts, extent=(1000, 1100, 1000, 1100))
+    # a single scan line, along an axis or diagonal, or two lines closer than half the spacing
+    k = np.arange(40.0)
+    for line in (np.column_stack([k, 0 * k, 0 * k]), np.column_stack([k, k, 0 * k]),
+                 np.column_stack([k, 0.3 * (k % 2), 0 * k])):
+        with pytest.raises(InputError, match="40 measured points lie along one line"):
+            pf.fit_height_surface(line)
+    # two scan lines 5 mm apart, points 1 mm apart along them: an area
+    two = np.column_stack([np.r_[k, k], np.r_[0 * k, 0 * k + 5], np.zeros(80)])
+    assert pf.fit_height_surface(two).grid.shape[:2] == (40, 6)
+
+
+def test_extreme_moran_and_filter_options_give_finite_results_or_located_errors(tmp_path):
+    from ncadapt import stats
+
+    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,{0.01 + 0.0004 * x - 0.0003 * y + 0.002 * np.sin(1.7 * k):.5f}"
+                                  for k, (x, y) in enumerate((x, y) for y in range(0, 41, 10) for x in range(0, 81, 10))]
+    m = tmp_path / "m.csv"
+    m.write_text("\n".join(rows) + "\n")
+    meas = measure.read(m)
+    # a huge K is the nearest-neighbour limit: on this exact grid, the 2 to 4 nearest points
+    from scipy.spatial.distance import cdist
+
+    d = cdist(meas.nominal, meas.nominal)
+    np.fill_diagonal(d, np.inf)
+    ref = stats.moran_matrix((d <= d.min(axis=1, keepdims=True) + 1e-9).astype(float), meas.deviation)
+    r = CliRunner().invoke(main, ["analyze", str(m), "--power", "1e20", "--json", str(tmp_path / "a.json")])
+    assert r.exit_code == 0, r.output
+    got = json.loads((tmp_path / "a.json").read_text())["moran"]
+    assert got["I"] == pytest.approx(ref.I, rel=1e-9)
+    for args, code, said in (
+        (["analyze", str(m), "--weights", "knn", "--neighbors", "45"], 2, "need more than 45 points; there are 45"),
+        (["analyze", str(m), "--probe-radius", "1e9"], 2, "--probe-radius"),
+        (["compensate", str(m), "--sigma-s", "1e-300"], 2, "keeps every deviation as systematic"),
+        (["compensate", str(m), "--sigma-c", "1e163"], 0, ""),
+    ):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == code and said in r.output, (args, r.output)
+
+
+def test_qif_xml_errors_are_located_and_entities_not_expanded(tmp_path):
+    bad = tmp_path / "bad.qif"
+    bad.write_text('<?xml version="1.0"?>\n<QIFDocument>\n  <Features>\n  <Bad attr=1>\n</QIFDocument>\n')
+    with pytest.raises(InputError) as e:
+        measure.read(bad)
+    assert (e.value.line, e.value.col) == (4, 13) and "line 4" not in e.value.message
+    secret = tmp_path / "secret.txt"
+    secret.write_text("1 2 3")
+    xxe = tmp_path / "xxe.qif"
+    xxe.write_text(f'<?xml version="1.0"?>\n<!DOCTYPE q [<!ENTITY e SYSTEM "file://{secret}">]>\n<QIFDocument><Features>'
+                   '<FeatureNominals><PointFeatureNominal id="1"><Location>&e;</Location><Normal>0 0 1</Normal>'
+                   '</PointFeatureNominal></FeatureNominals></Features></QIFDocument>\n')
+    with pytest.raises(InputError, match="Location needs 3 numbers, got 0"):
+        measure.read(xxe)

@@ -110,6 +110,66 @@ def test_moran_rejects_bad_input():
         stats.moran(q, v)
 
 
+def test_moran_idw_large_power_is_the_nearest_neighbour_limit():
+    # w_ij = d_ij^-K row-standardised tends, as K grows, to equal weights on each point's nearest
+    # neighbours: built here by hand on a jittered grid (a point's nearest is unique) and on an
+    # exact grid (2 to 4 nearest at one distance), for the dense and the distance-band weights
+    from scipy.spatial.distance import cdist
+
+    rng = np.random.default_rng(4)
+    g = np.array([(x, y) for x in range(12) for y in range(9)], float)
+    for p in (g + rng.uniform(-0.05, 0.05, g.shape), g):
+        v = np.sin(p[:, 0] / 2) + 0.3 * rng.normal(size=len(p))
+        d = cdist(p, p)
+        np.fill_diagonal(d, np.inf)
+        nearest = (d <= d.min(axis=1, keepdims=True) * (1 + 1e-12)).astype(float)
+        ref = stats.moran_matrix(nearest, v)
+        for kw in ({}, {"threshold": 3.0}):
+            ours = stats.moran(p, v, power=1e12, **kw)
+            assert np.isfinite([ours.I, ours.z_randomization, ours.z_normality]).all()
+            np.testing.assert_allclose([ours.I, ours.z_randomization, ours.z_normality],
+                                       [ref.I, ref.z_randomization, ref.z_normality], rtol=1e-9)
+
+
+def test_moran_is_free_of_units():
+    # I and its z do not depend on the units of the points or of the values (closed form: every
+    # term is a ratio of sums of the same degree); extreme scales must not overflow
+    p, v = _data(n=200, seed=7)
+    ref = stats.moran(p, v, power=2.0)
+    for sp, sv in ((1e-3, 1.0), (1e3, 1e-200), (1.0, 1e200)):
+        m = stats.moran(p * sp, v * sv, power=2.0)
+        np.testing.assert_allclose([m.I, m.z_randomization, m.z_normality],
+                                   [ref.I, ref.z_randomization, ref.z_normality], rtol=1e-9)
+
+
+def test_moran_knn_needs_more_points_than_neighbours():
+    p, v = _data(n=10)
+    with pytest.raises(ValueError, match="need more than 10 points; there are 10"):
+        stats.moran(p, v, weights="knn", neighbors=10)
+
+
+def test_too_many_pairs_are_refused_before_listing(monkeypatch):
+    from ncadapt import neighbours
+
+    p, v = _data(n=100)
+    monkeypatch.setattr(neighbours, "MAX_PAIRS", 1000)
+    # all pairs: 100 * 99 / 2 = 4950 > 1000
+    with pytest.raises(ValueError, match="joins 4,950 pairs"):
+        filters.bilateral(p, v, 1e6, 1.0)
+    with pytest.raises(ValueError, match="joins 4,950 pairs"):
+        stats.moran(p, v, threshold=1e9)
+
+
+def test_bilateral_limits_of_its_sigmas():
+    # sigma_s → 0: no neighbour weighs anything, the values come back as they were; both sigmas
+    # → ∞: every weight is 1 and each value becomes the mean (closed forms), with no overflow
+    p, v = _data(n=60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(filters.bilateral(p, v, 1.0, 1e-300), v)
+        np.testing.assert_allclose(filters.bilateral(p, v, 1e300, 1e300), np.full(60, v.mean()), rtol=1e-12)
+
+
 def test_bilateral_equals_opencv_away_from_borders():
     cv2 = pytest.importorskip("cv2")
     rng = np.random.default_rng(1)
@@ -173,3 +233,13 @@ def test_border_extrapolation_is_exact_for_cubics_and_bounded():
     lo, hi = g[known].min(), g[known].max()
     assert out.max() == pytest.approx(hi + (hi - lo) / 4) and out.min() >= lo - (hi - lo) / 4 - 1e-12
     np.testing.assert_allclose(out[known], g[known])
+
+
+def test_a_p_value_that_underflows_is_never_printed_as_zero():
+    # z = 40 has p = 2 sf(40) ≈ 7.3e-350, below the smallest double: it underflows to 0
+    from scipy.stats import norm
+
+    assert 2 * norm.sf(40) == 0
+    assert stats.p_text(2 * norm.sf(40)) == "< 1e-300"
+    assert stats.p_text(0.0123456) == "0.0123"
+    assert stats.p_text(2.5e-300) == "2.5e-300"

@@ -26,6 +26,7 @@ from scipy import sparse, stats
 from scipy.spatial import cKDTree
 
 from .errors import InputError
+from .neighbours import pairs_within
 
 WEIGHTS = ("idw", "knn")
 # rows of the all-pairs inverse-distance weights computed at a time (memory: rows x n doubles)
@@ -93,8 +94,10 @@ def weights_matrix(points, weights: Weights) -> sparse.csr_matrix:
     tree = cKDTree(p)
     if weights.kind == "knn":
         k = int(weights.neighbors or 8)
-        if not 1 <= k < n:
-            raise ValueError(f"knn needs 1 <= neighbors < n ({n}), got {k}")
+        if k < 1:
+            raise ValueError(f"knn needs neighbors >= 1, got {k}")
+        if k >= n:
+            raise InputError(f"knn weights of {k} neighbours need more than {k} points; there are {n}")
         d, j = tree.query(p, k=k + 1)
         # the first hit is the point itself unless a duplicate ties with it: drop self explicitly
         rows = np.repeat(np.arange(n), k + 1)
@@ -110,14 +113,18 @@ def weights_matrix(points, weights: Weights) -> sparse.csr_matrix:
     elif weights.kind == "idw":
         if weights.threshold is None:
             raise ValueError("a sparse idw matrix needs a threshold (all pairs are computed densely)")
-        pairs = tree.query_pairs(float(weights.threshold), output_type="ndarray")
+        pairs = pairs_within(tree, float(weights.threshold), "the distance band (threshold)")
         r = np.concatenate([pairs[:, 0], pairs[:, 1]])
         c = np.concatenate([pairs[:, 1], pairs[:, 0]])
         d = np.sqrt(((p[r] - p[c]) ** 2).sum(axis=1))
         if (d == 0).any():
             i = int(r[np.flatnonzero(d == 0)[0]])
             raise InputError(f"points {i} and another coincide: inverse-distance weights are infinite")
-        w = sparse.csr_matrix((d ** -float(weights.power), (r, c)), shape=(n, n))
+        # each row scaled by its nearest distance (row standardisation removes the scale): the
+        # largest weight of a row is 1, so no power overflows, and a row never underflows to 0
+        near = np.full(n, np.inf)
+        np.minimum.at(near, r, d)
+        w = sparse.csr_matrix(((d / near[r]) ** -float(weights.power), (r, c)), shape=(n, n))
     else:
         raise ValueError(f"weights must be one of {WEIGHTS}, got {weights.kind!r}")
     rs = np.asarray(w.sum(axis=1)).ravel()
@@ -133,25 +140,33 @@ def _sums_sparse(w: sparse.csr_matrix, z: np.ndarray):
     return s0, s1, s2, float(z @ (w @ z))
 
 
-def _sums_dense_idw(p: np.ndarray, z: np.ndarray, power: float):
-    """S0, S1, S2 and zᵀWz of row-standardised all-pairs 1/d^k weights, a block of rows at a time."""
+def _sums_dense_idw(p: np.ndarray, z: np.ndarray, power: float, progress=None):
+    """S0, S1, S2 and zᵀWz of row-standardised all-pairs 1/d^k weights, a block of rows at a time
+    (``progress(done, total)`` is told the rows done of the two passes)."""
     from scipy.spatial.distance import cdist
 
     n = len(p)
+    # each row's distances are divided by its nearest distance before the power (row
+    # standardisation removes the scale): a row's largest raw weight is 1, so no power overflows
+    # and no row underflows to 0, whatever the power and the units
+    near = cKDTree(p).query(p, k=2)[0][:, 1]
+    if (near == 0).any():
+        i = int(np.flatnonzero(near == 0)[0])
+        j = int(np.flatnonzero((p == p[i]).all(axis=1) & (np.arange(n) != i))[0])
+        raise InputError(f"points {i} and {j} coincide: inverse-distance weights are infinite")
 
     def block(a, b):
         d = cdist(p[a:b], p)
         idx = np.arange(a, b)
         d[idx - a, idx] = np.inf
-        if (d == 0).any():
-            i, j = np.argwhere(d == 0)[0]
-            raise InputError(f"points {a + i} and {j} coincide: inverse-distance weights are infinite")
-        return d ** -power
+        return d
 
     raw_rows = np.empty(n)
     for a in range(0, n, _DENSE_ROWS):
         b = min(a + _DENSE_ROWS, n)
-        raw_rows[a:b] = block(a, b).sum(axis=1)
+        raw_rows[a:b] = ((block(a, b) / near[a:b, None]) ** -power).sum(axis=1)
+        if progress:
+            progress(b, 2 * n)
     inv = 1.0 / raw_rows
     wz = 0.0
     col = np.zeros(n)
@@ -159,13 +174,15 @@ def _sums_dense_idw(p: np.ndarray, z: np.ndarray, power: float):
     cross = 0.0
     for a in range(0, n, _DENSE_ROWS):
         b = min(a + _DENSE_ROWS, n)
-        raw = block(a, b)
-        w = raw * inv[a:b, None]
+        d = block(a, b)
+        w = (d / near[a:b, None]) ** -power * inv[a:b, None]
         wz += float(z[a:b] @ (w @ z))
         col += w.sum(axis=0)
         sq += float((w * w).sum())
-        # w_ji = raw_ij / row_j (distances are symmetric)
-        cross += float((w * (raw * inv[None, :])).sum())
+        # w_ji: row j's raw weight of i (the same distance, row j's scale) over row j's sum
+        cross += float((w * ((d / near[None, :]) ** -power * inv[None, :])).sum())
+        if progress:
+            progress(n + b, 2 * n)
     s0 = float(n)  # every row sums to one
     s1 = sq + cross  # ½ Σ (w_ij + w_ji)² = Σ w_ij² + Σ w_ij w_ji
     s2 = float(((1.0 + col) ** 2).sum())
@@ -181,6 +198,7 @@ def moran(
     threshold: float | None = None,
     neighbors: int | None = None,
     alpha: float = 0.05,
+    progress=None,
 ) -> Moran:
     """Global Moran's I of ``values`` at ``points`` (n, d) with row-standardised weights.
 
@@ -191,6 +209,8 @@ def moran(
         ``knn``: 1 for the ``neighbors`` nearest points (default 8).
     alpha : float
         Significance of the decision :attr:`Moran.systematic`.
+    progress : callable, optional
+        ``progress(done, total)`` during the all-pairs weights (``n²`` distances: long for large n).
     """
     p, v = _check(points, values)
     if not power >= 1:
@@ -201,11 +221,11 @@ def moran(
         raise ValueError(f"threshold must be > 0 mm, got {threshold}")
     wt = Weights(weights, float(power) if weights == "idw" else None, threshold if weights == "idw" else None,
                  (int(neighbors) if neighbors else 8) if weights == "knn" else None)
-    z = v - v.mean()
+    z = _centred(v)
     if float(z @ z) == 0:
         raise InputError("all values are equal: Moran's I is undefined")
     if weights == "idw" and threshold is None:
-        s0, s1, s2, zwz = _sums_dense_idw(p, z, float(power))
+        s0, s1, s2, zwz = _sums_dense_idw(p, z, float(power), progress)
     else:
         s0, s1, s2, zwz = _sums_sparse(weights_matrix(p, wt), z)
     return _moran(v, s0, s1, s2, zwz, alpha, wt)
@@ -219,13 +239,24 @@ def moran_matrix(w, values, alpha: float = 0.05) -> Moran:
     m = sp.csr_matrix(w, dtype=float)
     rs = np.asarray(m.sum(axis=1)).ravel()
     m = sp.csr_matrix(sp.diags(np.divide(1.0, rs, out=np.zeros_like(rs), where=rs > 0)) @ m)
-    z = v - v.mean()
+    z = _centred(v)
     return _moran(v, *_sums_sparse(m, z), alpha, Weights("matrix", None, None, None))
+
+
+def _centred(v: np.ndarray) -> np.ndarray:
+    """``v`` minus its mean, divided by its largest magnitude: I, E[I], the variances and the
+    kurtosis b2 do not depend on the scale, and the sums of squares and fourth powers stay finite
+    whatever the values' units."""
+    m = float(np.abs(v).max())
+    u = v / m if m > 0 else v
+    z = u - u.mean()
+    m = float(np.abs(z).max())
+    return z / m if m > 0 else z
 
 
 def _moran(v, s0, s1, s2, zwz, alpha, wt) -> Moran:
     n = len(v)
-    z = v - v.mean()
+    z = _centred(v)
     zz = float(z @ z)
     if s0 == 0:
         raise InputError("no point has a neighbour within the threshold; increase it")
@@ -237,6 +268,8 @@ def _moran(v, s0, s1, s2, zwz, alpha, wt) -> Moran:
     v_rand = num / ((n - 1) * (n - 2) * (n - 3) * s0 * s0) - ei * ei
     z_n = (i_stat - ei) / math.sqrt(v_norm)
     z_r = (i_stat - ei) / math.sqrt(v_rand) if v_rand > 0 else math.copysign(math.inf, i_stat - ei)
+    if not all(math.isfinite(x) for x in (i_stat, v_norm, v_rand, z_n)):
+        raise InputError(f"Moran's I is not finite with these weights ({wt.kind}): the weights are degenerate")
     return Moran(
         I=i_stat, expected=ei, variance_normality=v_norm, variance_randomization=v_rand,
         z_normality=z_n, z_randomization=z_r,
@@ -306,6 +339,11 @@ def noise(points, residual, **moran_options) -> Noise:
     m = moran(points, r, **moran_options)
     return Noise(std=float(r.std(ddof=1)), pearson_chi2=chi2, pearson_dof=dof, pearson_p=pp,
                  lag1_r=r1, student_t=t, student_p=tp, moran_z=m.z_randomization, moran_p=m.p_randomization)
+
+
+def p_text(p: float, digits: int = 3) -> str:
+    """A p value as people read it: ``< 1e-300`` below 1e-300 (where doubles underflow to 0), never 0."""
+    return "< 1e-300" if p < 1e-300 else f"{p:.{digits}g}"
 
 
 def summary(values) -> dict:

@@ -247,10 +247,24 @@ def write_json(path, payload: dict) -> None:
 
 
 @contextlib.contextmanager
-def progress():
-    """A status line on a terminal (quiet otherwise); yields a function taking a message."""
-    if err_console.is_terminal:
-        with err_console.status("") as status:
-            yield lambda msg: status.update(msg)
-    else:
-        yield lambda msg: None
+def progress(console: Console | None = None):
+    """Progress on a terminal, quiet otherwise (a pipe, a file, a CI log).
+
+    Yields ``say(message, done=None, total=None)``: with a total, a bar with the percentage and
+    the time left; without, the message beside a spinner. The bar is removed when the work ends.
+    """
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TaskProgressColumn, TextColumn, TimeRemainingColumn
+
+    con = console or err_console
+    if not con.is_terminal:
+        yield lambda msg, done=None, total=None: None
+        return
+    bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(),
+                   TimeRemainingColumn(), console=con, transient=True)
+    task = bar.add_task("", total=None)
+
+    def say(msg, done=None, total=None):
+        bar.update(task, description=msg, completed=done or 0, total=total)
+
+    with bar:
+        yield say

@@ -20,7 +20,7 @@ def _moran_options(f):
         click.option("--neighbors", type=click.IntRange(min=1), default=8, show_default=True, help="N of knn weights."),
         click.option("--alpha", type=FiniteRange(0, 1, min_open=True, max_open=True), default=0.05,
                      show_default=True, help="Significance of the 'systematic' decision."),
-        click.option("--probe-radius", type=FiniteRange(min=0), default=0.0, show_default=True,
+        click.option("--probe-radius", type=FiniteRange(0, constants.COORD_MAX), default=0.0, show_default=True,
                      help="The measured points are probe-tip centres of this radius, mm."),
         click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."),
         click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."),
@@ -34,12 +34,20 @@ def _moran_kw(weights, power, threshold, neighbors, alpha):
     return {"weights": weights, "power": power, "threshold": threshold, "neighbors": neighbors, "alpha": alpha}
 
 
+def _said(say, what):
+    """A ``progress(done, total)`` callback that shows ``what`` with a bar."""
+    say(what)
+    return lambda done, total: say(what, done, total)
+
+
 def _print_analysis(a) -> None:
+    from ..stats import p_text
+
     m, d = a.moran, a.deviation
     summary(f"points: {a.n_points:,}")
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
     summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
-               f"{m.z_normality:.2f} (normality), p {m.p_value:.3g}")
+               f"{m.z_normality:.2f} (normality), p {p_text(m.p_value)}")
     summary(f"systematic at alpha {m.alpha:g}: {'yes' if m.systematic else 'no'}")
 
 
@@ -56,9 +64,12 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     from ..processes import freeform as pf
 
     check_outputs({"measurements": measurements}, {"--json": json_path, "--report": report_path})
-    meas = measure.read(measurements, probe_radius=probe_radius)
-    frame = pf.frame_of(meas)
-    a = pf.analyze(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
+    with progress() as say:
+        say(f"reading {measurements}")
+        meas = measure.read(measurements, probe_radius=probe_radius)
+        frame = pf.frame_of(meas)
+        a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"),
+                       **_moran_kw(weights, power, threshold, neighbors, alpha))
     _print_analysis(a)
     if json_path:
         write_json(json_path, {"input": str(measurements), **a.as_dict()})
@@ -120,9 +131,8 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
     with progress() as say:
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius)
-        say("analysing")
         frame = pf.frame_of(meas)
-        a = pf.analyze(meas, frame=frame, **kw)
+        a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"), **kw)
         say("separating systematic and random error")
         d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, frame=frame, **kw)
         surf = pf.fit_height_surface(meas.nominal, extent=extent, frame=frame)

@@ -29,6 +29,8 @@ from ..surfaces import Frame, Surface, extrapolate_border
 FILTERS = ("bilateral", "spline")
 # fewest points each step needs
 MIN_POINTS = 10
+# most nodes of the surface grid (its arrays, normals and field: some 0.5 GB at this size)
+MAX_GRID_NODES = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -57,16 +59,28 @@ def noise_level(points, values) -> float:
     return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2)))
 
 
+def require_area(uv, source: str | None = None) -> None:
+    """Refuse points in (u, v) that lie along one line (a single scan line, a row of points): a
+    surface, a triangulation or a thin-plate spline over them is undetermined across the line."""
+    q = np.asarray(uv, float)[:, :2]
+    c = q - q.mean(axis=0)
+    across = np.linalg.svd(c, full_matrices=False)[2][-1]
+    width = float(np.abs(c @ across).max()) if len(q) else 0.0
+    if width < 0.5 * spacing(q):
+        raise InputError(f"the {len(q)} measured points lie along one line (all within half their spacing of it): "
+                         "a surface needs points over an area", source)
+
+
 def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
     """``frame``, or the one :meth:`Frame.fit` chooses from the measured normals."""
     return frame if frame is not None else Frame.fit(meas.normal, meas.source)
 
 
-def analyze(meas: Measurements, *, frame: Frame | None = None, **moran_options) -> Analysis:
+def analyze(meas: Measurements, *, frame: Frame | None = None, progress=None, **moran_options) -> Analysis:
     """Deviation statistics and Moran's I of the deviations over (u, v) (options of
-    :func:`ncadapt.stats.moran`)."""
+    :func:`ncadapt.stats.moran`; ``progress(done, total)`` follows its all-pairs weights)."""
     meas.require(MIN_POINTS, "the analysis")
-    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, **moran_options)
+    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, **moran_options)
     return Analysis(len(meas), m, stats.summary(meas.deviation))
 
 
@@ -128,6 +142,8 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
         raise ValueError(f"filter must be one of {FILTERS}, got {method!r}")
     meas.require(MIN_POINTS, "the decomposition")
     xy = frame_of(meas, frame).uv(meas.nominal)
+    if method == "spline":
+        require_area(xy, meas.source)
     e = meas.deviation
     h = spacing(xy)
     sig = max(noise_level(xy, e), 1e-6)
@@ -141,6 +157,9 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
     for par in ladder:
         s = _filter(method, xy, e, par)
         r = e - s
+        if np.ptp(r) == 0:
+            raise InputError(f"the {method} filter with {', '.join(f'{k} {v:g}' for k, v in par.items())} keeps every "
+                             "deviation as systematic (nothing is left as noise); smooth more", meas.source)
         nz = stats.noise(xy, r, **moran_options)
         chosen = (s, r, par, nz)
         if not auto or nz.moran_p >= moran_options.get("alpha", 0.05):
@@ -210,12 +229,25 @@ def fit_height_surface(points, extent=None, step: float | None = None, frame: Fr
         return Surface(xs, ys, frame.to_world(X, Y, Z))
     from scipy.interpolate import CloughTocher2DInterpolator
 
+    require_area(p)
     h = step or spacing(p)
     x0, x1, y0, y1 = extent or (p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max())
-    xs = np.linspace(x0, x1, max(4, int(round((x1 - x0) / h)) + 1))
-    ys = np.linspace(y0, y1, max(4, int(round((y1 - y0) / h)) + 1))
+    what = "the extent" if extent else "the measured area"
+    area = f"{what} u {x0:g} … {x1:g}, v {y0:g} … {y1:g} mm"
+    if min(x1 - x0, y1 - y0) < h:
+        raise InputError(f"{area} is narrower than the point spacing {h:.4g} mm: no surface to fit")
+    nu, nv = (max(4, int(round(span / h)) + 1) for span in (x1 - x0, y1 - y0))
+    if nu * nv > MAX_GRID_NODES:
+        raise InputError(f"{area} at the point spacing {h:.4g} mm needs a surface grid of {nu:,} x {nv:,} nodes, "
+                         f"more than {MAX_GRID_NODES:,}; "
+                         + ("give a smaller extent" if extent else "check the coordinates or give the part's extent"))
+    xs = np.linspace(x0, x1, nu)
+    ys = np.linspace(y0, y1, nv)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     zi = CloughTocher2DInterpolator(p[:, :2], p[:, 2])(X, Y)
     known = np.isfinite(zi)
+    if known.sum() < 16:
+        raise InputError(f"the measured points cover {known.sum()} nodes of the surface grid over {area}, fewer "
+                         "than 16: the extent must overlap the measured area")
     Z = extrapolate_border(xs, ys, np.where(known, zi, 0.0), known)
     return Surface(xs, ys, frame.to_world(X, Y, Z))
