@@ -17,6 +17,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
+from ..constants import COORD_MAX
 from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries, write_target
 from ..errors import InputError, NcadaptError, RefusedError, cut
 
@@ -156,7 +157,8 @@ class FiniteRange(click.FloatRange):
 
 
 def comma_floats(value: str, n: int, what: str) -> list[float]:
-    """``n`` comma-separated numbers of an option, or a click usage error saying ``what``."""
+    """``n`` comma-separated lengths of an option (within ±``COORD_MAX`` mm), or a click usage
+    error saying ``what``."""
     try:
         parts = [float(v) for v in value.split(",")]
     except ValueError:
@@ -165,6 +167,8 @@ def comma_floats(value: str, n: int, what: str) -> list[float]:
         raise click.BadParameter(f"expected {what}, got {cut(value)}")
     if not all(math.isfinite(v) for v in parts):
         raise click.BadParameter(f"expected {what} (finite), got {cut(value)}")
+    if any(abs(v) > COORD_MAX for v in parts):
+        raise click.BadParameter(f"expected {what} within ±{COORD_MAX:g} mm, got {cut(value)}")
     return parts
 
 
