@@ -404,3 +404,80 @@ def test_qif_xml_errors_are_located_and_entities_not_expanded(tmp_path):
                    '</PointFeatureNominal></FeatureNominals></Features></QIFDocument>\n')
     with pytest.raises(InputError, match="Location needs 3 numbers, got 0"):
         measure.read(xxe)
+
+
+# --------------------------------------------------------------------------------- the gate
+# Rates over 200 seeds (binomial standard error at 5 %: 1.5 %). The gate is Moran's I (one-sided,
+# by permutation up to 3,000 points) or the offset test, each at alpha / 2.
+GRID = np.array([(x, y, 0.0) for x in np.arange(0, 100, 5.0) for y in np.arange(0, 75, 5.0)])
+UP = np.tile([0.0, 0.0, 1.0], (len(GRID), 1))
+SEEDS = range(200)
+
+
+def _on_grid(e):
+    return measure.from_arrays(GRID, UP, deviation=e)
+
+
+def test_the_gate_false_alarm_rate_on_noise_is_at_most_alpha():
+    hits = sum(pf.analyze(_on_grid(np.random.default_rng(s).normal(0, 0.005, len(GRID)))).systematic for s in SEEDS)
+    assert hits <= 14, hits  # ≤ 7 % (nominal 5 %)
+
+
+def test_the_gate_sees_a_uniform_offset():
+    # the paper's uniform model (eq. 9: A_m = const): 3 sigma, and its own 20 µm with 5 µm noise
+    for a_m in (0.015, 0.020):
+        got = [pf.analyze(_on_grid(a_m + np.random.default_rng(s).normal(0, 0.005, len(GRID)))) for s in range(100)]
+        assert sum(g.systematic for g in got) >= 95
+        assert all("offset" in g.verdict.by for g in got)
+
+
+def test_the_gate_sees_the_demo_error(bench):
+    part, prog, err, first, clean, p, n = bench
+    hits = sum(pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=0.005, seed=s))).systematic
+               for s in SEEDS)
+    assert hits >= 190
+
+
+def test_a_checkerboard_is_not_a_systematic_pattern():
+    # ±10 µm alternating from point to point: negative autocorrelation, z ≪ 0, mean 0; no filter
+    # can extract it (the bilateral filter averages it away)
+    ij = np.round(GRID[:, 0] / 5) + np.round(GRID[:, 1] / 5)
+    e = 0.010 * np.where(ij % 2 == 0, 1.0, -1.0) + np.random.default_rng(0).normal(0, 0.001, len(GRID))
+    a = pf.analyze(_on_grid(e))
+    assert a.moran.z_randomization < -5 and not a.systematic and a.verdict.by == ()
+
+
+@pytest.mark.parametrize("method", ["bilateral", "spline"])
+def test_the_residual_check_passes_an_ideal_separation(method):
+    # a flat systematic error plus white noise: the random part is the noise, smoothed a little
+    passed = sum(pf.decompose(_on_grid(0.02 + np.random.default_rng(s).normal(0, 0.005, len(GRID))), method).noise.passed
+                 for s in SEEDS)
+    assert passed >= 180  # ≥ 90 %
+
+
+def test_auto_chooses_the_smoothest_passing_setting_or_says_none_passed(tmp_path):
+    # a smooth error (second-degree polynomial, the paper's eq. 7) with 5 µm noise: --auto finds a
+    # setting whose random part is the noise (its std within 30 % of 5 µm: a filter keeps a share of
+    # the noise in what it calls systematic) and whose systematic part is within 3 µm RMS of dF
+    u, v = GRID[:, 0] / 100 * 2 - 1, GRID[:, 1] / 75 * 2 - 1
+    df = 0.02 * (u * u - 0.5 * v + 0.8 * u * v)
+    for s in range(5):
+        e = df + np.random.default_rng(s).normal(0, 0.005, len(GRID))
+        for method in ("bilateral", "spline"):
+            d = pf.decompose(_on_grid(e), method, auto=True)
+            assert d.auto["passed"] and d.noise.passed
+            assert 0.0035 <= d.noise.std <= 0.0065, (method, d.noise.std)
+            assert np.sqrt(np.mean((d.systematic - df) ** 2)) < 0.003
+    # stripes two points wide: the spline's residual keeps them (lag-1 correlation), at every p
+    stripes = 0.02 * ((GRID[:, 0] // 5) % 2) + np.random.default_rng(0).normal(0, 0.001, len(GRID))
+    d = pf.decompose(_on_grid(stripes), "spline", auto=True)
+    assert d.auto == {"passed": False, "setting": {"p": pytest.approx(1 / (1 + 5.0**3 / 6))}} and not d.noise.passed
+    m = tmp_path / "stripes.csv"
+    m.write_text("x,y,z,i,j,k,dev\n" + "".join(f"{x},{y},0,0,0,1,{e:.6f}\n" for (x, y, _), e in zip(GRID, stripes)))
+    r = CliRunner().invoke(main, ["compensate", str(m), "--filter", "spline", "--auto", "--json", str(tmp_path / "c.json")])
+    assert r.exit_code == 0, r.output
+    assert "warning: --auto found no spline setting" in r.stdout
+    j = json.loads((tmp_path / "c.json").read_text())
+    # the columns alternate 0 / 20 µm: a mean of 10 µm, which the offset test sees
+    assert j["auto"]["passed"] is False and j["verdict"]["systematic"] is True and "offset" in j["verdict"]["by"]
+    assert set(j["offset"]) == {"mean", "t", "p_value"}

@@ -87,6 +87,8 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
         "measured_rms_before": rms(meas.deviation),
         "measured_rms_after": rms(after_measured),
         "moran": analysis.moran.as_dict(),
+        "offset": analysis.offset.as_dict(),
+        "verdict": analysis.verdict.as_dict(),
         "filter": decomposition.as_dict(),
         "program": corr.as_dict(),
         "model": {"tool_radius": TOOL_RADIUS, "stepover": STEPOVER, "noise": NOISE,

@@ -46,9 +46,13 @@ def _print_analysis(a) -> None:
     m, d = a.moran, a.deviation
     summary(f"points: {a.n_points:,}")
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
+    o, v = a.offset, a.verdict
     summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
-               f"{m.z_normality:.2f} (normality), p {p_text(m.p_value)}")
-    summary(f"systematic at alpha {m.alpha:g}: {'yes' if m.systematic else 'no'}")
+            f"{m.z_normality:.2f} (normality), p {p_text(m.p_value)} (one-sided: neighbours alike)")
+    summary(f"offset: mean {o.mean:+.4f} mm, t {o.t:.2f}, p {p_text(o.p_value)}")
+    summary(f"systematic at alpha {v.alpha:g} (Moran's I and the offset each at {v.alpha / 2:g}): "
+            + (f"yes, by {' and '.join('the offset' if b == 'offset' else 'Moran' + chr(39) + 's I' for b in v.by)}"
+               if v.systematic else "no"))
 
 
 @click.command()
@@ -76,7 +80,7 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     if report_path:
         from ..report import freeform as rep, write
 
-        d = pf.decompose(meas, alpha=alpha, frame=frame)
+        d = pf.decompose(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
         write(report_path, rep.render(title=f"Deviation analysis: {measurements.name}", analysis=a, decomposition=d,
                                       xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation))
 
@@ -148,8 +152,14 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
     sysd = d.as_dict()
     summary(f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
                f"({d.method}); random part: std {d.noise.std:.4f} mm")
-    if not a.moran.systematic:
+    if not a.systematic:
         echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
+    if d.auto is not None and not d.auto["passed"]:
+        summary(f"warning: --auto found no {d.method} setting whose random part is free of systematic error; "
+                f"the default setting ({', '.join(f'{k} {v:g}' for k, v in d.auto['setting'].items())}) is used")
+    elif not d.noise.passed:
+        summary(f"warning: the random part still holds systematic error (Moran z {d.noise.moran_z:.2f}, lag-1 "
+                f"r {d.noise.lag1_r:.2f}); smooth less, or try --auto")
     if corr is not None:
         summary(f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
                    f"max displacement {corr.max_displacement:.4f} mm")

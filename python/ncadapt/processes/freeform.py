@@ -35,12 +35,22 @@ MAX_GRID_NODES = 4_000_000
 
 @dataclass(frozen=True)
 class Analysis:
+    """The gate: Moran's I (a spatial pattern) and the offset test (a uniform part), each at α/2,
+    and their verdict."""
+
     n_points: int
     moran: stats.Moran
     deviation: dict
+    offset: stats.Offset
+    verdict: stats.Verdict
+
+    @property
+    def systematic(self) -> bool:
+        return self.verdict.systematic
 
     def as_dict(self) -> dict:
-        return {"n_points": self.n_points, "moran": self.moran.as_dict(), "deviation": self.deviation}
+        return {"n_points": self.n_points, "moran": self.moran.as_dict(), "deviation": self.deviation,
+                "offset": self.offset.as_dict(), "verdict": self.verdict.as_dict()}
 
 
 def spacing(points) -> float:
@@ -76,29 +86,40 @@ def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
     return frame if frame is not None else Frame.fit(meas.normal, meas.source)
 
 
-def analyze(meas: Measurements, *, frame: Frame | None = None, progress=None, **moran_options) -> Analysis:
-    """Deviation statistics and Moran's I of the deviations over (u, v) (options of
-    :func:`ncadapt.stats.moran`; ``progress(done, total)`` follows its all-pairs weights)."""
+def analyze(meas: Measurements, *, frame: Frame | None = None, progress=None, alpha: float = 0.05,
+            **moran_options) -> Analysis:
+    """Deviation statistics, Moran's I of the deviations over (u, v) (options of
+    :func:`ncadapt.stats.moran`; ``progress(done, total)`` follows its all-pairs weights) and the
+    offset test; the verdict at ``alpha`` (each test at α/2)."""
     meas.require(MIN_POINTS, "the analysis")
-    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, **moran_options)
-    return Analysis(len(meas), m, stats.summary(meas.deviation))
+    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, alpha=alpha / 2,
+                    **moran_options)
+    o = stats.offset(meas.deviation)
+    return Analysis(len(meas), m, stats.summary(meas.deviation), o, stats.verdict(m, o, alpha))
 
 
 @dataclass(frozen=True)
 class Decomposition:
+    """Systematic + random parts; ``noise`` checks the random part (``noise.passed``: no systematic
+    error left); ``auto`` ({"passed", "setting"}) when the setting was searched (``auto=True``)."""
+
     systematic: np.ndarray
     random: np.ndarray
     method: str
     parameters: dict
     noise: stats.Noise
+    auto: dict | None = None
 
     def as_dict(self) -> dict:
-        return {
+        d = {
             "method": self.method, "parameters": self.parameters,
             "systematic": {"rms": float(np.sqrt((self.systematic**2).mean())), "max_abs": float(np.abs(self.systematic).max())},
             "random": {"std": self.noise.std, "pearson_p": self.noise.pearson_p, "student_p": self.noise.student_p,
-                       "moran_z": self.noise.moran_z, "moran_p": self.noise.moran_p},
+                       "moran_z": self.noise.moran_z, "moran_p": self.noise.moran_p, "passed": self.noise.passed},
         }
+        if self.auto is not None:
+            d["auto"] = self.auto
+        return d
 
 
 def _on_grid(points):
@@ -135,8 +156,10 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
 
     ``bilateral``: σ_c defaults to 1.5 × the point spacing, σ_s to 3 × the estimated noise std.
     ``spline``: p defaults to MATLAB csaps' choice for the spacing h, 1 / (1 + h³ / 6).
-    ``auto``: the smoothest setting (largest σ_c, or smallest p) of a ladder whose random part has
-    no significant Moran's I at the analysis' ``alpha``.
+    ``auto``: the smoothest setting (largest σ_c, or smallest p) of a ladder whose random part
+    passes the residual check (:attr:`ncadapt.stats.Noise.passed`: no significantly positive
+    Moran's I or lag-1 correlation left, one-sided, at the analysis' ``alpha``). When no setting
+    passes, the default setting is used and ``auto["passed"]`` is False: the caller must say so.
     """
     if method not in FILTERS:
         raise ValueError(f"filter must be one of {FILTERS}, got {method!r}")
@@ -153,19 +176,22 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
     else:
         p0 = p if p is not None else 1.0 / (1.0 + h**3 / 6.0)
         ladder = [{"p": q} for q in (1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.3, 0.6, 0.9)] if auto else [{"p": p0}]
-    chosen = None
-    for par in ladder:
+    def split(par):
         s = _filter(method, xy, e, par)
         r = e - s
         if np.ptp(r) == 0:
             raise InputError(f"the {method} filter with {', '.join(f'{k} {v:g}' for k, v in par.items())} keeps every "
                              "deviation as systematic (nothing is left as noise); smooth more", meas.source)
-        nz = stats.noise(xy, r, **moran_options)
-        chosen = (s, r, par, nz)
-        if not auto or nz.moran_p >= moran_options.get("alpha", 0.05):
-            break
+        return s, r, par, stats.noise(xy, r, **moran_options)
+
+    chosen = next((c for c in map(split, ladder) if c[3].passed), None) if auto else split(ladder[0])
+    found = chosen is not None
+    if not found:  # no rung passes: the default setting, flagged
+        chosen = split(base if method == "bilateral" else {"p": p0})
     s, r, par, nz = chosen
-    return Decomposition(s, r, method, {k: float(v) for k, v in par.items()} | {"auto": auto, "noise_estimate": sig}, nz)
+    params = {k: float(v) for k, v in par.items()}
+    return Decomposition(s, r, method, params | {"auto": auto, "noise_estimate": sig}, nz,
+                         {"passed": found, "setting": params} if auto else None)
 
 
 @dataclass(frozen=True)
