@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from ncadapt import InputError, cad, measure, nc
+from ncadapt import InputError, RefusedError, cad, measure, nc
 from ncadapt.cli import main
 from ncadapt.processes import freeform as pf
 from ncadapt.sim import freeform as ff
@@ -163,7 +164,11 @@ def test_compensation_closes_the_loop(bench):
     assert a.moran.systematic
     d = pf.decompose(m)
     c = pf.compensate(part, m, d.systematic)
-    out = prog.correct(c.field(4.0))
+    # the program's tool centres along the part's edge lie up to a tool radius beyond the hull of
+    # the tips over the part: held at the edge value
+    with pytest.raises(RefusedError, match="outside the field's domain"):
+        prog.correct(c.field(4.0))
+    out = prog.correct(c.field(4.0, "clamp"))
     second = ff.machine(out, part, err, 4.0)
     before = np.einsum("ij,ij->i", ff.measure(first, p, n) - p, n)
     after = np.einsum("ij,ij->i", ff.measure(second, p, n) - p, n)
@@ -225,6 +230,34 @@ def test_a_wall_seen_from_x_gives_the_same_compensation(bench):
     np.testing.assert_allclose(c1.surface.grid, c0.surface.grid @ perm.T, atol=1e-12)
     np.testing.assert_allclose(c1.compensated.grid, c0.compensated.grid @ perm.T, atol=1e-12)
     np.testing.assert_allclose(c1.points_compensated, c0.points_compensated @ perm.T, atol=1e-12)
+    # the NC field of the wall is the upright part's field turned (a tool of radius 0: the tips are
+    # the surface points)
+    q = c0.surface.grid.reshape(-1, 3)[::7]
+    np.testing.assert_allclose(c1.field(0.0, "clamp")(q @ perm.T), c0.field(0.0, "clamp")(q) @ perm.T, atol=1e-9)
+
+
+def test_a_wall_is_compensated_end_to_end(tmp_path):
+    # a flat wall x = 0 facing +x, measured over y 0..80, z -40..0 with dF = 20 sin(y / 9) µm and
+    # 2 µm noise; a ball-end R4 finishing program touches it: centre (4, y, z), tip (4, y, z - 4)
+    rng = np.random.default_rng(3)
+    yz = np.array([(y, z) for y in np.arange(0, 81, 2.5) for z in np.arange(-40, 0.1, 2.5)])
+    df = 0.02 * np.sin(yz[:, 0] / 9)
+    rows = ["x,y,z,i,j,k,dev"] + [f"0,{y},{z},1,0,0,{d:.6f}" for (y, z), d in zip(yz, df + rng.normal(0, 0.002, len(yz)))]
+    (tmp_path / "wall.csv").write_text("\n".join(rows) + "\n")
+    lines = ["G21 G90 G17", "G0 X20 Y0 Z0", "G0 X4 Y0 Z-10"]
+    for i, z in enumerate(np.arange(-10, -35, -5.0)):
+        lines += [f"G1 Z{z:g} F500", f"G1 Y{80 if i % 2 == 0 else 0} F500"]
+    lines += ["G0 X20", "M2"]
+    (tmp_path / "wall.ngc").write_text("\n".join(lines) + "\n")
+    r = CliRunner().invoke(main, ["compensate", str(tmp_path / "wall.csv"), "--program", str(tmp_path / "wall.ngc"),
+                                  "-o", str(tmp_path / "c.ngc"), "--tool-radius", "4"])
+    assert r.exit_code == 0, r.output
+    # every cutting point moved along x only, by −dF at its contact point (y, z + 4 - 4) = (y, z)
+    moves = [(float(m.group(1)), float(m.group(2))) for m in
+             re.finditer(r"X(-?[\d.]+) Y(-?[\d.]+)", (tmp_path / "c.ngc").read_text())]
+    got = np.array([(x - 4, y) for x, y in moves if 3.9 < x < 4.1])
+    assert len(got) > 100
+    np.testing.assert_allclose(got[:, 0], -0.02 * np.sin(got[:, 1] / 9), atol=0.004)
 
 
 def test_a_tilted_part_is_analysed_in_its_own_plane(bench):
@@ -268,10 +301,15 @@ def test_analyze_and_compensate_cli(tmp_path, bench):
     assert set(a["moran"]) >= {"I", "expected", "variance_normality", "variance_randomization", "z_normality",
                                "z_randomization", "p_value", "systematic", "weights"}
     assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None}
-    r = CliRunner().invoke(main, [
-        "compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
-        "--tool-radius", "4", "--extent", "0,80,0,60", "--surface", str(tmp_path / "c.step"),
-        "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"])
+    args = ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
+            "--tool-radius", "4", "--extent", "0,80,0,60", "--surface", str(tmp_path / "c.step"),
+            "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"]
+    # the program plunges at X0 Y0, a tool radius beyond the tips of the compensated surface: by
+    # default refused, nothing written
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 1 and "outside the field's domain" in r.output, r.output
+    assert not any((tmp_path / f).exists() for f in ("c.ngc", "c.step", "pts.csv", "c.json"))
+    r = CliRunner().invoke(main, args + ["--outside", "clamp"])
     assert r.exit_code == 0, r.output
     j = json.loads((tmp_path / "c.json").read_text())
     assert {"n_points", "moran", "deviation", "systematic", "random"} <= set(j)

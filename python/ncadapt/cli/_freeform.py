@@ -111,13 +111,16 @@ def _extent(ctx, param, value):
                    "extrapolated into it (default: the measured area).")
 @click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any program displacement exceeds this, mm.")
+@click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
+              help="Program points beyond the compensated surface (the measured area, or --extent): refuse, hold "
+                   "the nearest edge value, or extrapolate the thin-plate spline.")
 @click.option("--surface", "surface_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Compensated surface, .step/.stp or .igs/.iges.")
 @click.option("--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points.")
 @_moran_options
 @handle_errors
 def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, limit,
-               surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, json_path,
+               outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, json_path,
                report_path):
     """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
     surface and compensated points."""
@@ -144,7 +147,7 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         corr = None
         if program is not None:
             say(f"correcting {program}")
-            corr = ncmod.read(program).correct_to(output, c.field(tool_radius), limit=limit, progress=say)
+            corr = ncmod.read(program).correct_to(output, c.field(tool_radius, outside), limit=limit, progress=say)
         if surface_path is not None:
             say(f"writing {surface_path}")
             cad.write(c.compensated, surface_path)

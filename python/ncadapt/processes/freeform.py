@@ -205,14 +205,35 @@ class Compensation:
     points_compensated: np.ndarray  # (n, 3) the measured points' nominals moved by −dF n
     frame: Frame  # the (u, v) of the surface grid
 
-    def field(self, tool_radius: float = 0.0, outside: str = "clamp") -> ScatteredField:
-        """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R."""
+    def field(self, tool_radius: float = 0.0, outside: str = "error") -> "FramedField":
+        """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R
+        (its axis along z), interpolated over the frame's (u, v): the tips of a wall seen from +x
+        are spread over (y, z). ``outside`` (error|clamp|extrapolate): tool positions beyond the
+        surface grid — the measured area, or ``--extent``."""
         s = self.surface
         U, V = np.meshgrid(s.u, s.v, indexing="ij")
         p = s.point(U, V).reshape(-1, 3)
         n = s.normal(U, V).reshape(-1, 3)
         tip = p + tool_radius * n - tool_radius * np.array([0.0, 0.0, 1.0])
-        return ScatteredField(tip, -self.df_grid.reshape(-1, 1) * n, outside=outside, source="compensation")
+        return FramedField(self.frame, ScatteredField(self.frame.local(tip), -self.df_grid.reshape(-1, 1) * n,
+                                                      outside=outside, source="compensation"))
+
+
+class FramedField:
+    """A field over a frame's (u, v): world points are put in frame coordinates (u, v, w) before
+    ``inner`` (a field over their first two) is evaluated; displacements stay in world axes."""
+
+    def __init__(self, frame: Frame, inner: ScatteredField):
+        self.frame, self.inner = frame, inner
+        self.outside = inner.outside
+        # the world (x, y) box the clearance check of `correct` uses: only for a part seen along z
+        self.bounds = inner.bounds if np.allclose(np.abs(frame.axes[2]), [0, 0, 1]) else None
+
+    def __call__(self, points) -> np.ndarray:
+        return self.inner(self.frame.local(np.asarray(points, float)))
+
+    def __repr__(self):
+        return f"FramedField({self.frame.names}, {self.inner!r})"
 
 
 def compensate(surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None) -> Compensation:
