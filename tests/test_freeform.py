@@ -519,3 +519,57 @@ def test_auto_chooses_the_smoothest_passing_setting_or_says_none_passed(tmp_path
     # the columns alternate 0 / 20 µm: a mean of 10 µm, which the offset test sees
     assert j["auto"]["passed"] is False and j["verdict"]["systematic"] is True and "offset" in j["verdict"]["by"]
     assert set(j["offset"]) == {"mean", "t", "p_value"}
+
+
+def test_units_of_dmis_qif_and_unitless_files(tmp_path):
+    # the same four points written in inches: read back in mm (25.4 mm per inch, exact)
+    nom_in, meas_in = NOM / 25.4, MEAS / 25.4
+    dmis = ["DMISMN/'inch part',05.0", "UNITS/INCH,ANGDEC"]
+    for k in range(4):
+        dmis += [f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*nom_in[k], *NRM[k])))}",
+                 f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*meas_in[k], *NRM[k])))}"]
+    (tmp_path / "in.dmo").write_text("\n".join(dmis + ["ENDFIL"]) + "\n")
+    m = measure.read(tmp_path / "in.dmo")
+    np.testing.assert_allclose(m.nominal, NOM, atol=1e-12)
+    np.testing.assert_allclose(m.deviation, DEV, atol=1e-12)
+    with pytest.raises(InputError, match="UNITS/INCH disagrees with --units mm") as e:
+        measure.read(tmp_path / "in.dmo", units="mm")
+    assert e.value.line == 2
+    # a change of units mid-file applies to what follows it; polar points are refused
+    (tmp_path / "mixed.dmo").write_text("\n".join(dmis[:4] + ["UNITS/MM,ANGDEC"] + [
+        f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*NOM[k], *NRM[k])))}\n"
+        f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*MEAS[k], *NRM[k])))}" for k in (1, 2, 3)]) + "\n")
+    np.testing.assert_allclose(measure.read(tmp_path / "mixed.dmo").deviation, DEV, atol=1e-12)
+    (tmp_path / "pol.dmo").write_text("DMISMN/'p',05.0\nF(P1)=FEAT/POINT,POL,10,45,0,0,0,1\n")
+    with pytest.raises(InputError, match="only Cartesian"):
+        measure.read(tmp_path / "pol.dmo")
+    # QIF with FileUnits in inches
+    nominals = "".join(f'<PointFeatureNominal id="{10 + k}"><Location>{" ".join(map(_r, nom_in[k]))}</Location>'
+                       f'<Normal>{" ".join(map(str, NRM[k]))}</Normal></PointFeatureNominal>' for k in range(4))
+    meas = "".join(f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{10 + k}</FeatureItemId>'
+                   f'<Location>{" ".join(map(_r, meas_in[k]))}</Location></PointFeatureMeasurement>' for k in range(4))
+    (tmp_path / "in.qif").write_text(
+        '<?xml version="1.0"?>\n<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">\n<FileUnits><PrimaryUnits>'
+        "<LinearUnit><SIUnitName>metre</SIUnitName><UnitName>in</UnitName></LinearUnit></PrimaryUnits></FileUnits>\n"
+        f"<Features><FeatureNominals>{nominals}</FeatureNominals></Features>\n<MeasurementsResults>"
+        f"<FeatureMeasurements>{meas}</FeatureMeasurements></MeasurementsResults></QIFDocument>\n")
+    np.testing.assert_allclose(measure.read(tmp_path / "in.qif").deviation, DEV, atol=1e-12)
+    # unitless files: --units inch
+    (tmp_path / "in.txt").write_text("".join(" ".join(map(_r, (*nom_in[k], *NRM[k], *meas_in[k]))) + "\n"
+                                             for k in range(4)))
+    np.testing.assert_allclose(measure.read(tmp_path / "in.txt", units="inch").deviation, DEV, atol=1e-12)
+    r = CliRunner().invoke(main, ["analyze", str(tmp_path / "in.dmo"), "--units", "mm"])
+    assert r.exit_code == 2 and "in.dmo:2:1: error: UNITS/INCH disagrees" in r.output
+
+
+def _r(v) -> str:
+    return repr(float(v))
+
+
+def test_a_program_needs_the_tool_radius(tmp_path):
+    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,0.01" for x in range(0, 50, 5) for y in range(0, 50, 5)]
+    (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "p.ngc").write_text("G0 X0 Y0 Z1\nG1 Z0 F100\nG1 X40\nM2\n")
+    r = CliRunner().invoke(main, ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"),
+                                  "-o", str(tmp_path / "o.ngc")])
+    assert r.exit_code == 2 and "--program needs --tool-radius" in r.output and not (tmp_path / "o.ngc").exists()

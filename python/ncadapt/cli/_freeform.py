@@ -22,6 +22,9 @@ def _moran_options(f):
                      show_default=True, help="Significance of the 'systematic' decision."),
         click.option("--probe-radius", type=FiniteRange(0, constants.COORD_MAX), default=0.0, show_default=True,
                      help="The measured points are probe-tip centres of this radius, mm."),
+        click.option("--units", type=click.Choice(["mm", "inch"]), default=None,
+                     help="Length unit of a measurement file that does not declare one (CSV, XYZIJK; DMIS or QIF "
+                          "without a units statement) [default: mm]; a file's own must agree."),
         click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."),
         click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."),
     ]
@@ -47,8 +50,14 @@ def _print_analysis(a) -> None:
     summary(f"points: {a.n_points:,}")
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
     o, v = a.offset, a.verdict
+    if m.p_permutation is None:
+        p_said = f"p {p_text(m.p_value)} (one-sided, normal approximation)"
+    else:  # the smallest a permutation p can be is 1 / (R + 1): no permutation reached I
+        least = m.p_permutation * (m.permutations + 1) < 1.5
+        p_said = (f"p {'≤ ' if least else ''}{m.p_permutation:.3g} (one-sided, {m.permutations} permutations; "
+                  f"normal approximation {p_text(m.p_randomization)})")
     summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
-            f"{m.z_normality:.2f} (normality), p {p_text(m.p_value)} (one-sided: neighbours alike)")
+            f"{m.z_normality:.2f} (normality), {p_said}")
     summary(f"offset: mean {o.mean:+.4f} mm, t {o.t:.2f}, p {p_text(o.p_value)}")
     summary(f"systematic at alpha {v.alpha:g} (Moran's I and the offset each at {v.alpha / 2:g}): "
             + (f"yes, by {' and '.join('the offset' if b == 'offset' else 'Moran' + chr(39) + 's I' for b in v.by)}"
@@ -59,7 +68,7 @@ def _print_analysis(a) -> None:
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @_moran_options
 @handle_errors
-def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_radius, json_path, report_path):
+def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_radius, units, json_path, report_path):
     """Deviations of MEASUREMENTS along the normals and Moran's I: is the error systematic?
 
     MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3.
@@ -70,7 +79,7 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     check_outputs({"measurements": measurements}, {"--json": json_path, "--report": report_path})
     with progress() as say:
         say(f"reading {measurements}")
-        meas = measure.read(measurements, probe_radius=probe_radius)
+        meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
         a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"),
                        **_moran_kw(weights, power, threshold, neighbors, alpha))
@@ -104,8 +113,9 @@ def _extent(ctx, param, value):
 @click.option("--auto", is_flag=True, help="Smoothest filter whose random part has no significant Moran's I.")
 @click.option("--program", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="NC program to correct.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Corrected NC program.")
-@click.option("--tool-radius", type=FiniteRange(min=0), default=0.0, show_default=True,
-              help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre).")
+@click.option("--tool-radius", type=FiniteRange(0, constants.COORD_MAX), default=None,
+              help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre); required with "
+                   "--program (0: the programmed point is the contact point).")
 @click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX",
               help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
                    "extrapolated into it (default: the measured area).")
@@ -120,8 +130,8 @@ def _extent(ctx, param, value):
 @_moran_options
 @handle_errors
 def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, limit,
-               outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, json_path,
-               report_path):
+               outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, units,
+               json_path, report_path):
     """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
     surface and compensated points."""
     from .. import cad, measure
@@ -134,10 +144,13 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
     check_outputs({"measurements": measurements, "input program": program},
                   {"-o": output, "--surface": surface_path, "--points-out": points_out, "--json": json_path,
                    "--report": report_path})
+    if program is not None and tool_radius is None:
+        raise click.UsageError("--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
+                               "programmed point is the contact point); the correction is evaluated at the tool's tip")
     kw = _moran_kw(weights, power, threshold, neighbors, alpha)
     with progress() as say:
         say(f"reading {measurements}")
-        meas = measure.read(measurements, probe_radius=probe_radius)
+        meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
         a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"), **kw)
         say("separating systematic and random error")
@@ -147,7 +160,7 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         corr = None
         if program is not None:
             say(f"correcting {program}")
-            corr = ncmod.read(program).correct_to(output, c.field(tool_radius, outside), limit=limit, progress=say)
+            corr = ncmod.read(program).correct_to(output, c.field(tool_radius or 0.0, outside), limit=limit, progress=say)
         if surface_path is not None:
             say(f"writing {surface_path}")
             cad.write(c.compensated, surface_path)

@@ -1,7 +1,8 @@
-"""Freeform surfaces: compensation from coordinate measurements (Pechenin et al., Vestnik of
-Samara University 15(4), 2016, DOI 10.18287/2541-7533-2016-15-4-252-264).
+"""Freeform surfaces: compensation from coordinate measurements (V. A. Pechenin, "Technique of
+compensating errors in machining of parts with sculptured surfaces", Vestnik of Samara University
+15(4), 2016, DOI 10.18287/2541-7533-2016-15-4-252-264).
 
-measure → :func:`analyze` (deviations, Moran's I: is it systematic?) → :func:`decompose`
+measure → :func:`analyze` (deviations; Moran's I and the offset test: is it systematic?) → :func:`decompose`
 (bilateral filter or smoothing spline: systematic + random, noise diagnostics) → :func:`compensate`
 (the systematic part on the part's surface grid, extrapolated cubically into the unmeasured border;
 the mirrored surface P_c = P − dF·n; a correction field −dF·n for the NC program).
