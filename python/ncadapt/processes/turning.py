@@ -27,16 +27,24 @@ Model
   F₀ = ρ [t_p S_p − ζ S_p² + t_p (x₃ + y₃)(prev) − t_p (x₃ + y₃) − S_p (x₁ + y₁)];
   moving the deflection terms to the left gives the paper's C_Σ (the −ζS_p² term, which the
   paper's linearisation drops from F, is kept).
+- The depth of cut is taken from the programmed radius (the paper's eq. 5): t = r₀ − X₁ − (x₁ + y₁),
+  r₀ the radius before the cut. With the program's radial offset o = X₁ − R from the nominal final
+  radius R = r₀ − t_p, the depth is t_p − o − (x₁ + y₁).
 - Steady state (x₃ = x₃(prev)): with g = e₁ᵀ(S_X + S_Y) λ the radial compliance along λ,
-  F₀ = ρ(t_p S_p − ζS_p²)/(1 + ρ S_p g) and x₁ + y₁ = g F₀ — the closed form the inverse uses.
+  F₀ = ρ(S_p(t_p − o) − ζS_p²)/(1 + ρ S_p g) and w = x₁ + y₁ = g F₀ — the closed form the inverse
+  uses; the factor 1/(1 + ρS_p g) is the depth lost to the deflection.
 
 Inverse problem
 ---------------
-The invariant X₁ − (x₁ + y₁) = const. **Feed mode**: for a deflection δ*, S_p(x3) solves
-g ρ ζ S² + g ρ (δ* − t_p) S + δ* = 0 (the smaller root) within the feed bounds; δ* is chosen as
-large as the bounds allow everywhere (least machining time for the least variation).
-**Path mode**: X₁(x3) = R − δ(x3) at the constant feed — exact on the model, since the depth of
-cut, and so the force, stays the nominal one.
+The invariant X₁ − (x₁ + y₁) = const (eq. 8): the radius r = R + o + w stays R when o = −w. Then
+the depth is t_p again and the deflection is the nominal one, without the feedback factor:
+w = g ρ (S_p t_p − ζ S_p²). **Path mode**: X₁(x3) = R − g ρ (S t_p − ζS²) at a constant feed —
+exact on the model. **Feed mode**: a constant offset o = −δ and S_p(x3) the smaller root of
+g ρ ζ S² − g ρ t_p S + δ = 0 within the feed bounds; δ is chosen as large as the bounds allow
+everywhere (least machining time for the least variation); where the stiff ends cannot reach δ even
+at the largest feed, the deflection there (with the feedback) is the floor of the variation. The
+constant offset finally programmed is the mid-range of the deflection it gives (a fixed point: the
+offset changes the depth, so the deflection).
 
 Choosing one trajectory: dynamic programming over stations along x3 and the spindle speeds of
 the family, minimising machining time Σ Δx3 / (S_p n) (plus, optionally, tool wear by Taylor's law
@@ -240,23 +248,45 @@ class Model:
         v = math.pi * self.cfg.diameter * np.asarray(rpm, float)  # m/min
         return np.interp(v, self.cfg.rho_speed, self.cfg.rho) * self.rho_scale
 
-    def chip_area(self, feed) -> np.ndarray:
+    def chip_area(self, feed, depth=None) -> np.ndarray:
+        """S = S_p t − ζ S_p² (eq. 4), m², at depth t (default the nominal t_p)."""
         s = np.asarray(feed, float)
-        return s * self.cfg.depth - self.zeta * s ** 2
+        t = self.cfg.depth if depth is None else np.asarray(depth, float)
+        return s * t - self.zeta * s ** 2
 
-    def deflection(self, x3, feed, rpm) -> np.ndarray:
-        """Steady-state radial deflection x₁ + y₁, m (closed form)."""
-        g, r, a = self.radial_compliance(x3), self.rho(rpm), self.chip_area(feed)
-        return g * r * a / (1 + r * np.asarray(feed, float) * g)
+    def nominal_deflection(self, x3, feed, rpm) -> np.ndarray:
+        """w = g ρ (S_p t_p − ζ S_p²), m: the radial deflection when the depth of cut is the
+        nominal t_p — which it is where the program's X pre-distortion equals the deflection."""
+        return self.radial_compliance(x3) * self.rho(rpm) * self.chip_area(feed)
+
+    def deflection(self, x3, feed, rpm, offset=0.0) -> np.ndarray:
+        """Steady-state radial deflection w = x₁ + y₁, m (closed form), when the program's radius is
+        ``offset`` (m, + away from the axis) off the nominal final radius: the depth of cut is
+        t_p − offset − w (eq. 5), so w = g ρ (S (t_p − offset) − ζ S²) / (1 + ρ S g)."""
+        g, r, s = self.radial_compliance(x3), self.rho(rpm), np.asarray(feed, float)
+        return g * r * self.chip_area(s, self.cfg.depth - np.asarray(offset, float)) / (1 + r * s * g)
 
     def feed_for(self, x3, rpm, delta) -> np.ndarray:
-        """The feed per revolution that gives the steady deflection δ (the smaller root), m/rev;
-        NaN where no feed does."""
+        """The feed per revolution whose nominal deflection is δ (the program offset by −δ, so the
+        depth is t_p): the smaller root of g ρ ζ S² − g ρ t_p S + δ = 0, m/rev; NaN where no feed
+        reaches δ."""
         g, r, tp = self.radial_compliance(x3), self.rho(rpm), self.cfg.depth
-        A, B, C = g * r * self.zeta, g * r * (delta - tp), delta + 0 * g
+        A, B, C = g * r * self.zeta, -g * r * tp, delta + 0 * g
         disc = B * B - 4 * A * C
         with np.errstate(invalid="ignore"):
             return np.where(disc >= 0, (-B - np.sqrt(np.maximum(disc, 0))) / (2 * A), np.nan)
+
+    def constant_offset(self, x3, feed, rpm) -> tuple[float, np.ndarray]:
+        """The constant program offset −c whose deflection w(−c) has c as its mid-range (the best
+        constant offset: the radius error w − c is symmetric), and that deflection."""
+        c = 0.0
+        for _ in range(200):  # dw/dc = ρSg/(1 + ρSg) < 1: a contraction
+            w = self.deflection(x3, feed, rpm, -c)
+            c_new = 0.5 * float(np.max(w) + np.min(w))
+            if abs(c_new - c) <= 1e-15:
+                break
+            c = c_new
+        return c, self.deflection(x3, feed, rpm, -c)
 
     # --- the paper's 6 × 6 system, revolution by revolution
     def c_sigma(self, x3: float, feed: float, rpm: float) -> tuple[np.ndarray, float]:
@@ -284,19 +314,26 @@ class Model:
 
 @dataclass
 class Plan:
+    """A trajectory and its figures on the model. Every error is a **diameter** measure, mm in
+    :meth:`as_dict`: ``diameter_error_max`` = max |D − D_target| along the shaft, ``diameter_variation``
+    = max D − min D; the constant-feed comparison uses the best constant X offset."""
+
     mode: str
     x3: np.ndarray  # m, stations
     feed: np.ndarray  # m/rev
     rpm: np.ndarray
     deflection: np.ndarray  # m, steady radial deflection at the stations
-    x1_offset: np.ndarray  # m: programmed radius offset (path mode), 0 in feed mode
+    x1_offset: np.ndarray  # m: programmed radius − nominal final radius (path mode: −deflection)
     constant_feed: float  # m/rev, the comparison program's feed
     constant_rpm: float
-    diameter_error_max: float  # m, on the model
+    constant_offset: float  # m: the comparison program's best constant radius offset
+    diameter_error_max: float  # m, on the model: max |D − D_target|
+    diameter_variation: float  # m: max D − min D
     diameter_error_constant_feed: float
+    diameter_variation_constant_feed: float
     machining_time_s: float
     machining_time_constant_feed_s: float
-    constant_feed_same_error: float  # m/rev: the constant feed that gives the same worst error
+    constant_feed_same_error: float  # m/rev: the constant feed that gives the same diameter variation
     machining_time_same_error_s: float
     family_rpm: np.ndarray
     family_feed: np.ndarray  # (speeds, stations) m/rev, NaN outside the bounds
@@ -304,17 +341,21 @@ class Plan:
 
     def as_dict(self) -> dict:
         mm = 1e3
-        same = self.diameter_error_max > 1e-9  # a constant feed can match a non-zero error only
+        same = self.diameter_variation > 1e-9  # a constant feed can match a non-zero variation only
         return {
             "mode": self.mode,
+            "measure": "diameter, mm (error: max |D - D_target|; variation: max D - min D)",
             "diameter_error_max": self.diameter_error_max * mm,
+            "diameter_variation": self.diameter_variation * mm,
             "diameter_error_constant_feed": self.diameter_error_constant_feed * mm,
-            "diameter_variation_ratio": (self.diameter_error_max / self.diameter_error_constant_feed
-                                         if self.diameter_error_constant_feed else 0.0),
+            "diameter_variation_constant_feed": self.diameter_variation_constant_feed * mm,
+            "diameter_variation_ratio": (self.diameter_variation / self.diameter_variation_constant_feed
+                                         if self.diameter_variation_constant_feed else 0.0),
             "machining_time_s": self.machining_time_s,
             "machining_time_constant_feed_s": self.machining_time_constant_feed_s,
             "constant_feed": self.constant_feed * mm,
             "constant_rpm": self.constant_rpm,
+            "constant_offset": self.constant_offset * mm,
             "constant_feed_same_error": self.constant_feed_same_error * mm if same else None,
             "machining_time_same_error_s": self.machining_time_same_error_s if same else None,
             "deflection_target": self.delta * mm,
@@ -323,6 +364,15 @@ class Plan:
                         for a, s, n, d, o in zip(self.x3, self.feed, self.rpm, self.deflection, self.x1_offset)],
         }
 
+    def constant_feed_plan(self) -> "Plan":
+        """The comparison: this plan's stations at the constant feed and speed, with the best
+        constant X offset (what a careful programmer without the model would get)."""
+        import dataclasses
+
+        n = len(self.x3)
+        return dataclasses.replace(self, mode="constant", feed=np.full(n, self.constant_feed),
+                                   rpm=np.full(n, self.constant_rpm), x1_offset=np.full(n, -self.constant_offset))
+
 
 def _time(x3, feed, rpm) -> float:
     """Σ Δx3 / (S n) over the stations (the feed and speed of a station hold up to the next), s."""
@@ -330,7 +380,7 @@ def _time(x3, feed, rpm) -> float:
     return float(np.sum(dx / (feed[:-1] * rpm[:-1] / 60.0)))
 
 
-def _dp(cost, feeds, rpms, dx, feed_change, rpm_change):
+def _dp(cost, feeds, rpms, dx, feed_change, rpm_change, progress=None):
     """Dynamic programming over stations: states are (speed, feed) candidates; the least total
     cost path whose feed and speed change by at most ``feed_change`` and ``rpm_change`` per
     revolution between stations (the revolutions between two stations: Δx3 over the larger of
@@ -341,6 +391,8 @@ def _dp(cost, feeds, rpms, dx, feed_change, rpm_change):
     back = np.zeros((nk, ns), dtype=np.int64)
     dn_ok = np.abs(rpms[:, None] - rpms[None, :])
     for j in range(1, ns):
+        if progress is not None and j % 16 == 0:
+            progress(j / (ns - 1))
         fj, fp = feeds[:, j][:, None], feeds[:, j - 1][None, :]
         revs = dx[j - 1] / np.maximum(fj, fp)
         ok = (np.abs(fj - fp) <= feed_change * revs + 1e-15) & (dn_ok <= rpm_change * revs + 1e-9)
@@ -358,7 +410,7 @@ def _dp(cost, feeds, rpms, dx, feed_change, rpm_change):
 
 
 def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c: float = 300.0,
-         taylor_m: float = 0.25) -> Plan:
+         taylor_m: float = 0.25, progress=None) -> Plan:
     """Plan the trajectory (``mode`` "feed": S_p(x3) and n(x3); "path": X₁(x3) at constant feed)."""
     if mode not in ("feed", "path"):
         raise ValueError(f'mode must be "feed" or "path", got {mode!r}')
@@ -367,9 +419,9 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
     smin, smax = cfg.feed_bounds
     rpms = np.linspace(cfg.rpm_bounds[0], cfg.rpm_bounds[1], max(cfg.speeds, 1))
     # the deflection target: as large as the bounds allow at every station, at some speed
-    d_min = np.array([m.deflection(x3, smin, n) for n in rpms])  # (speeds, stations)
-    d_max = np.array([m.deflection(x3, smax, n) for n in rpms])
+    d_min = np.array([m.nominal_deflection(x3, smin, n) for n in rpms])  # (speeds, stations)
     delta = float(np.max(d_min.min(axis=0)))  # the most compliant station at its best speed, feed at minimum
+    d_max = np.array([m.deflection(x3, smax, n, -delta) for n in rpms])  # the program offset by −δ
     family = np.array([m.feed_for(x3, n, delta) for n in rpms])
     # no root: δ is out of reach of any feed here (a stiff station), so the largest feed; below the
     # smallest feed: this speed cannot keep δ here (NaN, not a candidate)
@@ -379,9 +431,9 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
     # the comparison: constant feed and speed with the same mean feed and speed (set below)
     if mode == "feed":
         # states: per speed, the family's feed and a geometric grid of lower feeds; a state is
-        # allowed where its deflection stays inside [floor, δ] — floor: the least deflection the
-        # stiffest station reaches at the largest feed — so the rate bounds can be met near the
-        # ends without adding to the variation
+        # allowed where its deflection (program offset −δ) stays inside [floor, δ] — floor: the
+        # least deflection the stiffest station reaches at the largest feed — so the rate bounds
+        # can be met near the ends without adding to the variation
         floor = float(np.min(d_max.max(axis=0)))
         grid = np.geomspace(smin, smax, 24)
         st_rpm = np.repeat(rpms, len(grid) + 1)
@@ -389,7 +441,7 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
         for k in range(len(rpms)):
             st_feed[k * (len(grid) + 1)] = np.nan_to_num(family[k], nan=smin)
             st_feed[k * (len(grid) + 1) + 1:(k + 1) * (len(grid) + 1)] = grid[:, None]
-        dfl_states = np.array([m.deflection(x3, st_feed[i], st_rpm[i]) for i in range(len(st_rpm))])
+        dfl_states = np.array([m.deflection(x3, st_feed[i], st_rpm[i], -delta) for i in range(len(st_rpm))])
         allowed = (dfl_states <= delta * (1 + 1e-9)) & (dfl_states >= floor * (1 - 1e-9))
         allowed[::len(grid) + 1] &= np.isfinite(family)
         dx = np.gradient(x3)
@@ -397,67 +449,85 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
         life = (taylor_c / v) ** (1 / taylor_m) * 60.0  # s: Taylor's tool life V T^m = C
         t = dx[None, :] / (st_feed * st_rpm[:, None] / 60.0)
         cost = np.where(allowed, t * (1 + wear_weight / life[:, None]), np.inf)
-        path = _dp(cost, st_feed, st_rpm, np.diff(x3), cfg.feed_change, cfg.rpm_change)
+        path = _dp(cost, st_feed, st_rpm, np.diff(x3), cfg.feed_change, cfg.rpm_change, progress=progress)
         if path is None:
             raise InputError("no trajectory satisfies the feed and speed bounds and their rates of change", cfg.source)
         feed = st_feed[path, np.arange(len(x3))]
         rpm = st_rpm[path]
-        dfl = m.deflection(x3, feed, rpm)
         # the deflection is held (nearly) constant: a constant X offset takes out its mid-range
-        x1 = np.full_like(x3, -0.5 * (dfl.max() + dfl.min()))
+        c, dfl = m.constant_offset(x3, feed, rpm)
+        x1 = np.full_like(x3, -c)
     else:
         feed = np.full_like(x3, 0.5 * (smin + smax))
         rpm = np.full_like(x3, rpms[len(rpms) // 2])
-        dfl = m.deflection(x3, feed, rpm)
-        x1 = -dfl  # pre-distortion: X₁ = R − δ
+        dfl = m.nominal_deflection(x3, feed, rpm)
+        x1 = -dfl  # pre-distortion: X₁ = R − g ρ (S t_p − ζS²); the depth stays t_p
     s_bar, n_bar = float(np.mean(feed)), float(np.mean(rpm))
-    # diameter errors: 2·max|r − R| with, for the constant-feed program too, the best constant offset
-    err = 2 * float(np.max(np.abs(dfl + x1)))
-    err_const = float(np.ptp(m.deflection(x3, s_bar, n_bar)))
-    # the constant feed giving the same worst-case error (at the mean speed): bisection
+    # diameter errors: D − D_target = 2 (o + w), the model's own w at the program's offset
+    r_err = x1 + m.deflection(x3, feed, rpm, x1)
+    err, var = 2 * float(np.max(np.abs(r_err))), 2 * float(np.ptp(r_err))
+    c_const, w_const = m.constant_offset(x3, s_bar, n_bar)
+    err_const, var_const = 2 * float(np.max(np.abs(w_const - c_const))), 2 * float(np.ptp(w_const))
+
+    # the constant feed giving the same diameter variation (at the mean speed): bisection
+    def variation(s):
+        return 2 * float(np.ptp(m.constant_offset(x3, s, n_bar)[1]))
+
     lo, hi = 1e-6 * smin, smax
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if np.ptp(m.deflection(x3, mid, n_bar)) > err:
+        if variation(mid) > var:
             hi = mid
         else:
             lo = mid
     s_same = lo
-    return Plan(mode, x3, feed, rpm, dfl, x1, s_bar, n_bar, err, err_const, _time(x3, feed, rpm),
-                _time(x3, np.full_like(x3, s_bar), np.full_like(x3, n_bar)), s_same,
+    return Plan(mode, x3, feed, rpm, dfl, x1, s_bar, n_bar, c_const, err, var, err_const, var_const,
+                _time(x3, feed, rpm), _time(x3, np.full_like(x3, s_bar), np.full_like(x3, n_bar)), s_same,
                 _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)), rpms, family, delta)
 
 
-def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False) -> str:
-    """Lathe G-code for a plan: G18, G7/G8, G95 feed per revolution, G97 (or G96 constant surface
-    speed) with an S word per block where the speed changes, G1 blocks along the shaft with the
-    plan's F (feed mode) or pre-distorted X (path mode). Z0 is the tailstock centre, the chuck at
-    Z−L; the tool cuts towards the chuck."""
+def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False, tool: int = 1) -> str:
+    """Lathe G-code (LinuxCNC) for a plan.
+
+    Set-up: G18 G21 G90 G40 G80 G54, G7/G8, G95 feed per revolution, ``T<tool> M6 G43`` (tool and
+    its length offset), spindle on, coolant (M8). Approach: X clear of the bar first (a radial move
+    away from the work is safe from any position), then Z to the start, a rapid to 1 mm above the
+    bar and a radial plunge at the smallest feed of the bounds. One G1 per station with the plan's F
+    (feed mode) or pre-distorted X (path mode): a block runs at the lower feed and the higher speed
+    of its two stations, so the deflection stays at or under the target along it. Speed: G97 with an
+    S word (rpm) where it changes, or, with ``css``, G96 with a D limit (the largest speed of the
+    bounds) and an S word (m/min) per block computed at the tool's own diameter at the block's end,
+    so the controller turns at the planned rpm. Retract: X clear, then Z back to the start (away
+    from the chuck), coolant and spindle off. Z0 is the tailstock centre, the chuck at Z−L."""
     mm = 1e3
     r_final = (cfg.diameter / 2 - cfg.depth) * mm
+    r_clear = cfg.diameter / 2 * mm + 2
     xw = (lambda r: 2 * r) if diameter_mode else (lambda r: r)
-    out = [f"(ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode)",
-           "G18 G21 G90 G40 G80", "G7" if diameter_mode else "G8", "G95"]
+    out = [f"(ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode"
+           f"{', constant surface speed' if css else ''})",
+           "G18 G21 G90 G40 G80 G54", "G7" if diameter_mode else "G8", "G95",
+           f"T{tool} M6 G43"]
+
+    def surface_speed(j, n):  # m/min at the tool's diameter at station j
+        return math.pi * 2 * (r_final + p.x1_offset[j] * mm) * n / 1000
+
     n0 = p.rpm[0]
     if css:
-        v = math.pi * cfg.diameter * n0  # m/min
-        out.append(f"G96 D{max(p.rpm):.0f} S{v:.1f} M3")
+        last_s = round(surface_speed(0, n0), 2)
+        out.append(f"G96 D{max(cfg.rpm_bounds[1], float(np.max(p.rpm))):.0f} S{last_s:.2f} M3")
     else:
+        last_s = round(n0)
         out.append(f"G97 S{n0:.0f} M3")
-    # approach clear of the shaft, plunge radially at the first station, then one G1 per station;
-    # a block runs at the lower feed and the higher speed of its two stations, so the deflection
-    # stays at or under the target along it (the compliance changes monotonically between stations)
-    out.append(f"G0 X{xw(cfg.diameter / 2 * mm + 2):.4f} Z{-p.x3[0] * mm:.4f}")
-    f0 = min(p.feed[0], p.feed[1]) if len(p.feed) > 1 else p.feed[0]
-    out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.4f} F{f0 * mm:.4f}")
-    last_s = n0
+    out += ["M8", f"G0 X{xw(r_clear):.4f}", f"G0 Z{-p.x3[0] * mm:.4f}", f"G0 X{xw(r_clear - 1):.4f}"]
+    out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.4f} F{cfg.feed_bounds[0] * mm:.4f}")
     for j in range(1, len(p.x3)):
         f = min(p.feed[j - 1], p.feed[j])
         n = max(p.rpm[j - 1], p.rpm[j])
         words = [f"G1 X{xw(r_final + p.x1_offset[j] * mm):.4f} Z{-p.x3[j] * mm:.4f} F{f * mm:.4f}"]
-        if not css and abs(n - last_s) >= 0.5:
-            words.append(f"S{n:.0f}")
-            last_s = n
+        sv = round(surface_speed(j, n), 2) if css else round(n)
+        if sv != last_s:
+            words.append(f"S{sv:.2f}" if css else f"S{sv:.0f}")
+            last_s = sv
         out.append(" ".join(words))
-    out += [f"G0 X{xw(cfg.diameter / 2 * mm + 2):.4f}", "M5", "M2"]
+    out += [f"G0 X{xw(r_clear):.4f}", f"G0 Z{-p.x3[0] * mm:.4f}", "M9", "M5", "M2"]
     return "\n".join(out) + "\n"
