@@ -98,6 +98,16 @@ class Config:
     source: str = ""
 
 
+#: Physical bounds of the configuration (the paper's units): ρ (kgf/mm², the paper's 210–290; ten
+#: times the hardest steels' specific cutting force), its speeds (m/min), the force shares λ, the
+#: stiffness entries (kgf/mm; the paper's are 10³–10⁵), feed (mm/rev) and spindle speed (rpm).
+RHO_MAX = 5_000.0
+RHO_SPEED_MAX = 10_000.0
+LAMBDA_MAX = 10.0
+STIFFNESS_MAX = 1e9
+FEED_MAX = 5.0
+RPM_MAX = 100_000.0
+
 #: Bounds of the planning work: stations along the shaft, spindle speeds of the family, and both.
 STATIONS_MAX = 100_000
 SPEEDS_MAX = 1_000
@@ -167,8 +177,8 @@ def load(path) -> Config:
         return v
 
     mm = 1e-3
-    rs = np.asarray(numbers("cut", "rho_speed", positive=True))
-    rho = np.asarray(numbers("cut", "rho", positive=True))
+    rs = np.asarray(numbers("cut", "rho_speed", positive=True, hi=RHO_SPEED_MAX))
+    rho = np.asarray(numbers("cut", "rho", positive=True, hi=RHO_MAX))
     if len(rs) != len(rho) or np.any(np.diff(rs) <= 0):
         fail("cut", "rho_speed", "must increase and match rho in length")
     diameter = number("shaft", "diameter", positive=True, hi=1e4)
@@ -182,25 +192,47 @@ def load(path) -> Config:
     if stations > STATIONS_MAX or stations * speeds > WORK_MAX:
         fail("plan", "step", f"gives {stations:,.0f} stations x {speeds} speeds; at most {STATIONS_MAX:,} "
                              f"stations and {WORK_MAX:,} stations x speeds")
+    if stations < 1:
+        fail("plan", "step", f"must be at most end - start = {end - start:g} mm (two stations at least)")
+    depth = number("cut", "depth", positive=True)
+    if not depth < diameter / 2:
+        fail("cut", "depth", f"must be < {diameter / 2:g} mm, the bar's radius, got {depth:g}")
+    lam = numbers("cut", "lambda", 3, hi=LAMBDA_MAX)
+    if not (lam[0] > 0 and lam[1] > 0 and lam[2] >= 0):
+        fail("cut", "lambda", "must be (radial > 0, tangential > 0, axial >= 0): the radial force pushes the tool "
+                              f"away from the work and the tangential force opposes the cut, got {lam}")
+    stiff = {key: numbers("stiffness", key, 6, lo=-STIFFNESS_MAX, hi=STIFFNESS_MAX)
+             for key in ("chuck", "tailstock", "tool")}
+    feed_bounds = numbers("bounds", "feed", 2, positive=True, hi=FEED_MAX)
+    rpm_bounds = numbers("bounds", "spindle_rpm", 2, positive=True, hi=RPM_MAX)
     cfg = Config(
         diameter=diameter * mm, length=length * mm,
         youngs=number("shaft", "youngs_modulus", positive=True, hi=1e7) * 1e6,
-        depth=number("cut", "depth", positive=True, hi=diameter / 2) * mm,
+        depth=depth * mm,
         phi=math.radians(number("cut", "plan_angle", positive=True, hi=179)),
         phi1=math.radians(number("cut", "trailing_angle", positive=True, hi=179)),
-        lam=np.asarray(numbers("cut", "lambda", 3), float), rho_speed=rs, rho=rho * KGF * 1e6,
-        chuck=_sym(numbers("stiffness", "chuck", 6), KGF / mm), tail=_sym(numbers("stiffness", "tailstock", 6), KGF / mm),
-        tool=_sym(numbers("stiffness", "tool", 6), KGF / mm),
-        feed_bounds=tuple(x * mm for x in numbers("bounds", "feed", 2)),
-        rpm_bounds=tuple(numbers("bounds", "spindle_rpm", 2)),
-        feed_change=number("bounds", "feed_change", positive=True) * mm,
-        rpm_change=number("bounds", "rpm_change", positive=True),
+        lam=np.asarray(lam, float), rho_speed=rs, rho=rho * KGF * 1e6,
+        chuck=_sym(stiff["chuck"], KGF / mm), tail=_sym(stiff["tailstock"], KGF / mm),
+        tool=_sym(stiff["tool"], KGF / mm),
+        feed_bounds=tuple(x * mm for x in feed_bounds),
+        rpm_bounds=tuple(rpm_bounds),
+        feed_change=number("bounds", "feed_change", positive=True, hi=FEED_MAX) * mm,
+        rpm_change=number("bounds", "rpm_change", positive=True, hi=RPM_MAX) * 1.0,
         start=start * mm, end=end * mm, step=step * mm, speeds=speeds, source=str(path))
     if not 0 < cfg.feed_bounds[0] < cfg.feed_bounds[1] or not 0 < cfg.rpm_bounds[0] <= cfg.rpm_bounds[1]:
         fail("bounds", "feed", "and spindle_rpm must be increasing positive pairs")
+    if cfg.phi + cfg.phi1 >= math.pi:
+        fail("cut", "trailing_angle", "and plan_angle must add up to less than 180 degrees")
     for name, key in (("chuck", "chuck"), ("tail", "tailstock"), ("tool", "tool")):
         if np.any(np.linalg.eigvalsh(getattr(cfg, name)) <= 0):
             fail("stiffness", key, "is not positive definite")
+    # the radial compliance along the force must be positive everywhere along the shaft, or the
+    # force would pull the tool into the work (the off-diagonal terms can do that)
+    x3 = np.linspace(0, cfg.length, 201)
+    g = Model(cfg).radial_compliance(x3)
+    if not np.all(g > 0):
+        fail("cut", "lambda", f"with these stiffness matrices gives a radial compliance <= 0 at x3 = "
+                              f"{x3[np.argmin(g)] * 1e3:g} mm: the force would pull the tool into the work")
     return cfg
 
 

@@ -179,8 +179,9 @@ def read_program(path, length: float | None = None) -> list[Move]:
                 raise InputError("G96 without a D spindle-speed limit: the speed would grow without bound "
                                  "near the axis", path, ln, 1)
             moves.append(Move(ln, z, z_new, x, x_new, f, s, css, cap))
-        elif motion == 0 and moved and x is not None and z is not None:
-            moves.append(Move(ln, z, z_new, x, x_new, 0.0, 0.0, False, math.inf))  # a rapid: checked, not cut
+        elif motion == 0 and moved and x_new is not None and z_new is not None:  # a rapid: checked, not cut
+            moves.append(Move(ln, z_new if z is None else z, z_new, x_new if x is None else x, x_new, 0.0, 0.0, False,
+                              math.inf))
         x, z = x_new, z_new
     return moves
 
