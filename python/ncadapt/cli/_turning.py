@@ -41,20 +41,27 @@ def turning() -> None:
 @click.option("--css", is_flag=True,
               help="Constant surface speed: G96 with a D rpm limit and the surface speed (m/min) per block at the "
                    "tool's diameter, so the spindle turns at the planned rpm (default: G97 with S rpm per block).")
-@click.option("--tool", type=click.IntRange(1, 99999), default=1, show_default=True,
-              help="Tool number of the program's tool call (T<n> M6 G43).")
+@click.option("--tool", type=click.IntRange(1, 99), default=1, show_default=True,
+              help="Tool number of the program's tool call (LinuxCNC T<n> M6 G43, Fanuc T<nn><nn>, Sinumerik T<n> D1).")
+@click.option("--dialect", type=click.Choice(["linuxcnc", "fanuc", "sinumerik"]), default="linuxcnc",
+              show_default=True,
+              help="Controller of the program: LinuxCNC (G7/G8, G95, G96 D), Fanuc lathe (G-code system A: G99, "
+                   "G50 S limit, diameter programming), Sinumerik (DIAMON, G95, LIMS=).")
 @click.option("--wear-weight", type=FiniteRange(min=0), default=0.0, show_default=True,
               help="Weight of tool wear (Taylor's law) in the cost, s per tool life.")
 @json_option
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report: the feed/speed/position family and the diameter profiles.")
 @handle_errors
-def plan(config, mode, output, radius_mode, css, tool, wear_weight, json_path, report_path):
+def plan(config, mode, output, radius_mode, css, tool, dialect, wear_weight, json_path, report_path):
     """Plan the trajectory for the shaft in CONFIG (TOML, the paper's units)."""
     from ..processes import turning as tu
     from .._io import atomic_write
 
     check_outputs({"configuration": config}, {"-o": output, "--json": json_path, "--report": report_path})
+    if dialect == "fanuc" and radius_mode:
+        raise click.BadParameter("a Fanuc lathe programs X as a diameter (radius programming is a machine "
+                                 "parameter); drop --radius-mode", param_hint="'--dialect'")
     cfg = tu.load(config)
     with _bar("planning") as say:
         p = tu.plan(cfg, mode, wear_weight=wear_weight, progress=say)
@@ -66,7 +73,8 @@ def plan(config, mode, output, radius_mode, css, tool, wear_weight, json_path, r
             + (f", a constant feed with the same variation {d['constant_feed_same_error']:.4f} mm/rev takes "
                f"{d['machining_time_same_error_s']:.1f} s" if d["machining_time_same_error_s"] is not None else ""))
     if output:
-        atomic_write(output, tu.program(p, cfg, diameter_mode=not radius_mode, css=css, tool=tool).encode())
+        atomic_write(output, tu.program(p, cfg, diameter_mode=not radius_mode, css=css, tool=tool,
+                                           dialect=dialect).encode())
         summary(f"wrote {output}")
     if json_path:
         write_json(json_path, {"config": str(config), **d})
@@ -82,10 +90,12 @@ def plan(config, mode, output, radius_mode, css, tool, wear_weight, json_path, r
                    "of ±σ/2 along the cut), 0 … 0.5.")
 @click.option("--stiffness-sigma", type=FiniteRange(0, 0.5), default=0.0, show_default=True,
               help="Relative scatter σ of the stiffness (a log-normal factor exp(σN) per run), 0 … 0.5.")
+@click.option("--dialect", type=click.Choice(["linuxcnc", "fanuc", "sinumerik"]), default="linuxcnc",
+              show_default=True, help="How PROGRAM is read: LinuxCNC, Fanuc lathe (G-code system A) or Sinumerik.")
 @seed_option
 @json_option
 @handle_errors
-def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
+def simulate(config, program, rho_sigma, stiffness_sigma, dialect, seed, json_path):
     """Turn the shaft of CONFIG with PROGRAM on the virtual lathe: the diameter along the shaft."""
     from ..processes import turning as tu
     from ..sim import turning as st
@@ -94,7 +104,7 @@ def simulate(config, program, rho_sigma, stiffness_sigma, seed, json_path):
     cfg = tu.load(config)
     with _bar("turning") as say:
         prof = st.simulate(cfg, program, rho_sigma=rho_sigma, stiffness_sigma=stiffness_sigma, seed=seed,
-                           progress=say)
+                           progress=say, dialect=dialect)
     d = prof.as_dict()
     summary(f"{program}: diameter {d['diameter_min']:.4f} .. {d['diameter_max']:.4f} mm (target "
             f"{d['diameter_target']:.3f}; max |D − target| {d['diameter_error_max'] * 1000:.1f} µm, variation "

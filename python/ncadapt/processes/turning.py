@@ -64,7 +64,7 @@ from .._io import read_text
 from ..errors import InputError, cut
 
 KGF = 9.80665  # N
-__all__ = ["Config", "load", "Model", "Plan", "plan", "program"]
+__all__ = ["Config", "DIALECTS", "load", "Model", "Plan", "plan", "program"]
 
 
 def _sym(v, scale: float) -> np.ndarray:
@@ -518,48 +518,83 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
                 _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)), rpms, family, delta)
 
 
-def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False, tool: int = 1) -> str:
-    """Lathe G-code (LinuxCNC) for a plan.
+#: The controllers a lathe program is written for.
+DIALECTS = ("linuxcnc", "fanuc", "sinumerik")
 
-    Set-up: G18 G21 G90 G40 G80 G54, G7/G8, G95 feed per revolution, ``T<tool> M6 G43`` (tool and
-    its length offset), spindle on, coolant (M8). Approach: X clear of the bar first (a radial move
-    away from the work is safe from any position), then Z to the start, a rapid to 1 mm above the
-    bar and a radial plunge at the smallest feed of the bounds. One G1 per station with the plan's F
-    (feed mode) or pre-distorted X (path mode): a block runs at the lower feed and the higher speed
-    of its two stations, so the deflection stays at or under the target along it. Speed: G97 with an
-    S word (rpm) where it changes, or, with ``css``, G96 with a D limit (the largest speed of the
-    bounds) and an S word (m/min) per block computed at the tool's own diameter at the block's end,
-    so the controller turns at the planned rpm. Retract: X clear, then Z back to the start (away
-    from the chuck), coolant and spindle off. Z0 is the tailstock centre, the chuck at Z−L."""
+
+def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False, tool: int = 1,
+            dialect: str = "linuxcnc") -> str:
+    """Lathe G-code for a plan, for ``dialect``:
+
+    - ``linuxcnc``: G18 G21 G90 G40 G80 G54, G7 (diameter) or G8 (radius), G95 feed per revolution,
+      ``T<tool> M6 G43``; G96 with a ``D`` rpm limit or G97; M2 at the end (checked by rs274);
+    - ``fanuc`` (lathe, G-code system A): ``%``, ``O1000``, G18 G21 G40 G54 G99 (feed per
+      revolution), ``T<tool><tool>`` (tool and its offset, e.g. T0101), ``G50 S<limit>`` (the
+      spindle limit) before G96/G97, diameter programming (the Fanuc lathe default; radius
+      programming is a parameter, so ``diameter_mode=False`` is refused), M30 and ``%``;
+    - ``sinumerik``: G18 G71 G90 G40 G54, DIAMON (diameter) or DIAMOF (radius), G95, ``T<tool> D1``,
+      ``LIMS=<limit>`` and G96/G97, M30.
+
+    The same in every dialect: spindle on, coolant on (M8), the approach with X clear of the bar
+    first (a radial move away from the work is safe from any position), then Z to the start, a rapid
+    to 1 mm above the bar and a radial plunge at the smallest feed of the bounds; one G1 per station
+    with the plan's F (feed mode) or pre-distorted X (path mode), a block at the lower feed and the
+    higher speed of its two stations, so the deflection stays at or under the target along it. Speed:
+    G97 with an S word (rpm) where it changes, or, with ``css``, G96 with the limit (the largest
+    speed of the bounds) and an S word (m/min) per block computed at the tool's own diameter at the
+    block's end, so the controller turns at the planned rpm. Retract: X clear, then Z back to the
+    start (away from the chuck), coolant and spindle off. Z0 is the tailstock centre, the chuck at
+    Z−L."""
+    if dialect not in DIALECTS:
+        raise ValueError(f"dialect must be one of {', '.join(DIALECTS)}, got {dialect!r}")
+    if dialect == "fanuc" and not diameter_mode:
+        raise InputError("a Fanuc lathe programs X as a diameter (radius programming is a machine parameter, not a "
+                         "G code): drop --radius-mode for --dialect fanuc")
     mm = 1e3
     r_final = (cfg.diameter / 2 - cfg.depth) * mm
     r_clear = cfg.diameter / 2 * mm + 2
     xw = (lambda r: 2 * r) if diameter_mode else (lambda r: r)
-    out = [f"(ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode"
-           f"{', constant surface speed' if css else ''})",
-           "G18 G21 G90 G40 G80 G54", "G7" if diameter_mode else "G8", "G95",
-           f"T{tool} M6 G43"]
+    limit = max(cfg.rpm_bounds[1], float(np.max(p.rpm)))
+    what = (f"ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode"
+            f"{', constant surface speed' if css else ''}")
+    if dialect == "linuxcnc":
+        out = [f"({what})", "G18 G21 G90 G40 G80 G54", "G7" if diameter_mode else "G8", "G95", f"T{tool} M6 G43"]
+    elif dialect == "fanuc":
+        out = ["%", f"O1000 ({what.upper()})", "G18 G21 G40 G54 G99", f"T{tool:02d}{tool:02d}", f"G50 S{limit:.0f}"]
+    else:
+        out = [f"; {what}", "G18 G71 G90 G40 G54", "DIAMON" if diameter_mode else "DIAMOF", "G95", f"T{tool} D1",
+               f"LIMS={limit:.0f}"]
+
+    dp = 3 if dialect == "fanuc" else 4  # Fanuc IS-B: least input increment 0.001 mm
 
     def surface_speed(j, n):  # m/min at the tool's diameter at station j
         return math.pi * 2 * (r_final + p.x1_offset[j] * mm) * n / 1000
 
     n0 = p.rpm[0]
+    m3 = "M03" if dialect == "fanuc" else "M3"
     if css:
         last_s = round(surface_speed(0, n0), 2)
-        out.append(f"G96 D{max(cfg.rpm_bounds[1], float(np.max(p.rpm))):.0f} S{last_s:.2f} M3")
+        out.append(f"G96 D{limit:.0f} S{last_s:.2f} M3" if dialect == "linuxcnc" else f"G96 S{last_s:.2f} {m3}")
     else:
         last_s = round(n0)
-        out.append(f"G97 S{n0:.0f} M3")
-    out += ["M8", f"G0 X{xw(r_clear):.4f}", f"G0 Z{-p.x3[0] * mm:.4f}", f"G0 X{xw(r_clear - 1):.4f}"]
-    out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.4f} F{cfg.feed_bounds[0] * mm:.4f}")
+        out.append(f"G97 S{n0:.0f} {m3}")
+    out += ["M08" if dialect == "fanuc" else "M8", f"G0 X{xw(r_clear):.{dp}f}", f"G0 Z{-p.x3[0] * mm:.{dp}f}",
+            f"G0 X{xw(r_clear - 1):.{dp}f}"]
+    out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.{dp}f} F{cfg.feed_bounds[0] * mm:.4f}")
     for j in range(1, len(p.x3)):
         f = min(p.feed[j - 1], p.feed[j])
         n = max(p.rpm[j - 1], p.rpm[j])
-        words = [f"G1 X{xw(r_final + p.x1_offset[j] * mm):.4f} Z{-p.x3[j] * mm:.4f} F{f * mm:.4f}"]
+        words = [f"G1 X{xw(r_final + p.x1_offset[j] * mm):.{dp}f} Z{-p.x3[j] * mm:.{dp}f} F{f * mm:.4f}"]
         sv = round(surface_speed(j, n), 2) if css else round(n)
         if sv != last_s:
             words.append(f"S{sv:.2f}" if css else f"S{sv:.0f}")
             last_s = sv
         out.append(" ".join(words))
-    out += [f"G0 X{xw(r_clear):.4f}", f"G0 Z{-p.x3[0] * mm:.4f}", "M9", "M5", "M2"]
+    out += [f"G0 X{xw(r_clear):.{dp}f}", f"G0 Z{-p.x3[0] * mm:.{dp}f}"]
+    if dialect == "linuxcnc":
+        out += ["M9", "M5", "M2"]
+    elif dialect == "fanuc":
+        out += ["M09", "M05", "M30", "%"]
+    else:
+        out += ["M9", "M5", "M30"]
     return "\n".join(out) + "\n"

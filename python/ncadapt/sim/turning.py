@@ -96,20 +96,54 @@ class Profile:
                 "profile": [{"x3": float(a), "diameter": float(d)} for a, d in zip(self.x3[::10], self.diameter[::10])]}
 
 
-_KNOWN_G = {0, 1, 4, 7, 8, 17, 18, 19, 21, 40, 43, 49, 54, 55, 56, 57, 58, 59, 61, 64, 80, 90, 95, 96, 97}
+_KNOWN_G = {
+    "linuxcnc": {0, 1, 4, 7, 8, 17, 18, 19, 21, 40, 43, 49, 54, 55, 56, 57, 58, 59, 61, 64, 80, 90, 95, 96, 97},
+    "fanuc": {0, 1, 4, 18, 21, 40, 50, 54, 55, 56, 57, 58, 59, 80, 96, 97, 99},
+    "sinumerik": {0, 1, 4, 17, 18, 19, 40, 54, 55, 56, 57, 60, 64, 71, 90, 95, 96, 97, 500},
+}
+_SINUMERIK_WORD = re.compile(r"\b(LIMS\s*=\s*([-+]?\d*\.?\d+)|DIAMON|DIAMOF|DIAM90)\b")
 
 
-def read_program(path, length: float | None = None) -> list[Move]:
+def read_program(path, length: float | None = None, dialect: str = "linuxcnc") -> list[Move]:
     """The feed moves of a lathe program (see the module) with their lines, mm; ``length`` (mm)
-    bounds Z: a move beyond the chuck face (Z < −length) is refused."""
+    bounds Z: a move beyond the chuck face (Z < −length) is refused. ``dialect``: how the program
+    is read — ``linuxcnc`` (G7/G8, G95, G96 D), ``fanuc`` (lathe, G-code system A: diameter
+    programming, G99 feed per revolution, G50 S spindle limit, T0101) or ``sinumerik`` (DIAMON/
+    DIAMOF, G95, LIMS=, T1 D1)."""
+    if dialect not in _KNOWN_G:
+        raise ValueError(f"dialect must be one of {', '.join(_KNOWN_G)}, got {dialect!r}")
     path = str(path)
     text = read_text(path)
-    diam, css, cap, per_rev = None, False, math.inf, False
+    fanuc, sinu = dialect == "fanuc", dialect == "sinumerik"
+    diam, css, cap, per_rev = (True if fanuc else None), False, math.inf, False
     motion, x, z, f, s = None, None, None, None, None
+    known = _KNOWN_G[dialect]
     moves = []
     for ln, raw in enumerate(text.splitlines(), 1):
         line = re.sub(r"\(.*?\)|;.*", "", raw).upper()
+        if line.strip() == "%":
+            continue
+        if sinu:
+            for mt in _SINUMERIK_WORD.finditer(line):
+                word = mt.group(1)
+                if word == "DIAMON":
+                    diam = True
+                elif word == "DIAMOF":
+                    diam = False
+                elif word == "DIAM90":
+                    raise InputError("DIAM90 is not simulated; use DIAMON or DIAMOF", path, ln, mt.start() + 1)
+                else:
+                    v = float(mt.group(2))
+                    if not 0 < v <= RPM_MAX:
+                        raise InputError(f"LIMS={mt.group(2)} must be > 0 and at most {RPM_MAX:g} rpm", path, ln,
+                                         mt.start() + 1)
+                    cap = v
+            line = _SINUMERIK_WORD.sub(" ", line)
+            if "=" in line:
+                raise InputError("an assignment (NAME=…) is not simulated on the virtual lathe", path, ln,
+                                 line.find("=") + 1)
         x_new, z_new, xw = x, z, None
+        g50 = False
         for mt in _WORD.finditer(line):
             letter, val, col = mt.group(1), mt.group(2), mt.start() + 1
             v = float(val)
@@ -119,19 +153,22 @@ def read_program(path, length: float | None = None) -> list[Move]:
                 g = round(v, 1)
                 if g in (2, 3):
                     raise InputError("arcs are not simulated on the virtual lathe", path, ln, col)
-                if g == 94:
+                if g == 94 and not fanuc:
                     raise InputError("feed per minute (G94): the virtual lathe needs feed per revolution (G95)",
                                      path, ln, col)
-                if g in (98, 99):
+                if g == 98 and fanuc:
+                    raise InputError("feed per minute (G98): the virtual lathe needs feed per revolution (G99 on a "
+                                     "Fanuc lathe)", path, ln, col)
+                if g in (98, 99) and not fanuc:
                     raise InputError(f"G{g:g}: feed per {'minute' if g == 98 else 'revolution'} on a Fanuc lathe "
-                                     "(G-code system A), a canned-cycle return in LinuxCNC; the virtual lathe reads "
-                                     "LinuxCNC lathe programs: G95 feed per revolution", path, ln, col)
-                if g == 20:
-                    raise InputError("inch units (G20): the virtual lathe reads millimetre programs (G21)", path, ln, col)
+                                     f"(G-code system A), not in {dialect}; read as --dialect fanuc, or use G95 "
+                                     "feed per revolution", path, ln, col)
+                if g == 20 or (sinu and g == 70):
+                    raise InputError(f"inch units (G{g:g}): the virtual lathe reads millimetre programs", path, ln, col)
                 if g == 91:
                     raise InputError("incremental distances (G91) are not simulated; use G90", path, ln, col)
-                if g not in _KNOWN_G:
-                    raise InputError(f"G{g:g} is not simulated on the virtual lathe", path, ln, col)
+                if g not in known:
+                    raise InputError(f"G{g:g} is not simulated on the virtual lathe ({dialect})", path, ln, col)
                 if g in (0, 1):
                     motion = int(g)
                 elif g == 7:
@@ -142,12 +179,16 @@ def read_program(path, length: float | None = None) -> list[Move]:
                     css = True
                 elif g == 97:
                     css = False
-                elif g == 95:
+                elif g in (95, 99):
                     per_rev = True
+                elif g == 50:
+                    g50 = True
             elif letter == "X":
                 xw = (v, col)
             elif letter == "Z":
                 z_new = v
+            elif letter in ("U", "W") and fanuc:
+                raise InputError(f"incremental {letter} words are not simulated; use X and Z", path, ln, col)
             elif letter == "F":
                 if not 0 < v <= FEED_MAX:
                     raise InputError(f"feed F{val} mm/rev must be > 0 and at most {FEED_MAX:g} mm/rev", path, ln, col)
@@ -155,14 +196,20 @@ def read_program(path, length: float | None = None) -> list[Move]:
             elif letter == "S":
                 if not 0 < v <= RPM_MAX:
                     raise InputError(f"S{val} must be > 0 and at most {RPM_MAX:g}", path, ln, col)
-                s = v
-            elif letter == "D":
+                if g50:
+                    cap = v  # Fanuc: G50 S is the spindle limit
+                else:
+                    s = v
+            elif letter == "D" and dialect == "linuxcnc":
                 if not v > 0:
                     raise InputError(f"the G96 speed limit D{val} must be > 0 rpm", path, ln, col)
                 cap = v
+        if g50 and (xw is not None or z_new != z):
+            raise InputError("G50 with X or Z sets the coordinate system: not simulated", path, ln, 1)
         if xw is not None:
             if diam is None:
-                raise InputError("an X word before G7 (diameter) or G8 (radius) mode is set", path, ln, xw[1])
+                raise InputError("an X word before G7 (diameter) or G8 (radius) mode is set" if not sinu else
+                                 "an X word before DIAMON (diameter) or DIAMOF (radius) is set", path, ln, xw[1])
             x_new = xw[0] / 2 if diam else xw[0]
             if x_new < 0:
                 raise InputError(f"X{xw[0]:g} is below the axis", path, ln, xw[1])
@@ -172,12 +219,13 @@ def read_program(path, length: float | None = None) -> list[Move]:
         moved = x_new != x or z_new != z
         if motion == 1 and moved and x is not None and z is not None:
             if not per_rev:
-                raise InputError("a cut before feed per revolution (G95) is set", path, ln, 1)
+                raise InputError(f"a cut before feed per revolution ({'G99' if fanuc else 'G95'}) is set", path, ln, 1)
             if f is None or s is None:
                 raise InputError("a cut before F and S are set", path, ln, 1)
             if css and not math.isfinite(cap):
-                raise InputError("G96 without a D spindle-speed limit: the speed would grow without bound "
-                                 "near the axis", path, ln, 1)
+                raise InputError("G96 without a spindle-speed limit (" + {"linuxcnc": "D", "fanuc": "G50 S",
+                                 "sinumerik": "LIMS="}[dialect] + "): the speed would grow without bound near the "
+                                 "axis", path, ln, 1)
             moves.append(Move(ln, z, z_new, x, x_new, f, s, css, cap))
         elif motion == 0 and moved and x_new is not None and z_new is not None:  # a rapid: checked, not cut
             moves.append(Move(ln, z_new if z is None else z, z_new, x_new if x is None else x, x_new, 0.0, 0.0, False,
@@ -219,7 +267,7 @@ def _force(rho, g, g3, s, a_prev, t0, zeta) -> float:
 
 
 def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_sigma: float = 0.0,
-             seed: int = 1, progress=None) -> Profile:
+             seed: int = 1, progress=None, dialect: str = "linuxcnc") -> Profile:
     """Turn the shaft of ``cfg`` with the program (see the module); ``progress(fraction)`` is
     called as the revolutions go by."""
     for name, v in (("rho_sigma", rho_sigma), ("stiffness_sigma", stiffness_sigma)):
@@ -231,7 +279,7 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
     drift = rho_sigma * rng.uniform(-0.5, 0.5) if rho_sigma else 0.0
     m = tu.Model(cfg, stiffness_scale=ks)
     L = cfg.length * 1e3
-    moves = read_program(program_path, L)
+    moves = read_program(program_path, L, dialect)
     src = str(program_path)
     grid = np.arange(0.0, L + GRID / 2, GRID)  # x3, mm
     stock = np.full(len(grid), cfg.diameter / 2 * 1e3)  # radius, mm
