@@ -344,7 +344,7 @@ HEAD = "G18 G21 G90 G7 G95\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F0.2\n"
     ("G18 G21 G90 G95\nG97 S1000 M3\nG0 X30 Z-20\n", 3, "before G7 (diameter) or G8 (radius)"),
     ("G18 G20 G90 G7 G95\n", 1, "inch units (G20)"),
     ("G18 G21 G91 G7 G95\n", 1, "incremental distances (G91)"),
-    ("G18 G21 G90 G7 G95\nG96 S100 M3\nG0 X30 Z-20\nG1 X16 F0.2\nG1 Z-100\n", 4, "G96 without a D"),
+    ("G18 G21 G90 G7 G95\nG96 S100 M3\nG0 X30 Z-20\nG1 X16 F0.2\nG1 Z-100\n", 4, "G96 without a spindle-speed limit (D)"),
     (HEAD + "G1 Z-400 F0.0001\n", 0, "at most 2,000,000"),
     ("G18 G21 G90 G7 G95\nG97 S1000 M3\nG0 X16 Z-20\nG1 Z-100 F0.2\n", 3, "a rapid move (G0) into the stock"),
     (HEAD + "G76 P1\n", 5, "G76 is not simulated"),
@@ -393,3 +393,63 @@ def test_plan_cli_refuses_bad_configurations(tmp_path, examples):
         p.write_text(text.replace(old, new, 1))
         r = CliRunner().invoke(main, ["turning", "plan", str(p)])
         assert r.exit_code == 2 and f"{p}:" in r.output and "error:" in r.output, r.output
+
+
+# ------------------------------------------------------------------ controllers (issue 20, 8)
+GOLDEN = EXAMPLES / "turning" / "golden"
+
+
+@pytest.mark.parametrize("css,name", [(False, "short_cut_path_fanuc.nc"), (True, "short_cut_path_fanuc_css.nc")])
+def test_fanuc_program_matches_the_golden_file(css, name):
+    """The golden files were checked by hand against the Fanuc lathe manual's rules (see
+    examples/turning/golden/README.md); the program must stay byte for byte what was checked."""
+    c = tu.load(GOLDEN / "short_cut.toml")
+    text = tu.program(tu.plan(c, "path"), c, css=css, dialect="fanuc")
+    assert text == (GOLDEN / name).read_text()
+    lines = text.splitlines()
+    assert lines[0] == lines[-1] == "%" and lines[1].startswith("O1000 (")
+    assert not re.search(r"\bG(90|7|8|95|94)\b", text)  # system A: G90 is a cycle; G7/G8/G95 are not Fanuc's
+    first_cut = next(i for i, ln in enumerate(lines) if ln.startswith("G1 "))
+    assert any("G99" in ln for ln in lines[:first_cut])
+    g50 = next(i for i, ln in enumerate(lines) if ln.startswith("G50 S"))
+    speed = next(i for i, ln in enumerate(lines) if ln.startswith(("G96", "G97")))
+    assert g50 < speed and "T0101" in lines
+    assert all(len(w.split(".")[1]) == 3 for w in re.findall(r"[XZ]-?\d+\.\d+", text))  # IS-B, 0.001 mm
+
+
+def test_programs_of_every_dialect_turn_the_same_part(cfg, feed_plan, tmp_path):
+    res = {}
+    for d in ("linuxcnc", "fanuc", "sinumerik"):
+        f = tmp_path / f"{d}.nc"
+        f.write_text(tu.program(feed_plan, cfg, css=True, dialect=d))
+        res[d] = st.simulate(cfg, f, dialect=d)
+    for d in ("fanuc", "sinumerik"):
+        assert res[d].variation == pytest.approx(res["linuxcnc"].variation, abs=1e-3)  # Fanuc rounds X to 1 µm
+        assert res[d].time_s == pytest.approx(res["linuxcnc"].time_s, rel=1e-3)
+    with pytest.raises(Exception, match="G99: feed per revolution on a Fanuc lathe"):
+        st.simulate(cfg, tmp_path / "fanuc.nc")  # a Fanuc program read as LinuxCNC's is refused, not misread
+    from ncadapt.errors import InputError
+
+    with pytest.raises(InputError, match="Fanuc lathe programs X as a diameter"):
+        tu.program(feed_plan, cfg, diameter_mode=False, dialect="fanuc")
+
+
+def test_sinumerik_program_read_by_nc_gcode_interpreter(cfg, feed_plan):
+    """nc-gcode-interpreter (a Sinumerik-flavoured interpreter) reads the program and reports every
+    block's end position: the plan's X (diameter, DIAMON), Z and F."""
+    nci = pytest.importorskip("nc_gcode_interpreter")
+    import io
+
+    text = tu.program(feed_plan, cfg, dialect="sinumerik")
+    df, state = nci.nc_to_dataframe(io.StringIO(text))
+    rows = df.to_dicts()
+    cuts = [r for r in rows if r.get("gg01_motion") == "G1" and r.get("Z") is not None]
+    r_final = (cfg.diameter / 2 - cfg.depth) * 1e3
+    z = np.array([r["Z"] for r in cuts])
+    x = np.array([r["X"] for r in cuts])
+    f = np.array([r["F"] for r in cuts])
+    # the first G1 is the plunge at x3[0]; then one block per station
+    np.testing.assert_allclose(z[1:], -feed_plan.x3[1:] * 1e3, atol=1e-4)
+    np.testing.assert_allclose(x[1:], 2 * (r_final + feed_plan.x1_offset[1:] * 1e3), atol=1e-4)
+    np.testing.assert_allclose(f[1:], np.minimum(feed_plan.feed[:-1], feed_plan.feed[1:]) * 1e3, atol=1e-4)
+    assert state["symbol_table"]["LIMS"] == pytest.approx(cfg.rpm_bounds[1])
