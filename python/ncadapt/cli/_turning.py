@@ -72,6 +72,11 @@ def plan(config, mode, output, radius_mode, css, tool, dialect, wear_weight, jso
             f"machining time {d['machining_time_s']:.1f} s"
             + (f", a constant feed with the same variation {d['constant_feed_same_error']:.4f} mm/rev takes "
                f"{d['machining_time_same_error_s']:.1f} s" if d["machining_time_same_error_s"] is not None else ""))
+    for b in d["baselines"]:
+        summary(f"  baseline {b['name']}: feed {b['feed']:.3f}"
+                + (f" then {b['finish_feed']:.3f} mm/rev over the last {b['finish_depth']:.2f} mm" if "finish_feed" in b
+                   else " mm/rev") + f", diameter variation {b['diameter_variation'] * 1000:.1f} µm, "
+                f"{b['machining_time_s']:.1f} s")
     if output:
         atomic_write(output, tu.program(p, cfg, diameter_mode=not radius_mode, css=css, tool=tool,
                                            dialect=dialect).encode())

@@ -96,6 +96,16 @@ class Config:
     step: float
     speeds: int
     source: str = ""
+    nose_radius: float | None = None  # m, [cut] nose_radius (optional)
+    rz_max: float | None = None  # m, [bounds] rz_max (optional): Rz = S²/(8 r_ε) ≤ rz_max
+    finish_depth: float | None = None  # m, [plan] finish_depth: the finishing pass of the rough + finish baseline
+    feed_max_rough: float | None = None  # m/rev: the largest feed before the roughness bound
+
+
+def roughness(feed, nose_radius):
+    """Theoretical peak-to-valley height of a turned profile, Rz = S²/(8 r_ε) (the circular-nose
+    approximation, valid while S < r_ε; e.g. Sandvik Coromant's turning formulas), same units."""
+    return np.asarray(feed, float) ** 2 / (8 * nose_radius)
 
 
 #: Physical bounds of the configuration (the paper's units): ρ (kgf/mm², the paper's 210–290; ten
@@ -221,6 +231,28 @@ def load(path) -> Config:
         start=start * mm, end=end * mm, step=step * mm, speeds=speeds, source=str(path))
     if not 0 < cfg.feed_bounds[0] < cfg.feed_bounds[1] or not 0 < cfg.rpm_bounds[0] <= cfg.rpm_bounds[1]:
         fail("bounds", "feed", "and spindle_rpm must be increasing positive pairs")
+    # the roughness bound: Rz = S²/(8 r_ε) ≤ rz_max caps the feed at √(8 r_ε rz_max)
+    if "rz_max" in d.get("bounds", {}):
+        rz = number("bounds", "rz_max", positive=True, hi=1000) * 1e-6  # µm
+        if "nose_radius" not in d.get("cut", {}):
+            fail("bounds", "rz_max", "needs [cut] nose_radius (mm): Rz = S²/(8 r_ε)")
+        re_ = number("cut", "nose_radius", positive=True, hi=10) * mm
+        s_rz = math.sqrt(8 * re_ * rz)
+        if s_rz <= cfg.feed_bounds[0]:
+            fail("bounds", "rz_max", f"allows feeds up to {s_rz * 1e3:.4f} mm/rev (Rz = S²/(8 r_ε)), not above the "
+                                     f"smallest feed of the bounds {cfg.feed_bounds[0] * 1e3:g} mm/rev")
+        cfg.nose_radius, cfg.rz_max = re_, rz
+        cfg.feed_max_rough = cfg.feed_bounds[1]
+        cfg.feed_bounds = (cfg.feed_bounds[0], min(cfg.feed_bounds[1], s_rz))
+    elif "nose_radius" in d.get("cut", {}):
+        cfg.nose_radius = number("cut", "nose_radius", positive=True, hi=10) * mm
+    if "finish_depth" in d.get("plan", {}):
+        fd = number("plan", "finish_depth", positive=True)
+        if not fd < depth:
+            fail("plan", "finish_depth", f"must be < the depth of cut {depth:g} mm")
+        cfg.finish_depth = fd * mm
+    else:
+        cfg.finish_depth = min(0.25e-3, cfg.depth / 2)
     if cfg.phi + cfg.phi1 >= math.pi:
         fail("cut", "trailing_angle", "and plan_angle must add up to less than 180 degrees")
     for name, key in (("chuck", "chuck"), ("tail", "tailstock"), ("tool", "tool")):
@@ -291,12 +323,15 @@ class Model:
         nominal t_p — which it is where the program's X pre-distortion equals the deflection."""
         return self.radial_compliance(x3) * self.rho(rpm) * self.chip_area(feed)
 
-    def deflection(self, x3, feed, rpm, offset=0.0) -> np.ndarray:
+    def deflection(self, x3, feed, rpm, offset=0.0, depth=None) -> np.ndarray:
         """Steady-state radial deflection w = x₁ + y₁, m (closed form), when the program's radius is
         ``offset`` (m, + away from the axis) off the nominal final radius: the depth of cut is
-        t_p − offset − w (eq. 5), so w = g ρ (S (t_p − offset) − ζ S²) / (1 + ρ S g)."""
+        t_p − offset − w (eq. 5), so w = g ρ (S (t_p − offset) − ζ S²) / (1 + ρ S g); ``depth``
+        replaces the nominal t_p (a finishing pass)."""
         g, r, s = self.radial_compliance(x3), self.rho(rpm), np.asarray(feed, float)
-        return g * r * self.chip_area(s, self.cfg.depth - np.asarray(offset, float)) / (1 + r * s * g)
+        tp = self.cfg.depth if depth is None else depth
+        area = np.maximum(self.chip_area(s, tp - np.asarray(offset, float)), 0.0)  # no contact: no force
+        return g * r * area / (1 + r * s * g)
 
     def feed_for(self, x3, rpm, delta) -> np.ndarray:
         """The feed per revolution whose nominal deflection is δ (the program offset by −δ, so the
@@ -308,17 +343,18 @@ class Model:
         with np.errstate(invalid="ignore"):
             return np.where(disc >= 0, (-B - np.sqrt(np.maximum(disc, 0))) / (2 * A), np.nan)
 
-    def constant_offset(self, x3, feed, rpm) -> tuple[float, np.ndarray]:
+    def constant_offset(self, x3, feed, rpm, *, depth=None, left=0.0) -> tuple[float, np.ndarray]:
         """The constant program offset −c whose deflection w(−c) has c as its mid-range (the best
-        constant offset: the radius error w − c is symmetric), and that deflection."""
+        constant offset: the radius error w − c is symmetric), and that deflection. ``left`` (m):
+        the radius a previous pass left over its aim along the stations (adds to the depth)."""
         c = 0.0
         for _ in range(200):  # dw/dc = ρSg/(1 + ρSg) < 1: a contraction
-            w = self.deflection(x3, feed, rpm, -c)
+            w = self.deflection(x3, feed, rpm, -c - left, depth)
             c_new = 0.5 * float(np.max(w) + np.min(w))
             if abs(c_new - c) <= 1e-15:
                 break
             c = c_new
-        return c, self.deflection(x3, feed, rpm, -c)
+        return c, self.deflection(x3, feed, rpm, -c - left, depth)
 
     # --- the paper's 6 × 6 system, revolution by revolution
     def c_sigma(self, x3: float, feed: float, rpm: float) -> tuple[np.ndarray, float]:
@@ -370,6 +406,7 @@ class Plan:
     family_rpm: np.ndarray
     family_feed: np.ndarray  # (speeds, stations) m/rev, NaN outside the bounds
     delta: float
+    baselines: tuple = ()  # dicts: what a programmer without the model would run (see plan)
 
     def as_dict(self) -> dict:
         mm = 1e3
@@ -391,6 +428,7 @@ class Plan:
             "constant_feed_same_error": self.constant_feed_same_error * mm if same else None,
             "machining_time_same_error_s": self.machining_time_same_error_s if same else None,
             "deflection_target": self.delta * mm,
+            "baselines": [dict(b) for b in self.baselines],
             "profile": [{"x3": float(a * mm), "feed": float(s * mm), "spindle_rpm": float(n), "deflection": float(d * mm),
                          "x1_offset": float(o * mm)}
                         for a, s, n, d, o in zip(self.x3, self.feed, self.rpm, self.deflection, self.x1_offset)],
@@ -515,7 +553,46 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
     s_same = lo
     return Plan(mode, x3, feed, rpm, dfl, x1, s_bar, n_bar, c_const, err, var, err_const, var_const,
                 _time(x3, feed, rpm), _time(x3, np.full_like(x3, s_bar), np.full_like(x3, n_bar)), s_same,
-                _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)), rpms, family, delta)
+                _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)), rpms, family, delta,
+                baselines(cfg, m, x3, n_bar))
+
+
+def baselines(cfg: Config, m: Model, x3, rpm: float) -> tuple:
+    """What a programmer without the model would run, on the same model, each with its best
+    constant X offset, at the speed ``rpm``: (1) a constant-feed finish at the largest feed of the
+    bounds (with ``rz_max``: the roughness-limited feed) over the whole depth; (2) rough + finish:
+    a roughing pass of depth t_p − t_f at the largest feed (of the configuration, before the
+    roughness bound) whose barrel leaves the finish at least t_f/2 everywhere (its radial range
+    at most t_f), then the constant-feed finish of depth t_f, whose depth varies by what the
+    roughing left (its barrel, copied at the ratio ρSg/(1 + ρSg)). Diameters, mm; times, s."""
+    mm = 1e3
+    s_fin = cfg.feed_bounds[1]
+    s_rough = cfg.feed_max_rough or s_fin
+    n = np.full_like(x3, rpm)
+    c1, w1 = m.constant_offset(x3, s_fin, rpm)
+    t_fin = _time(x3, np.full_like(x3, s_fin), n)
+    tf = cfg.finish_depth
+
+    def rough(s):
+        return m.constant_offset(x3, s, rpm, depth=cfg.depth - tf)
+
+    if np.ptp(rough(s_rough)[1]) > tf:  # bisection: the largest rough feed whose barrel the finish cleans up
+        lo, hi = cfg.feed_bounds[0], s_rough
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.ptp(rough(mid)[1]) <= tf else (lo, mid)
+        s_rough = lo
+    cr, wr = rough(s_rough)
+    left = wr - cr  # the radius the roughing left over its aim
+    cf, wf = m.constant_offset(x3, s_fin, rpm, depth=tf, left=left)
+    t_r = _time(x3, np.full_like(x3, s_rough), n)
+    return (
+        {"name": "constant-feed finish", "feed": s_fin * mm, "spindle_rpm": rpm, "passes": 1,
+         "diameter_variation": 2 * float(np.ptp(w1)) * mm, "machining_time_s": t_fin},
+        {"name": "rough + finish", "feed": s_rough * mm, "finish_feed": s_fin * mm, "finish_depth": tf * mm,
+         "spindle_rpm": rpm, "passes": 2, "diameter_variation": 2 * float(np.ptp(wf)) * mm,
+         "rough_diameter_variation": 2 * float(np.ptp(wr)) * mm, "machining_time_s": t_r + t_fin},
+    )
 
 
 #: The controllers a lathe program is written for.

@@ -308,8 +308,8 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
     zeta = m.zeta
     lam = cfg.lam
     s_tool = m.s_tool
-    xs, dfl = [], []
     covered = np.zeros(len(grid), bool)
+    defl = np.zeros(len(grid))  # mm, the last revolution's radial deflection there
     t, done = 0.0, 0
     a_cur, a_prev = -1.0, 0.0  # where the next revolution starts; the last axial deflection, m
     no_contact: list = []
@@ -348,9 +348,8 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
             F = _force(rho, float(gs[j]), float(g3s[j]), mv.feed * 1e-3, a_prev, t0, zeta) if t0 > 0 else 0.0
             w = float(gs[j]) * F * 1e3  # mm
             a_prev = float(g3s[j]) * F  # no contact: 0, the next contact is an entry
-            xs.append(a)
-            dfl.append(w)
             covered[lo_i:hi_i] = True
+            defl[lo_i:hi_i] = w
             if F > 0:
                 stock[lo_i:hi_i] = np.minimum(stock[lo_i:hi_i], rp + w)
                 if nc_run is not None:
@@ -365,8 +364,7 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
         if nc_run is not None:
             no_contact.append(tuple(nc_run))
             nc_run = None
-    order = np.argsort(xs, kind="stable")
     x_cut = grid[covered]
-    return Profile(x_cut, 2 * stock[covered], np.interp(x_cut, np.asarray(xs)[order], np.asarray(dfl)[order]), t,
+    return Profile(x_cut, 2 * stock[covered], defl[covered], t,
                    (cfg.diameter - 2 * cfg.depth) * 1e3,
                    [(float(a), float(b), int(c)) for a, b, c in no_contact], done)
