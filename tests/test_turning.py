@@ -488,3 +488,82 @@ def test_roughness_bound_and_baselines(tmp_path, examples):
 
     with pytest.raises(InputError, match=r"\[bounds\] rz_max allows feeds up to 0.0800 mm/rev"):
         tu.load(bad)
+
+
+# ------------------------------------------------------------------ the workpiece model (issue 20, 7)
+def _fe_beam_general(L, ei_of, a, kc=None, kt=None, clamped=False, n=200, nodes=()):
+    """Deflection under a unit load at a (from the tailstock) of an Euler–Bernoulli beam with EI
+    per element (``ei_of(x_mid)``), on translational springs (None: rigid) at the tailstock (x = 0)
+    and the chuck (x = L), the chuck end clamped (rotation fixed) or pinned; finite elements
+    (cubic Hermite), the load node at a."""
+    k = max(2, int(round(n * a / L)))
+    xs = np.r_[np.linspace(0, a, k + 1), np.linspace(a, L, n - k + 2)[1:]]
+    xs = np.unique(np.r_[xs, [v for v in nodes if 0 < v < L]])  # a node at every step of EI
+    nn = len(xs)
+    K = np.zeros((2 * nn, 2 * nn))
+    for e in range(nn - 1):
+        h = xs[e + 1] - xs[e]
+        EI = ei_of(0.5 * (xs[e] + xs[e + 1]))
+        ke = EI / h ** 3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                                     [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
+        idx = [2 * e, 2 * e + 1, 2 * e + 2, 2 * e + 3]
+        K[np.ix_(idx, idx)] += ke
+    fixed = []
+    if kt is None:
+        fixed.append(0)
+    else:
+        K[0, 0] += kt
+    if kc is None:
+        fixed.append(2 * (nn - 1))
+    else:
+        K[2 * (nn - 1), 2 * (nn - 1)] += kc
+    if clamped:
+        fixed.append(2 * (nn - 1) + 1)
+    free = np.setdiff1d(np.arange(2 * nn), fixed)
+    f = np.zeros(2 * nn)
+    j = int(np.argmin(np.abs(xs - a)))
+    f[2 * j] = 1.0
+    u = np.zeros(2 * nn)
+    u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
+    return u[2 * j]
+
+
+@pytest.mark.parametrize("stepped,chuck", [(True, "pinned"), (False, "clamped"), (True, "clamped")])
+def test_workpiece_options_match_a_finite_element_beam(cfg, stepped, chuck):
+    """[model] stepped (the part already turned, from the start of the cut to the tool, at the
+    turned diameter) and chuck = "clamped": the bending compliance against FE with the same
+    assumptions; with springs, the pinned stepped beam's lever rule is exact (FE with springs)."""
+    import dataclasses
+
+    c = dataclasses.replace(cfg, stepped=stepped, chuck_support=chuck, chuck=np.diag(np.diag(cfg.chuck)),
+                            tail=np.diag(np.diag(cfg.tail)))
+    m = tu.Model(c)
+    for a in (0.05, 0.15, 0.215, 0.3, 0.39):
+        def ei(x, a=a):
+            return m.EI_f if (stepped and c.start <= x < a) else m.EI
+
+        fe = _fe_beam_general(c.length, ei, a, clamped=chuck == "clamped", nodes=(c.start,))
+        assert m._bending(a)[0] == pytest.approx(fe, rel=1e-6)
+        if chuck == "pinned":
+            fe = _fe_beam_general(c.length, ei, a, kc=c.chuck[0, 0], kt=c.tail[0, 0], nodes=(c.start,))
+            assert m.workpiece_compliance(a)[0, 0, 0] == pytest.approx(fe, rel=1e-6)
+    # the propped cantilever at mid-span by hand: δ = 7L³/768EI (clamped at one end, pinned at the other)
+    if chuck == "clamped" and not stepped:
+        assert m._bending(c.length / 2)[0] == pytest.approx(7 * c.length ** 3 / (768 * m.EI), rel=1e-12)
+
+
+def test_workpiece_options_change_the_plan(cfg, tmp_path, examples):
+    text = (examples / "turning" / "shaft_d20_l430.toml").read_text()
+    p = tmp_path / "c.toml"
+    p.write_text(text + '\n[model]\nstepped = true\nchuck = "clamped"\n')
+    c = tu.load(p)
+    assert c.stepped and c.chuck_support == "clamped"
+    q = tu.plan(c, "path")
+    f = tmp_path / "p.ngc"
+    f.write_text(tu.program(q, c))
+    assert st.simulate(c, f).variation < 0.002  # the lathe turns with the same workpiece model
+    p.write_text(text + '\n[model]\nchuck = "welded"\n')
+    from ncadapt.errors import InputError
+
+    with pytest.raises(InputError, match=r'\[model\] chuck must be "pinned" or "clamped"'):
+        tu.load(p)

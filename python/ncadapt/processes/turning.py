@@ -100,6 +100,8 @@ class Config:
     rz_max: float | None = None  # m, [bounds] rz_max (optional): Rz = S²/(8 r_ε) ≤ rz_max
     finish_depth: float | None = None  # m, [plan] finish_depth: the finishing pass of the rough + finish baseline
     feed_max_rough: float | None = None  # m/rev: the largest feed before the roughness bound
+    stepped: bool = False  # [model] stepped: the part already turned has the turned diameter
+    chuck_support: str = "pinned"  # [model] chuck: "pinned" (the paper's supports) or "clamped"
 
 
 def roughness(feed, nose_radius):
@@ -246,6 +248,20 @@ def load(path) -> Config:
         cfg.feed_bounds = (cfg.feed_bounds[0], min(cfg.feed_bounds[1], s_rz))
     elif "nose_radius" in d.get("cut", {}):
         cfg.nose_radius = number("cut", "nose_radius", positive=True, hi=10) * mm
+    model = d.get("model", {})
+    if not isinstance(model, dict):
+        fail("model", "", "must be a table: [model] with stepped = true|false, chuck = \"pinned\"|\"clamped\"")
+    for key in model:
+        if key not in ("stepped", "chuck"):
+            fail("model", key, "is not a model option (stepped, chuck)")
+    if "stepped" in model:
+        if not isinstance(model["stepped"], bool):
+            fail("model", "stepped", f"must be true or false, got {cut(model['stepped'])}")
+        cfg.stepped = model["stepped"]
+    if "chuck" in model:
+        if model["chuck"] not in ("pinned", "clamped"):
+            fail("model", "chuck", f"must be \"pinned\" or \"clamped\", got {cut(model['chuck'])}")
+        cfg.chuck_support = model["chuck"]
     if "finish_depth" in d.get("plan", {}):
         fd = number("plan", "finish_depth", positive=True)
         if not fd < depth:
@@ -276,6 +292,12 @@ class Model:
         d, E = cfg.diameter, cfg.youngs
         self.EI = E * math.pi * d ** 4 / 64
         self.EA = E * math.pi * d ** 2 / 4
+        df = d - 2 * cfg.depth  # the turned diameter
+        self.EI_f = E * math.pi * df ** 4 / 64
+        self.EA_f = E * math.pi * df ** 2 / 4
+        self.stepped = cfg.stepped
+        self.chuck_clamped = cfg.chuck_support == "clamped"
+        self._cache: dict = {}  # x3 bytes → S_Y: the planner asks for the same stations many times
         self.s_chuck = np.linalg.inv(cfg.chuck * stiffness_scale)
         self.s_tail = np.linalg.inv(cfg.tail * stiffness_scale)
         self.c_tool = cfg.tool * stiffness_scale
@@ -285,14 +307,65 @@ class Model:
         self.rho_scale = rho_scale
 
     # --- compliances
+    def _bending(self, a: float) -> tuple[float, float]:
+        """Bending compliance at the load point x3 = a (rigid supports) and the tailstock's share of
+        the load, for the model's options: the part already turned, [start, a), at the turned
+        diameter (``stepped``), and the chuck end pinned or clamped. Unit-load (Mohr) integrals of
+        the moment lines over the segments of constant EI, exact by 2-point Gauss on each (the
+        integrands are quadratics); the clamped chuck by the force method with the tailstock
+        reaction as the redundant."""
+        cfg, L = self.cfg, self.cfg.length
+        cuts = sorted({0.0, min(max(cfg.start, 0.0), a), a, L}) if self.stepped else sorted({0.0, a, L})
+        gx = np.array([-1, 1]) / math.sqrt(3)
+
+        def integral(f):
+            tot = 0.0
+            for lo, hi in zip(cuts[:-1], cuts[1:]):
+                if hi <= lo:
+                    continue
+                xs = 0.5 * (lo + hi) + 0.5 * (hi - lo) * gx
+                ei = self.EI_f if (self.stepped and cfg.start <= 0.5 * (lo + hi) < a) else self.EI
+                tot += 0.5 * (hi - lo) * float(np.sum(f(xs))) / ei
+            return tot
+
+        if not self.chuck_clamped:  # pinned–pinned: statically determinate, M(x) of a unit load at a
+            def m(x):
+                return np.where(x < a, x * (L - a) / L, a * (L - x) / L)
+
+            return integral(lambda x: m(x) ** 2), 1.0 - a / L
+        # clamped at the chuck (x = L), pinned at the tailstock (x = 0): cantilever from the chuck
+        d00 = integral(lambda x: x * x)
+        d0a = integral(lambda x: x * np.maximum(x - a, 0))
+        daa = integral(lambda x: np.maximum(x - a, 0) ** 2)
+        r = d0a / d00  # the tailstock's reaction to a unit load at a
+        return daa - d0a * r, r
+
     def workpiece_compliance(self, x3) -> np.ndarray:
         """S_Y (3 × 3, m/N) at distance x3 from the tailstock centre; (n, 3, 3) for an array."""
         x3 = np.atleast_1d(np.asarray(x3, float))
+        key = x3.tobytes()
+        if key not in self._cache:
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[key] = self._workpiece_compliance(x3)
+        return self._cache[key].copy()
+
+    def _workpiece_compliance(self, x3: np.ndarray) -> np.ndarray:
         L = self.cfg.length
         u = L - x3  # from the chuck
-        wc, wt = x3 / L, 1.0 - x3 / L
-        b = u ** 2 * (L - u) ** 2 / (3 * self.EI * L)
-        e = u * (L - u) / (self.EA * L)
+        if self.stepped or self.chuck_clamped:
+            bw = np.array([self._bending(float(a)) for a in x3])
+            b, wt = bw[:, 0], bw[:, 1]
+            wc = 1.0 - wt
+        else:
+            wc, wt = x3 / L, 1.0 - x3 / L
+            b = u ** 2 * (L - u) ** 2 / (3 * self.EI * L)
+        if self.stepped:  # axially: the two ends in parallel, the tailstock side partly turned
+            turned = np.clip(x3 - self.cfg.start, 0, None)
+            s1, s2 = (x3 - turned) / self.EA + turned / self.EA_f, u / self.EA
+            e = s1 * s2 / np.maximum(s1 + s2, 1e-300)
+        else:
+            e = u * (L - u) / (self.EA * L)
         s = wc[:, None, None] ** 2 * self.s_chuck + wt[:, None, None] ** 2 * self.s_tail
         s[:, 0, 0] += b
         s[:, 1, 1] += b
