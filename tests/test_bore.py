@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import needs_rs274
 
 from ncadapt import InputError
 from ncadapt.cli import main
@@ -366,3 +368,88 @@ def test_fuzz_findings_plan_file(tmp_path, text, says):
 def test_fuzz_finding_simulate_t0():
     r = CliRunner().invoke(main, ["bore", "simulate", "--parts", "5", "--t0", "3"])
     assert r.exit_code == 2 and "smaller --t0" in r.output and "Traceback" not in r.output, r.output
+
+
+# ------------------------------------------------------------------ real probe results (issue 20, bores 11)
+def _expect_planes(m, diameters, centres=None):
+    assert m.diameters == pytest.approx(list(diameters), abs=1e-9)
+    if centres:
+        assert [c.centre for c in m.circles] == [pytest.approx(c, abs=1e-9) for c in centres]
+
+
+def test_measurement_formats(tmp_path):
+    """The same bore — Ø39.80 near A (z 55), 39.81 mid, 39.82 near B — as a circle table, DMIS
+    FEAT/CIRCLE actuals, a PC-DMIS report and a LinuxCNC probe log: the same planes, A first."""
+    t = tmp_path / "table.csv"
+    t.write_text("plane;z;diameter;x;y\nB;5;39.82;0.01;0\nM;30;39.81;0;0\nA;55;39.80;0;0.002\n")
+    _expect_planes(pb.read_measurement(t), (39.80, 39.81, 39.82), [(0, 0.002), (0, 0), (0.01, 0)])
+    d = tmp_path / "bore.dms"
+    d.write_text("DMISMN/'bore',05.0\nF(CA)=FEAT/CIRCLE,INNER,CART,0,0,55,0,0,1,40.0\n"
+                 "FA(CA)=FEAT/CIRCLE,INNER,CART,0,0.002,55,0,0,1,39.80\n"
+                 "FA(CM)=FEAT/CIRCLE,INNER,CART,0,0,30,0,0,1,$\n39.81\n"
+                 "FA(CB)=FEAT/CIRCLE,INNER,CART,0.01,0,5,0,0,-1,39.82\nENDFIL\n")
+    _expect_planes(pb.read_measurement(d), (39.80, 39.81, 39.82), [(0, 0.002), (0, 0), (0.01, 0)])
+    r = tmp_path / "report.txt"
+    blocks = []
+    for name, z, dia in (("CIR_A", 55, 39.80), ("CIR_M", 30, 39.81), ("CIR_B", 5, 39.82)):
+        blocks.append(f"DIM LOC{name[-1]}= LOCATION OF CIRCLE {name}  UNITS=MM ,$\n"
+                      "AX    NOMINAL       +TOL       -TOL       MEAS        DEV     OUTTOL\n"
+                      f"X       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
+                      f"Y       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
+                      f"Z      {z:.4f}     0.0100     0.0100    {z:.4f}     0.0000     0.0000 ----#----\n"
+                      f"D      40.0000     0.0160     0.0000    {dia:.4f}    -0.1900     0.1900 #--------\n")
+    r.write_text("PART NAME  : bore\n" + "\n".join(blocks))
+    _expect_planes(pb.read_measurement(r), (39.80, 39.81, 39.82))
+    phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    lines = [f"{d / 2 * math.cos(f):.6f} {d / 2 * math.sin(f):.6f} {z + 0.003 * math.sin(3 * f):.6f} 0 0 0 0 0 0"
+             for d, z in ((39.80, 55), (39.81, 30), (39.82, 5)) for f in phi]
+    log = tmp_path / "bore_probe.txt"
+    log.write_text("\n".join(lines) + "\n")
+    m = pb.read_measurement(log)
+    assert m.diameters == pytest.approx([39.80, 39.81, 39.82], abs=2e-6)
+    bad = tmp_path / "bad.dms"
+    bad.write_text("FA(C1)=FEAT/CIRCLE,OUTER,CART,0,0,55,0,0,1,39.80\n")
+    with pytest.raises(InputError, match="OUTER") as e:
+        pb.read_measurement(bad)
+    assert e.value.line == 1
+    bad.write_text(r.read_text().replace("39.8000", "nan"))
+    with pytest.raises(InputError, match="MEAS must be a finite number"):
+        pb.read_measurement(bad)
+
+
+def test_a_plan_from_a_dmis_report_through_the_cli(tmp_path):
+    d = tmp_path / "bore.dms"
+    aim0 = 40.008 - 0.2
+    d.write_text("".join(f"FA(C{z})=FEAT/CIRCLE,INNER,CART,0,0,{z},0,0,1,{aim0 - 2 * dev:.4f}\n"
+                         for z, dev in ((55, 0.03), (30, 0.025), (5, 0.02))))
+    r = CliRunner().invoke(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
+                                  "--measured", str(d), "--json", "-"])
+    assert r.exit_code == 0, r.output
+    p = json.loads(r.stdout)
+    assert p["delta_a"] == pytest.approx(0.03, abs=1e-9) and p["delta_b"] == pytest.approx(0.02, abs=1e-9)
+
+
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc"])
+def test_probing_program(tmp_path, dialect):
+    out = tmp_path / "probe.ngc"
+    r = CliRunner().invoke(main, ["bore", "probe-program", "--diameter", "40", "--planes", "55,30,5", "--dialect",
+                                  dialect, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    text = out.read_text()
+    touch = "G38.2" if dialect == "linuxcnc" else "G31"
+    moves = re.findall(touch + r" X(-?[\d.]+) Y(-?[\d.]+)", text)
+    assert len(moves) == 24
+    radii = [math.hypot(float(x), float(y)) for x, y in moves]
+    assert radii == pytest.approx([21.0] * 24, abs=2e-3)  # 1 mm past the nominal wall
+    assert text.index("Z60.000") < text.index("Z55.000")  # the safe height above the highest plane
+    if dialect == "fanuc":
+        assert text.count("DPRNT[*#5061[44]*#5062[44]*#5063[44]]") == 24 and "POPEN" in text and "PCLOS" in text
+
+
+@needs_rs274
+def test_probing_program_runs_in_rs274(tmp_path):
+    from rs274 import canonical
+
+    out = tmp_path / "probe.ngc"
+    out.write_text(pb.probing_program(40, [55, 30, 5]))
+    assert canonical(out).error is None

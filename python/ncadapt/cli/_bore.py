@@ -40,7 +40,9 @@ def _um(v: float) -> str:
 @click.option("--delta-b", type=FiniteRange(-1, 1),
               help="Radial deviation near face B after pre-finishing, mm, material left > 0 (within ±1).")
 @click.option("--measured", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Probe points of the pre-finished bore, CSV plane,x,y,z (instead of --delta-a/--delta-b).")
+              help="The pre-finished bore measured (instead of --delta-a/--delta-b): probe points (CSV plane,x,y,z or "
+                   "x,y,z; a LinuxCNC/Fanuc probe log), a CSV plane,z,diameter table, DMIS FEAT/CIRCLE actuals or a "
+                   "PC-DMIS report.")
 @click.option("--entry", type=click.Choice(["top", "bottom"]), default="top", show_default=True,
               help="Where the tool enters (face A) in the probe file's z.")
 @click.option("--k", type=FiniteRange(0.01, 1), default=0.25, show_default=True,
@@ -59,7 +61,7 @@ def plan_cmd(diameter, final, prefinish, t0, allowance, delta_a, delta_b, measur
         raise click.UsageError("give --delta-a and --delta-b, or --measured PROBE.csv")
     check_outputs({"probe file": measured}, {"--json": json_path})
     if measured is not None:
-        meas = pb.read_probe(measured, entry)
+        meas = pb.read_measurement(measured, entry)
         p = pb.plan_from_measurement(diameter, meas, final=final, prefinish=prefinish, t0=t0, allowance=allowance,
                                      k=k, target_diameter=target)
     else:
@@ -97,7 +99,8 @@ def _read_plan(plan_path):
 @click.option("--plan", "plan_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), required=True,
               help="The plan written by `ncadapt bore plan --json`; each pass measured is recorded in it.")
 @click.option("--measured", type=click.Path(exists=True, dir_okay=False, path_type=Path), required=True,
-              help="Probe points after the pass, CSV plane,x,y,z or x,y,z (one plane near A is enough from pass 1 on).")
+              help="The bore after the pass, in any form --measured of `bore plan` takes (one plane near A is enough "
+                   "from pass 1 on).")
 @click.option("--pass", "pass_done", type=click.IntRange(0, 100),
               help="The pass just measured (0: after pre-finishing) [default: the next the plan records].")
 @click.option("--applied", type=FiniteRange(-1, 1),
@@ -156,14 +159,14 @@ def next_cmd(plan_path, measured, pass_done, applied, hardened, entry, controlle
     elif recorded_applied is not None and abs(applied - recorded_applied) > 1e-9:
         raise click.BadParameter(f"{applied:g} mm, but the plan records pass {pass_done} made with "
                                  f"δ_K = {recorded_applied:g} mm", param_hint="'--applied'")
-    meas = pb.read_probe(measured, entry)
+    meas = pb.read_measurement(measured, entry)
     for circ in meas.circles:
-        summary(f"  plane {circ.plane:>8s}: Ø{circ.diameter:.4f}, roundness {circ.roundness * 1000:.1f} µm")
+        rd = f", roundness {circ.roundness * 1000:.1f} µm" if circ.n else ""
+        summary(f"  plane {circ.plane:>8s}: Ø{circ.diameter:.4f}{rd}")
     if len(meas.circles) >= 2:
         summary(f"taper {meas.taper * 1000:+.1f} µm, barrel {meas.barrel * 1000:+.1f} µm")
     entry_rec = {"pass": pass_done, "probe": str(measured),
-                 "planes": [{"plane": c.plane, "z": c.z, "diameter": c.diameter, "roundness": c.roundness}
-                            for c in meas.circles],
+                 "planes": [c.as_dict() for c in meas.circles],
                  "applied": applied,
                  "predicted": (p.delta_a if pass_done == 0 else p.predicted[pass_done - 1])}
     if pass_done == p.passes:
@@ -240,6 +243,44 @@ def _report(path, p, source) -> None:
         ("Diameters per plane per pass", figure_png(fig)
          + table(rows, ["pass", "aimed Ø, mm", "measured Ø per plane, mm", "form δA − δB, µm",
                         "predicted δA, µm", "measured δA, µm", "correction δK next, µm"]))]))
+
+
+@bore.command("probe-program")
+@click.option("--diameter", type=_DIAMETER, required=True, help="Nominal bore diameter, mm.")
+@click.option("--planes", required=True,
+              help="z of the probing planes, mm, face A first, comma-separated (e.g. 55,30,5).")
+@click.option("--dialect", type=click.Choice(["linuxcnc", "fanuc"]), default="linuxcnc", show_default=True,
+              help="LinuxCNC G38.2 with a PROBEOPEN log, or Fanuc G31 skip with DPRNT.")
+@click.option("--points", type=click.IntRange(3, 360), default=8, show_default=True, help="Touches per plane.")
+@click.option("--feed", type=FiniteRange(1, 5000), default=100.0, show_default=True, help="Probing feed, mm/min.")
+@click.option("--safe-z", type=FiniteRange(-1e4, 1e4),
+              help="Clearance height above the bore, mm [default: 5 mm above the highest plane].")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The probing program to write.")
+@handle_errors
+def probe_program_cmd(diameter, planes, dialect, points, feed, safe_z, output):
+    """A program probing the bore in three planes from its centre (X0 Y0 on the bore's axis)."""
+    import math
+
+    from ..processes import bore as pb
+    from .._io import atomic_write
+
+    try:
+        zs = [float(v) for v in planes.split(",")]
+    except ValueError:
+        raise click.BadParameter(f"expected z values separated by commas, got {planes[:80]!r}",
+                                 param_hint="'--planes'") from None
+    if not zs or len(zs) > 20 or not all(math.isfinite(z) and abs(z) <= 1e4 for z in zs):
+        raise click.BadParameter("1 … 20 finite z values within ±10000 mm", param_hint="'--planes'")
+    check_outputs({}, {"-o": output})
+    if safe_z is None:
+        safe_z = max(zs) + 5.0
+    elif safe_z <= max(zs):
+        raise click.BadParameter(f"{safe_z:g} mm is not above the highest plane {max(zs):g} mm",
+                                 param_hint="'--safe-z'")
+    atomic_write(output, pb.probing_program(diameter, zs, dialect=dialect, points=points, feed=feed,
+                                            safe_z=safe_z).encode())
+    summary(f"wrote {output}: {len(zs)} plane(s) × {points} touches ({dialect})")
 
 
 @bore.command("simulate")

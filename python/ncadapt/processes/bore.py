@@ -41,12 +41,13 @@ correction at minimal depth and the compliance along the bore is identified from
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .. import iso286
-from .._io import csv_reader
+from .._io import csv_reader, read_text
 from ..errors import InputError, cut
 
 APPLICABILITY_SHARE = 0.25  # (3): |δ_A − δ_B| ≤ 0.25·ΔD(pre-finish) — the paper's (2) with k = 0.5 for H9, halved
@@ -68,7 +69,7 @@ class Circle:
 
     def as_dict(self) -> dict:
         return {"plane": self.plane, "z": self.z, "centre": list(self.centre), "diameter": self.diameter,
-                "roundness": self.roundness, "points": self.n}
+                "roundness": self.roundness if math.isfinite(self.roundness) else None, "points": self.n}
 
 
 def fit_circle(x, y, plane: str = "", z: float = 0.0) -> Circle:
@@ -166,8 +167,16 @@ def read_probe(path, entry: str = "top") -> BoreMeasurement:
             groups.setdefault(r[ip].strip() if ip < len(r) else "", []).append((x, y, z, ln))
         else:
             points.append((x, y, z, ln))
-    if ip is None and points:
-        points.sort(key=lambda q: q[2])
+    if ip is None:
+        return _planes_from_points(points, path, entry)
+    return _fit_planes(groups, path, entry)
+
+
+def _planes_from_points(points, path: str, entry: str) -> BoreMeasurement:
+    """Points (x, y, z, line) without a plane name: planes told apart by gaps in z."""
+    groups: dict[str, list] = {}
+    if points:
+        points = sorted(points, key=lambda q: q[2])
         cluster = [points[0]]
         for q in points[1:]:
             if q[2] - cluster[-1][2] > PLANE_GAP:
@@ -175,6 +184,10 @@ def read_probe(path, entry: str = "top") -> BoreMeasurement:
                 cluster = []
             cluster.append(q)
         groups[f"z={np.mean([c[2] for c in cluster]):.2f}"] = sorted(cluster, key=lambda c: c[3])
+    return _fit_planes(groups, path, entry)
+
+
+def _fit_planes(groups: dict, path: str, entry: str) -> BoreMeasurement:
     if not groups:
         raise InputError("no probe points", path)
     circles = []
@@ -190,6 +203,217 @@ def read_probe(path, entry: str = "top") -> BoreMeasurement:
         raise ValueError(f"entry must be 'top' or 'bottom', got {entry!r}")
     circles.sort(key=lambda c: -c.z if entry == "top" else c.z)
     return BoreMeasurement(tuple(circles), path)
+
+
+_DMIS_CIRCLE = re.compile(r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*CIRCLE\s*,\s*(INNER|OUTER)\s*,\s*CART\s*,(.*)$",
+                          re.I)
+_PCDMIS_HEAD = re.compile(r"LOCATION\s+OF\s+CIRCLE\s+(\S+)", re.I)
+
+
+def _finite(text: str, path: str, ln: int, what: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputError(f"expected a number for {what}, got {cut(text.strip())}", path, ln) from None
+    if not math.isfinite(v) or abs(v) > 1e6:
+        raise InputError(f"{what} must be a finite number within ±1e6 mm, got {cut(text.strip())}", path, ln)
+    return v
+
+
+def _circles(items, path: str, entry: str) -> BoreMeasurement:
+    """``items``: (line, name, x, y, z, diameter) per plane → a measurement ordered from face A."""
+    if not items:
+        raise InputError("no bore circles", path)
+    circles = []
+    for ln, name, x, y, z, dia in items:
+        if not dia > 0:
+            raise InputError(f"the diameter of {name!r} must be > 0, got {dia:g}", path, ln)
+        circles.append(Circle(name, z, (x, y), dia, float("nan"), 0))  # roundness unknown
+    if entry not in ("top", "bottom"):
+        raise ValueError(f"entry must be 'top' or 'bottom', got {entry!r}")
+    circles.sort(key=lambda c: -c.z if entry == "top" else c.z)
+    return BoreMeasurement(tuple(circles), path)
+
+
+def read_dmis_circles(path, entry: str = "top") -> BoreMeasurement:
+    """The bore per plane from DMIS output: ``FA(label)=FEAT/CIRCLE,INNER,CART,x,y,z,i,j,k,diam``
+    actuals (the nominal ``F(label)=…`` statements are not needed; a trailing ``$`` continues a
+    statement). The circle's centre is (x, y), its plane z."""
+    path = str(path)
+    text = read_text(path)
+    items, seen, buf, start = [], {}, "", 0
+    for ln, raw in enumerate(text.splitlines(), 1):
+        line = raw.rstrip()
+        if not buf:
+            start = ln
+        if line.endswith("$"):
+            buf += line[:-1]
+            continue
+        st, buf = buf + line, ""
+        m = _DMIS_CIRCLE.match(st)
+        if not m or m.group(1).upper() != "FA":
+            continue
+        if m.group(3).upper() != "INNER":
+            raise InputError(f"circle {m.group(2)!r} is OUTER (a shaft); a bore is an INNER circle", path, start)
+        parts = [v for v in m.group(4).split(",") if v.strip()]
+        if len(parts) != 7:
+            raise InputError(f"FEAT/CIRCLE needs x,y,z,i,j,k,diameter (7 numbers), got {len(parts)}", path, start)
+        x, y, z, i, j, k, dia = (_finite(v, path, start, "a circle value") for v in parts)
+        if abs(k) < 0.999 * math.sqrt(i * i + j * j + k * k):
+            raise InputError(f"circle {m.group(2)!r}: its axis ({i:g}, {j:g}, {k:g}) is not along z", path, start)
+        label = m.group(2).strip()
+        if label in seen:
+            raise InputError(f"circle {label!r} repeats (first at line {seen[label]})", path, start)
+        seen[label] = start
+        items.append((start, label, x, y, z, dia))
+    if buf:
+        raise InputError("statement continued with $ at the end of the file", path, start)
+    if not items:
+        raise InputError("no FA(label)=FEAT/CIRCLE,INNER,CART actual circles", path)
+    return _circles(items, path, entry)
+
+
+def read_pcdmis_circles(path, entry: str = "top") -> BoreMeasurement:
+    """The bore per plane from a PC-DMIS-style text report: for each ``… LOCATION OF CIRCLE name``
+    dimension, the rows ``X``, ``Y``, ``Z`` and ``D`` (or ``DF``) read in the ``MEAS`` column of the
+    ``AX NOMINAL … MEAS …`` header."""
+    path = str(path)
+    lines = read_text(path).splitlines()
+    items = []
+    k = 0
+    while k < len(lines):
+        m = _PCDMIS_HEAD.search(lines[k])
+        if not m:
+            k += 1
+            continue
+        name, start = m.group(1), k + 1
+        col, vals = None, {}
+        k += 1
+        while k < len(lines) and not _PCDMIS_HEAD.search(lines[k]):
+            words = lines[k].split()
+            if words and words[0].upper() == "AX":
+                heads = [w.upper() for w in words]
+                if "MEAS" not in heads:
+                    raise InputError("the AX header has no MEAS column", path, k + 1)
+                col = heads.index("MEAS")
+            elif words and col is not None and words[0].upper() in ("X", "Y", "Z", "D", "DF"):
+                if len(words) <= col:
+                    raise InputError(f"row {words[0]} has no MEAS value (column {col + 1})", path, k + 1)
+                vals[words[0].upper().replace("DF", "D")] = (k + 1, _finite(words[col], path, k + 1, "MEAS"))
+            k += 1
+        missing = [a for a in "XYZD" if a not in vals]
+        if missing:
+            raise InputError(f"circle {name!r} lacks the row(s) {', '.join(missing)}", path, start)
+        items.append((start, name, vals["X"][1], vals["Y"][1], vals["Z"][1], vals["D"][1]))
+    if not items:
+        raise InputError("no 'LOCATION OF CIRCLE' dimensions", path)
+    return _circles(items, path, entry)
+
+
+def read_circle_table(path, entry: str = "top") -> BoreMeasurement:
+    """CSV ``plane,z,diameter`` (and optionally ``x,y``: the centre), one row per plane — a CMM's or
+    a probing cycle's result table; comma, semicolon or tab delimited."""
+    path = str(path)
+    rows = list(csv_reader(path))
+    head = [h.strip().lower() for h in rows[0]]
+    for need in ("z", "diameter"):
+        if need not in head:
+            raise InputError(f"missing column {need!r} (expected plane,z,diameter[,x,y])", path, 1)
+    iz, idia = head.index("z"), head.index("diameter")
+    ip = head.index("plane") if "plane" in head else None
+    ix, iy = (head.index("x"), head.index("y")) if "x" in head and "y" in head else (None, None)
+    items = []
+    for ln, r in enumerate(rows[1:], start=2):
+        if not r or all(not c.strip() for c in r):
+            continue
+        try:
+            get = [r[iz], r[idia]] + ([r[ix], r[iy]] if ix is not None else [])
+        except IndexError:
+            raise InputError("a row with fewer fields than the header", path, ln) from None
+        z, dia = _finite(get[0], path, ln, "z"), _finite(get[1], path, ln, "diameter")
+        x, y = (_finite(get[2], path, ln, "x"), _finite(get[3], path, ln, "y")) if ix is not None else (0.0, 0.0)
+        items.append((ln, r[ip].strip() if ip is not None and ip < len(r) else f"z={z:g}", x, y, z, dia))
+    return _circles(items, path, entry)
+
+
+_NUMBERS_LINE = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(\s+[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?){2,}\s*$")
+
+
+def read_probe_log(path, entry: str = "top") -> BoreMeasurement:
+    """A probe log of whitespace-separated numbers, x y z first on each line — LinuxCNC's
+    ``(PROBEOPEN)`` log (x y z a b c u v w per G38 touch) or a Fanuc ``DPRNT`` of the skip
+    positions #5061–#5063; planes told apart by gaps in z."""
+    path = str(path)
+    points = []
+    for ln, raw in enumerate(read_text(path).splitlines(), 1):
+        if not raw.strip():
+            continue
+        words = raw.split()
+        if len(words) < 3:
+            raise InputError(f"expected x y z (whitespace-separated), got {len(words)} number(s)", path, ln)
+        x, y, z = (_finite(w, path, ln, "a probe coordinate") for w in words[:3])
+        points.append((x, y, z, ln))
+    return _planes_from_points(points, path, entry)
+
+
+def read_measurement(path, entry: str = "top") -> BoreMeasurement:
+    """The bore after a pass, from any of: probe points (CSV ``plane,x,y,z`` / ``x,y,z``), a table
+    of circles (CSV ``plane,z,diameter[,x,y]``), DMIS ``FEAT/CIRCLE`` actuals, a PC-DMIS-style text
+    report (``LOCATION OF CIRCLE``). The kind is told by the content."""
+    text = read_text(path)
+    if re.search(r"FEAT\s*/\s*CIRCLE", text, re.I):
+        return read_dmis_circles(path, entry)
+    if _PCDMIS_HEAD.search(text):
+        return read_pcdmis_circles(path, entry)
+    first = next((ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    if "diameter" in first.lower():
+        return read_circle_table(path, entry)
+    if _NUMBERS_LINE.match(first):
+        return read_probe_log(path, entry)
+    return read_probe(path, entry)
+
+
+def probing_program(diameter: float, planes, *, dialect: str = "linuxcnc", points: int = 8, clearance: float = 2.0,
+                    feed: float = 100.0, safe_z: float = 5.0) -> str:
+    """A program probing the bore in the planes ``planes`` (z, mm, face A first) with ``points``
+    touches each: from the bore's centre (X0 Y0, the work offset at the bore's axis) the probe moves
+    radially towards the wall, stopping on contact — LinuxCNC ``G38.2`` (the position is logged by
+    ``(PROBEOPEN file)`` … ``(PROBECLOSE)``, x y z per touch: the CSV ``x,y,z`` reader's input after
+    a header line), Fanuc ``G31`` skip (the skip position in #5061/#5062, written by ``DPRNT``). The
+    probe targets 1 mm past the nominal wall and comes back to the centre between touches."""
+    if dialect not in ("linuxcnc", "fanuc"):
+        raise ValueError(f"dialect must be linuxcnc or fanuc, got {dialect!r}")
+    if not (math.isfinite(diameter) and diameter > 2 * clearance):
+        raise InputError(f"the bore must be wider than twice the clearance {clearance:g} mm, got Ø{diameter:g}")
+    if not 3 <= points <= 360:
+        raise InputError(f"points per plane must be 3 … 360, got {points}")
+    r = diameter / 2 + 1.0
+    out = []
+    if dialect == "linuxcnc":
+        out += ["(ncadapt bore probing: G38.2 from the bore's centre, X0 Y0 on its axis)", "G21 G90 G17 G40 G54",
+                "(PROBEOPEN bore_probe.txt)", f"G0 Z{safe_z:.3f}", "G0 X0 Y0"]
+    else:
+        out += ["%", "O2000 (NCADAPT BORE PROBING: G31 SKIP, X0 Y0 ON THE AXIS)", "G21 G90 G17 G40 G54",
+                "POPEN", f"G0 Z{safe_z:.3f}", "G0 X0 Y0"]
+    for z in planes:
+        z = float(z)
+        if not math.isfinite(z):
+            raise InputError(f"plane z must be finite, got {z!r}")
+        out.append(f"G1 Z{z:.3f} F{feed:.0f}")
+        for k in range(points):
+            a = 2 * math.pi * k / points
+            x, y = r * math.cos(a), r * math.sin(a)
+            if dialect == "linuxcnc":
+                out.append(f"G38.2 X{x:.3f} Y{y:.3f} F{feed:.0f}")
+            else:
+                out += [f"G31 X{x:.3f} Y{y:.3f} F{feed:.0f}", "DPRNT[*#5061[44]*#5062[44]*#5063[44]]"]
+            out.append("G1 X0 Y0 F1000")
+        out.append(f"G0 Z{safe_z:.3f}")
+    if dialect == "linuxcnc":
+        out += ["(PROBECLOSE)", "M2"]
+    else:
+        out += ["PCLOS", "M30", "%"]
+    return "\n".join(out) + "\n"
 
 
 # ------------------------------------------------------------------------------------ the plan
