@@ -555,6 +555,9 @@ class Plan:
                     continue
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
                     raise InputError(f"not a bore plan: history[{i}].{key} must be a finite number", source)
+                if key == "correction" and abs(v) > DEVIATION_MAX:
+                    raise InputError(f"not a bore plan: history[{i}].correction must be within ±{DEVIATION_MAX:g} mm, "
+                                     f"got {v:g}", source)
             if h["pass"] != i:
                 raise InputError(f"not a bore plan: history[{i}] records pass {h['pass']}, expected {i}", source)
         try:
