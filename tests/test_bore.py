@@ -283,7 +283,6 @@ def test_finished_bore_from_the_cli_with_a_report(tmp_path):
     assert _cli("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--delta-a", "0.03",
                 "--delta-b", "0.02", "--json", str(plan)).exit_code == 0
     p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
-    corr = 0.0
     for n in range(p.passes):
         aim = p.nominal_diameter_after(n)
         f = _probe_csv(tmp_path, (aim - 0.004, aim - 0.003, aim - 0.002), name=f"m{n}.csv")
@@ -299,7 +298,6 @@ def test_finished_bore_from_the_cli_with_a_report(tmp_path):
     assert "Diameters per plane per pass" in html and "40.0088" in html
     r = _cli("bore", "next", "--plan", str(plan), "--measured", str(fin))
     assert r.exit_code == 2 and "finished bore" in r.output
-    del corr
 
 
 def test_probe_files_as_measured(tmp_path):

@@ -581,7 +581,7 @@ def predict(delta_a: float, delta_b: float, t: float, t0: float, passes: int) ->
     """
     ca, cb = delta_a / t0, delta_b / t0
     a, b = [], []
-    shift_prev, left_a, left_b = 0.0, delta_a, delta_b  # δ_K,0 = 0: the pre-finish is not corrected
+    left_a, left_b = delta_a, delta_b  # what the pre-finish left against its aim (it was not corrected)
     shift = max(delta_a, delta_b)
     for _ in range(passes):
         na = ca * (t + left_a + shift)
@@ -589,7 +589,7 @@ def predict(delta_a: float, delta_b: float, t: float, t0: float, passes: int) ->
         a.append(na)
         b.append(nb)
         left_a, left_b = na - shift, nb - shift
-        shift_prev, shift = shift, na
+        shift = na
     return a, b
 
 
