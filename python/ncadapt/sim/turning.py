@@ -24,8 +24,9 @@ Optional seeded scatter: the cutting pressure ρ and the stiffness each get one 
 per run, exp(σ·N(0, 1)) (always positive), and ρ a slow linear drift along the cut of ±σ/2 (tool
 wear). σ is at most 0.5.
 
-The program is read as LinuxCNC reads a lathe program: G0/G1 with X (diameter under G7, radius
-under G8; one of them must be set), Z (Z0 at the tailstock centre, the chuck face at Z−L), F in
+The program is read as its controller reads it (``dialect``: LinuxCNC, Fanuc lathe in G-code system
+A — diameter programming, G99, G50 S — or Sinumerik — DIAMON/DIAMOF, G95, LIMS=). For LinuxCNC:
+G0/G1 with X (diameter under G7, radius under G8; one of them must be set), Z (Z0 at the tailstock centre, the chuck face at Z−L), F in
 mm/rev under G95 and S (rpm under G97; under G96 the surface speed in m/min, rpm = 1000·V/(π·d) at
 the tool's diameter d, capped by the G96 D word, which must be given). Refused at their line: feed
 per minute (G94; G98, Fanuc's feed per minute, and G99), F ≤ 0 or over 5 mm/rev, inch (G20),
