@@ -21,6 +21,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .errors import InputError
+from .neighbours import pairs_within
 
 
 def bilateral(points, values, sigma_c: float, sigma_s: float, radius: float | None = None) -> np.ndarray:
@@ -37,10 +38,13 @@ def bilateral(points, values, sigma_c: float, sigma_s: float, radius: float | No
         raise ValueError(f"sigma_c and sigma_s must be > 0, got {sigma_c}, {sigma_s}")
     r = 2.0 * sigma_c if radius is None else float(radius)
     # every pair closer than r once (i < j), from the KD-tree as an array; each counts both ways
-    pairs = cKDTree(p).query_pairs(r, output_type="ndarray")
+    pairs = pairs_within(cKDTree(p), r, "the bilateral filter's radius 2 sigma_c =")
     i, j = pairs[:, 0], pairs[:, 1]
-    d2 = ((p[i] - p[j]) ** 2).sum(axis=1)
-    w = np.exp(-d2 / (2 * sigma_c**2) - (s[i] - s[j]) ** 2 / (2 * sigma_s**2))
+    # distances divided by the sigmas before squaring: no overflow for any positive sigma
+    dc = np.sqrt(((p[i] - p[j]) ** 2).sum(axis=1)) / sigma_c
+    ds = np.abs(s[i] - s[j]) / sigma_s
+    with np.errstate(over="ignore"):  # a distance of many sigmas weighs exp(-inf) = 0
+        w = np.exp(-0.5 * (dc * dc + ds * ds))
     n = len(s)
     # the point itself has weight 1
     num = s + np.bincount(i, weights=w * s[j], minlength=n) + np.bincount(j, weights=w * s[i], minlength=n)

@@ -167,6 +167,10 @@ class Frame:
     def w(self, points) -> np.ndarray:
         return np.asarray(points, float) @ self.axes[2]
 
+    def local(self, points) -> np.ndarray:
+        """(n, 3) frame coordinates (u, v, w) of world points."""
+        return np.asarray(points, float) @ self.axes.T
+
     def to_world(self, u, v, w) -> np.ndarray:
         """Points (…, 3) from frame coordinates."""
         return np.stack([u, v, w], axis=-1) @ self.axes

@@ -20,7 +20,7 @@ def _moran_options(f):
         click.option("--neighbors", type=click.IntRange(min=1), default=8, show_default=True, help="N of knn weights."),
         click.option("--alpha", type=FiniteRange(0, 1, min_open=True, max_open=True), default=0.05,
                      show_default=True, help="Significance of the 'systematic' decision."),
-        click.option("--probe-radius", type=FiniteRange(min=0), default=0.0, show_default=True,
+        click.option("--probe-radius", type=FiniteRange(0, constants.COORD_MAX), default=0.0, show_default=True,
                      help="The measured points are probe-tip centres of this radius, mm."),
         click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."),
         click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."),
@@ -34,13 +34,25 @@ def _moran_kw(weights, power, threshold, neighbors, alpha):
     return {"weights": weights, "power": power, "threshold": threshold, "neighbors": neighbors, "alpha": alpha}
 
 
+def _said(say, what):
+    """A ``progress(done, total)`` callback that shows ``what`` with a bar."""
+    say(what)
+    return lambda done, total: say(what, done, total)
+
+
 def _print_analysis(a) -> None:
+    from ..stats import p_text
+
     m, d = a.moran, a.deviation
     summary(f"points: {a.n_points:,}")
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
+    o, v = a.offset, a.verdict
     summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
-               f"{m.z_normality:.2f} (normality), p {m.p_value:.3g}")
-    summary(f"systematic at alpha {m.alpha:g}: {'yes' if m.systematic else 'no'}")
+            f"{m.z_normality:.2f} (normality), p {p_text(m.p_value)} (one-sided: neighbours alike)")
+    summary(f"offset: mean {o.mean:+.4f} mm, t {o.t:.2f}, p {p_text(o.p_value)}")
+    summary(f"systematic at alpha {v.alpha:g} (Moran's I and the offset each at {v.alpha / 2:g}): "
+            + (f"yes, by {' and '.join('the offset' if b == 'offset' else 'Moran' + chr(39) + 's I' for b in v.by)}"
+               if v.systematic else "no"))
 
 
 @click.command()
@@ -56,16 +68,19 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     from ..processes import freeform as pf
 
     check_outputs({"measurements": measurements}, {"--json": json_path, "--report": report_path})
-    meas = measure.read(measurements, probe_radius=probe_radius)
-    frame = pf.frame_of(meas)
-    a = pf.analyze(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
+    with progress() as say:
+        say(f"reading {measurements}")
+        meas = measure.read(measurements, probe_radius=probe_radius)
+        frame = pf.frame_of(meas)
+        a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"),
+                       **_moran_kw(weights, power, threshold, neighbors, alpha))
     _print_analysis(a)
     if json_path:
         write_json(json_path, {"input": str(measurements), **a.as_dict()})
     if report_path:
         from ..report import freeform as rep, write
 
-        d = pf.decompose(meas, alpha=alpha, frame=frame)
+        d = pf.decompose(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
         write(report_path, rep.render(title=f"Deviation analysis: {measurements.name}", analysis=a, decomposition=d,
                                       xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation))
 
@@ -96,13 +111,16 @@ def _extent(ctx, param, value):
                    "extrapolated into it (default: the measured area).")
 @click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any program displacement exceeds this, mm.")
+@click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
+              help="Program points beyond the compensated surface (the measured area, or --extent): refuse, hold "
+                   "the nearest edge value, or extrapolate the thin-plate spline.")
 @click.option("--surface", "surface_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Compensated surface, .step/.stp or .igs/.iges.")
 @click.option("--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points.")
 @_moran_options
 @handle_errors
 def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, limit,
-               surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, json_path,
+               outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, json_path,
                report_path):
     """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
     surface and compensated points."""
@@ -120,9 +138,8 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
     with progress() as say:
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius)
-        say("analysing")
         frame = pf.frame_of(meas)
-        a = pf.analyze(meas, frame=frame, **kw)
+        a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"), **kw)
         say("separating systematic and random error")
         d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, frame=frame, **kw)
         surf = pf.fit_height_surface(meas.nominal, extent=extent, frame=frame)
@@ -130,7 +147,7 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         corr = None
         if program is not None:
             say(f"correcting {program}")
-            corr = ncmod.read(program).correct_to(output, c.field(tool_radius), limit=limit, progress=say)
+            corr = ncmod.read(program).correct_to(output, c.field(tool_radius, outside), limit=limit, progress=say)
         if surface_path is not None:
             say(f"writing {surface_path}")
             cad.write(c.compensated, surface_path)
@@ -138,8 +155,14 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
     sysd = d.as_dict()
     summary(f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
                f"({d.method}); random part: std {d.noise.std:.4f} mm")
-    if not a.moran.systematic:
+    if not a.systematic:
         echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
+    if d.auto is not None and not d.auto["passed"]:
+        summary(f"warning: --auto found no {d.method} setting whose random part is free of systematic error; "
+                f"the default setting ({', '.join(f'{k} {v:g}' for k, v in d.auto['setting'].items())}) is used")
+    elif not d.noise.passed:
+        summary(f"warning: the random part still holds systematic error (Moran z {d.noise.moran_z:.2f}, lag-1 "
+                f"r {d.noise.lag1_r:.2f}); smooth less, or try --auto")
     if corr is not None:
         summary(f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
                    f"max displacement {corr.max_displacement:.4f} mm")

@@ -142,10 +142,19 @@ def read_qif(path, probe_radius: float = 0.0) -> Measurements:
     from lxml import etree
 
     src = str(path)
+    # no entity expansion and no network: a measurement file cannot make the reader fetch or inline
+    # anything else
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
     try:
-        root = etree.parse(str(path)).getroot()
-    except (OSError, etree.XMLSyntaxError) as e:
+        root = etree.parse(str(path), parser).getroot()
+    except OSError as e:
         raise InputError(f"not a readable QIF (XML) file: {e}", src) from None
+    except etree.XMLSyntaxError as e:
+        line, col = e.position if e.position else (0, 0)
+        msg = re.sub(r",? line \d+, column \d+$", "", e.msg or "")
+        raise InputError(f"not well-formed XML (QIF): {msg}", src, line or 0, col or 0) from None
+    if root is None:
+        raise InputError("not a QIF (XML) document: no root element", src)
 
     def local(el):
         return etree.QName(el).localname

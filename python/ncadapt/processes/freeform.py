@@ -29,16 +29,28 @@ from ..surfaces import Frame, Surface, extrapolate_border
 FILTERS = ("bilateral", "spline")
 # fewest points each step needs
 MIN_POINTS = 10
+# most nodes of the surface grid (its arrays, normals and field: some 0.5 GB at this size)
+MAX_GRID_NODES = 4_000_000
 
 
 @dataclass(frozen=True)
 class Analysis:
+    """The gate: Moran's I (a spatial pattern) and the offset test (a uniform part), each at α/2,
+    and their verdict."""
+
     n_points: int
     moran: stats.Moran
     deviation: dict
+    offset: stats.Offset
+    verdict: stats.Verdict
+
+    @property
+    def systematic(self) -> bool:
+        return self.verdict.systematic
 
     def as_dict(self) -> dict:
-        return {"n_points": self.n_points, "moran": self.moran.as_dict(), "deviation": self.deviation}
+        return {"n_points": self.n_points, "moran": self.moran.as_dict(), "deviation": self.deviation,
+                "offset": self.offset.as_dict(), "verdict": self.verdict.as_dict()}
 
 
 def spacing(points) -> float:
@@ -57,34 +69,57 @@ def noise_level(points, values) -> float:
     return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2)))
 
 
+def require_area(uv, source: str | None = None) -> None:
+    """Refuse points in (u, v) that lie along one line (a single scan line, a row of points): a
+    surface, a triangulation or a thin-plate spline over them is undetermined across the line."""
+    q = np.asarray(uv, float)[:, :2]
+    c = q - q.mean(axis=0)
+    across = np.linalg.svd(c, full_matrices=False)[2][-1]
+    width = float(np.abs(c @ across).max()) if len(q) else 0.0
+    if width < 0.5 * spacing(q):
+        raise InputError(f"the {len(q)} measured points lie along one line (all within half their spacing of it): "
+                         "a surface needs points over an area", source)
+
+
 def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
     """``frame``, or the one :meth:`Frame.fit` chooses from the measured normals."""
     return frame if frame is not None else Frame.fit(meas.normal, meas.source)
 
 
-def analyze(meas: Measurements, *, frame: Frame | None = None, **moran_options) -> Analysis:
-    """Deviation statistics and Moran's I of the deviations over (u, v) (options of
-    :func:`ncadapt.stats.moran`)."""
+def analyze(meas: Measurements, *, frame: Frame | None = None, progress=None, alpha: float = 0.05,
+            **moran_options) -> Analysis:
+    """Deviation statistics, Moran's I of the deviations over (u, v) (options of
+    :func:`ncadapt.stats.moran`; ``progress(done, total)`` follows its all-pairs weights) and the
+    offset test; the verdict at ``alpha`` (each test at α/2)."""
     meas.require(MIN_POINTS, "the analysis")
-    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, **moran_options)
-    return Analysis(len(meas), m, stats.summary(meas.deviation))
+    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, alpha=alpha / 2,
+                    **moran_options)
+    o = stats.offset(meas.deviation)
+    return Analysis(len(meas), m, stats.summary(meas.deviation), o, stats.verdict(m, o, alpha))
 
 
 @dataclass(frozen=True)
 class Decomposition:
+    """Systematic + random parts; ``noise`` checks the random part (``noise.passed``: no systematic
+    error left); ``auto`` ({"passed", "setting"}) when the setting was searched (``auto=True``)."""
+
     systematic: np.ndarray
     random: np.ndarray
     method: str
     parameters: dict
     noise: stats.Noise
+    auto: dict | None = None
 
     def as_dict(self) -> dict:
-        return {
+        d = {
             "method": self.method, "parameters": self.parameters,
             "systematic": {"rms": float(np.sqrt((self.systematic**2).mean())), "max_abs": float(np.abs(self.systematic).max())},
             "random": {"std": self.noise.std, "pearson_p": self.noise.pearson_p, "student_p": self.noise.student_p,
-                       "moran_z": self.noise.moran_z, "moran_p": self.noise.moran_p},
+                       "moran_z": self.noise.moran_z, "moran_p": self.noise.moran_p, "passed": self.noise.passed},
         }
+        if self.auto is not None:
+            d["auto"] = self.auto
+        return d
 
 
 def _on_grid(points):
@@ -121,13 +156,17 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
 
     ``bilateral``: σ_c defaults to 1.5 × the point spacing, σ_s to 3 × the estimated noise std.
     ``spline``: p defaults to MATLAB csaps' choice for the spacing h, 1 / (1 + h³ / 6).
-    ``auto``: the smoothest setting (largest σ_c, or smallest p) of a ladder whose random part has
-    no significant Moran's I at the analysis' ``alpha``.
+    ``auto``: the smoothest setting (largest σ_c, or smallest p) of a ladder whose random part
+    passes the residual check (:attr:`ncadapt.stats.Noise.passed`: no significantly positive
+    Moran's I or lag-1 correlation left, one-sided, at the analysis' ``alpha``). When no setting
+    passes, the default setting is used and ``auto["passed"]`` is False: the caller must say so.
     """
     if method not in FILTERS:
         raise ValueError(f"filter must be one of {FILTERS}, got {method!r}")
     meas.require(MIN_POINTS, "the decomposition")
     xy = frame_of(meas, frame).uv(meas.nominal)
+    if method == "spline":
+        require_area(xy, meas.source)
     e = meas.deviation
     h = spacing(xy)
     sig = max(noise_level(xy, e), 1e-6)
@@ -137,16 +176,22 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
     else:
         p0 = p if p is not None else 1.0 / (1.0 + h**3 / 6.0)
         ladder = [{"p": q} for q in (1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.3, 0.6, 0.9)] if auto else [{"p": p0}]
-    chosen = None
-    for par in ladder:
+    def split(par):
         s = _filter(method, xy, e, par)
         r = e - s
-        nz = stats.noise(xy, r, **moran_options)
-        chosen = (s, r, par, nz)
-        if not auto or nz.moran_p >= moran_options.get("alpha", 0.05):
-            break
+        if np.ptp(r) == 0:
+            raise InputError(f"the {method} filter with {', '.join(f'{k} {v:g}' for k, v in par.items())} keeps every "
+                             "deviation as systematic (nothing is left as noise); smooth more", meas.source)
+        return s, r, par, stats.noise(xy, r, **moran_options)
+
+    chosen = next((c for c in map(split, ladder) if c[3].passed), None) if auto else split(ladder[0])
+    found = chosen is not None
+    if not found:  # no rung passes: the default setting, flagged
+        chosen = split(base if method == "bilateral" else {"p": p0})
     s, r, par, nz = chosen
-    return Decomposition(s, r, method, {k: float(v) for k, v in par.items()} | {"auto": auto, "noise_estimate": sig}, nz)
+    params = {k: float(v) for k, v in par.items()}
+    return Decomposition(s, r, method, params | {"auto": auto, "noise_estimate": sig}, nz,
+                         {"passed": found, "setting": params} if auto else None)
 
 
 @dataclass(frozen=True)
@@ -160,14 +205,35 @@ class Compensation:
     points_compensated: np.ndarray  # (n, 3) the measured points' nominals moved by −dF n
     frame: Frame  # the (u, v) of the surface grid
 
-    def field(self, tool_radius: float = 0.0, outside: str = "clamp") -> ScatteredField:
-        """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R."""
+    def field(self, tool_radius: float = 0.0, outside: str = "error") -> "FramedField":
+        """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R
+        (its axis along z), interpolated over the frame's (u, v): the tips of a wall seen from +x
+        are spread over (y, z). ``outside`` (error|clamp|extrapolate): tool positions beyond the
+        surface grid — the measured area, or ``--extent``."""
         s = self.surface
         U, V = np.meshgrid(s.u, s.v, indexing="ij")
         p = s.point(U, V).reshape(-1, 3)
         n = s.normal(U, V).reshape(-1, 3)
         tip = p + tool_radius * n - tool_radius * np.array([0.0, 0.0, 1.0])
-        return ScatteredField(tip, -self.df_grid.reshape(-1, 1) * n, outside=outside, source="compensation")
+        return FramedField(self.frame, ScatteredField(self.frame.local(tip), -self.df_grid.reshape(-1, 1) * n,
+                                                      outside=outside, source="compensation"))
+
+
+class FramedField:
+    """A field over a frame's (u, v): world points are put in frame coordinates (u, v, w) before
+    ``inner`` (a field over their first two) is evaluated; displacements stay in world axes."""
+
+    def __init__(self, frame: Frame, inner: ScatteredField):
+        self.frame, self.inner = frame, inner
+        self.outside = inner.outside
+        # the world (x, y) box the clearance check of `correct` uses: only for a part seen along z
+        self.bounds = inner.bounds if np.allclose(np.abs(frame.axes[2]), [0, 0, 1]) else None
+
+    def __call__(self, points) -> np.ndarray:
+        return self.inner(self.frame.local(np.asarray(points, float)))
+
+    def __repr__(self):
+        return f"FramedField({self.frame.names}, {self.inner!r})"
 
 
 def compensate(surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None) -> Compensation:
@@ -210,12 +276,25 @@ def fit_height_surface(points, extent=None, step: float | None = None, frame: Fr
         return Surface(xs, ys, frame.to_world(X, Y, Z))
     from scipy.interpolate import CloughTocher2DInterpolator
 
+    require_area(p)
     h = step or spacing(p)
     x0, x1, y0, y1 = extent or (p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max())
-    xs = np.linspace(x0, x1, max(4, int(round((x1 - x0) / h)) + 1))
-    ys = np.linspace(y0, y1, max(4, int(round((y1 - y0) / h)) + 1))
+    what = "the extent" if extent else "the measured area"
+    area = f"{what} u {x0:g} … {x1:g}, v {y0:g} … {y1:g} mm"
+    if min(x1 - x0, y1 - y0) < h:
+        raise InputError(f"{area} is narrower than the point spacing {h:.4g} mm: no surface to fit")
+    nu, nv = (max(4, int(round(span / h)) + 1) for span in (x1 - x0, y1 - y0))
+    if nu * nv > MAX_GRID_NODES:
+        raise InputError(f"{area} at the point spacing {h:.4g} mm needs a surface grid of {nu:,} x {nv:,} nodes, "
+                         f"more than {MAX_GRID_NODES:,}; "
+                         + ("give a smaller extent" if extent else "check the coordinates or give the part's extent"))
+    xs = np.linspace(x0, x1, nu)
+    ys = np.linspace(y0, y1, nv)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     zi = CloughTocher2DInterpolator(p[:, :2], p[:, 2])(X, Y)
     known = np.isfinite(zi)
+    if known.sum() < 16:
+        raise InputError(f"the measured points cover {known.sum()} nodes of the surface grid over {area}, fewer "
+                         "than 16: the extent must overlap the measured area")
     Z = extrapolate_border(xs, ys, np.where(known, zi, 0.0), known)
     return Surface(xs, ys, frame.to_world(X, Y, Z))
