@@ -3,28 +3,12 @@
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 import click
 
-from ._common import (FiniteRange, check_outputs, echo_err, err_console, handle_errors, json_option, seed_option,
+from ._common import (FiniteRange, check_outputs, echo_err, handle_errors, json_option, progress, seed_option,
                       summary, write_json)
-
-
-@contextlib.contextmanager
-def _bar(what: str):
-    """A progress bar with percentage and time left on a terminal (stderr), quiet otherwise;
-    yields a function taking the fraction done."""
-    if not err_console.is_terminal:
-        yield lambda fraction: None
-        return
-    from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
-
-    with Progress(TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeRemainingColumn(),
-                  console=err_console, transient=True) as bar:
-        task = bar.add_task(what, total=1.0)
-        yield lambda fraction: bar.update(task, completed=min(max(fraction, 0.0), 1.0))
 
 
 @click.group()
@@ -63,8 +47,8 @@ def plan(config, mode, output, radius_mode, css, tool, dialect, wear_weight, jso
         raise click.BadParameter("a Fanuc lathe programs X as a diameter (radius programming is a machine "
                                  "parameter); drop --radius-mode", param_hint="'--dialect'")
     cfg = tu.load(config)
-    with _bar("planning") as say:
-        p = tu.plan(cfg, mode, wear_weight=wear_weight, progress=say)
+    with progress() as say:  # a bar with percentage and time left on a terminal, quiet otherwise
+        p = tu.plan(cfg, mode, wear_weight=wear_weight, progress=lambda f: say("planning", f, 1.0))
     d = p.as_dict()
     summary(f"{mode}: diameter variation (max D − min D) on the model {d['diameter_variation'] * 1000:.1f} µm "
             f"(constant feed {d['constant_feed']:.3f} mm/rev at {d['constant_rpm']:.0f} rpm with the best X offset: "
@@ -107,9 +91,9 @@ def simulate(config, program, rho_sigma, stiffness_sigma, dialect, seed, json_pa
 
     check_outputs({"configuration": config, "program": program}, {"--json": json_path})
     cfg = tu.load(config)
-    with _bar("turning") as say:
+    with progress() as say:
         prof = st.simulate(cfg, program, rho_sigma=rho_sigma, stiffness_sigma=stiffness_sigma, seed=seed,
-                           progress=say, dialect=dialect)
+                           progress=lambda f: say("turning", f, 1.0), dialect=dialect)
     d = prof.as_dict()
     summary(f"{program}: diameter {d['diameter_min']:.4f} .. {d['diameter_max']:.4f} mm (target "
             f"{d['diameter_target']:.3f}; max |D − target| {d['diameter_error_max'] * 1000:.1f} µm, variation "

@@ -148,7 +148,7 @@ def simulate(parts: int = 1000, seed: int = 1, *, material: str = "steel", progr
         if res.applicable:
             done.append(res)
             if progress and len(done) % 100 == 0:
-                progress(f"{len(done)}/{parts} parts")
+                progress(f"{len(done)}/{parts} parts", len(done), parts)
         if drawn > 20 * parts:
             raise InputError(f"condition (3) held for {len(done)} of the {drawn} parts drawn with these settings "
                              f"(t0 = {kw.get('t0', 0.5):g} mm: the pre-finish deflection grows with t0); use a "
