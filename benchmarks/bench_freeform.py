@@ -66,6 +66,7 @@ def main() -> int:
     except ImportError:
         print("   esda not installed (make test installs it)")
     gate()
+    border()
     return 0
 
 
@@ -131,6 +132,42 @@ def gate(seeds: int = 200, alpha: float = 0.05) -> None:
     found = sum(pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=demo.NOISE, seed=s)))
                 .systematic for s in range(seeds))
     print(f"   the demo's systematic error + 5 um noise: found in {rate(found)}")
+
+
+def border(seeds=(1, 2, 3)) -> None:
+    """The systematic error left in the unmeasured border strip after one compensation, with the
+    border held at the nearest measured value and with the paper's cubic extrapolation."""
+    from ncadapt import demo, measure, nc
+    from ncadapt.processes import freeform as pf
+    from ncadapt.sim import freeform as ff
+
+    part = ff.demo_part()
+    prog = nc.parse(demo.program_text())
+    p, n = ff.probe_points(part, demo.PROBE_BORDER, demo.PROBE_SPACING)
+    allp, alln = ff.probe_points(part, 0.5, 1.0)
+    b = demo.PROBE_BORDER
+    inner = (allp[:, 0] >= b) & (allp[:, 0] <= 80 - b) & (allp[:, 1] >= b) & (allp[:, 1] <= 60 - b)
+    print(f"\nthe unmeasured {b:g} mm border after one compensation (RMS at 1 mm spacing, seeds {list(seeds)})")
+    rms = lambda v: float(np.sqrt(np.mean(v * v)))  # noqa: E731
+    for name, model in (("demo error", (("curvature", demo.CURVATURE_AMPLITUDE), ("polynomial", demo.POLYNOMIAL))),
+                        ("bench error", (("curvature", 0.10), ("polynomial", {(1, 0): 0.02, (0, 2): -0.015})))):
+        err = ff.ErrorModel(part, model)
+        first = ff.machine(prog, part, err, demo.TOOL_RADIUS)
+        before = np.einsum("ij,ij->i", ff.measure(first, allp, alln) - allp, alln)
+        left = {m: [] for m in pf.BORDERS}
+        for seed in seeds:
+            m = measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=demo.NOISE, seed=seed))
+            d = pf.decompose(m)
+            for mode in pf.BORDERS:
+                c = pf.compensate(part, m, d.systematic, border=mode)
+                second = ff.machine(prog.correct(c.field(demo.TOOL_RADIUS, "clamp")), part, err, demo.TOOL_RADIUS)
+                after = np.einsum("ij,ij->i", ff.measure(second, allp, alln) - allp, alln)
+                left[mode].append((rms(after[inner]), rms(after[~inner])))
+        print(f"   {name}: before {rms(before[inner]) * 1e3:.1f} um inside, {rms(before[~inner]) * 1e3:.1f} um in the border")
+        for mode, v in left.items():
+            a = np.array(v) * 1e3
+            print(f"     --border {mode:5s} inside {a[:, 0].mean():.2f} um, border {a[:, 1].mean():.2f} um "
+                  f"({a[:, 1].min():.2f}-{a[:, 1].max():.2f})")
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

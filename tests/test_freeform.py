@@ -302,7 +302,7 @@ def test_analyze_and_compensate_cli(tmp_path, bench):
                                "z_randomization", "p_value", "systematic", "weights"}
     assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None}
     args = ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
-            "--tool-radius", "4", "--extent", "0,80,0,60", "--surface", str(tmp_path / "c.step"),
+            "--tool-radius", "4", "--extent", "0,80,0,60", "--extrapolate-nominal", "--surface", str(tmp_path / "c.step"),
             "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"]
     # the program plunges at X0 Y0, a tool radius beyond the tips of the compensated surface: by
     # default refused, nothing written
@@ -573,3 +573,40 @@ def test_a_program_needs_the_tool_radius(tmp_path):
     r = CliRunner().invoke(main, ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"),
                                   "-o", str(tmp_path / "o.ngc")])
     assert r.exit_code == 2 and "--program needs --tool-radius" in r.output and not (tmp_path / "o.ngc").exists()
+
+
+def test_a_surface_beyond_the_measured_points_is_refused_unless_accepted(tmp_path):
+    # a 15 x 11 grid over 5..75 x 5..55 (5 mm): the extent 0..80 x 0..60 adds a 5 mm strip, whose
+    # corners are sqrt(5² + 5²) = 7.07 mm from the points' hull; 56 of the 17 x 13 nodes are outside
+    pts = np.array([(x, y, 0.0) for x in range(5, 76, 5) for y in range(5, 56, 5)])
+    e = pf.nominal_extrapolation(pf.fit_height_surface(pts, extent=(0, 80, 0, 60)), pts)
+    assert e.max_distance == pytest.approx(np.hypot(5, 5), rel=1e-12) and e.area_fraction == pytest.approx(56 / 221)
+    assert pf.nominal_extrapolation(pf.fit_height_surface(pts), pts).max_distance == 0.0
+    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,{0.01 + 0.0002 * x:.5f}" for x, y, _ in pts]
+    (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
+    args = ["compensate", str(tmp_path / "m.csv"), "--extent", "0,80,0,60", "--json", str(tmp_path / "c.json"),
+            "--report", str(tmp_path / "r.html")]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and "would reach 7.07 mm beyond the measured points (25% of its grid" in r.output
+    assert not (tmp_path / "c.json").exists()
+    r = CliRunner().invoke(main, args + ["--extrapolate-nominal"])
+    assert r.exit_code == 0, r.output
+    j = json.loads((tmp_path / "c.json").read_text())
+    assert j["extrapolation"] == {"max_distance": pytest.approx(np.hypot(5, 5)), "area_fraction": pytest.approx(56 / 221)}
+    assert "Extrapolated nominal" in (tmp_path / "r.html").read_text()
+    # a scatter: the corners of its bounding box are beyond its hull
+    rng = np.random.default_rng(0)
+    sc = np.column_stack([rng.uniform(0, 80, 50), rng.uniform(0, 60, 50), np.zeros(50)])
+    assert pf.nominal_extrapolation(pf.fit_height_surface(sc), sc).max_distance > 1.0
+
+
+def test_the_border_holds_the_nearest_measured_value():
+    from ncadapt.surfaces import extrapolate_border
+
+    u, v = np.arange(6.0), np.arange(5.0)
+    vals = np.add.outer(u, 10 * v)
+    known = np.zeros((6, 5), bool)
+    known[1:5, 1:4] = True
+    out = extrapolate_border(u, v, np.where(known, vals, 0.0), known, mode="hold")
+    assert out[0, 0] == vals[1, 1] and out[5, 4] == vals[4, 3] and out[0, 2] == vals[1, 2]
+    np.testing.assert_array_equal(out[known], vals[known])
