@@ -509,7 +509,7 @@ def test_auto_chooses_the_smoothest_passing_setting_or_says_none_passed(tmp_path
     # stripes two points wide: the spline's residual keeps them (lag-1 correlation), at every p
     stripes = 0.02 * ((GRID[:, 0] // 5) % 2) + np.random.default_rng(0).normal(0, 0.001, len(GRID))
     d = pf.decompose(_on_grid(stripes), "spline", auto=True)
-    assert d.auto == {"passed": False, "setting": {"p": pytest.approx(1 / (1 + 5.0**3 / 6))}} and not d.noise.passed
+    assert d.auto == {"passed": False, "setting": {"p": pytest.approx(1 / (1 + 5.0**3 / 9))}} and not d.noise.passed
     m = tmp_path / "stripes.csv"
     m.write_text("x,y,z,i,j,k,dev\n" + "".join(f"{x},{y},0,0,0,1,{e:.6f}\n" for (x, y, _), e in zip(GRID, stripes)))
     r = CliRunner().invoke(main, ["compensate", str(m), "--filter", "spline", "--auto", "--json", str(tmp_path / "c.json")])
