@@ -13,30 +13,50 @@ OPC UA exchange (namespace ``urn:ncadapt:skin``, object ``Controller``): the con
 ``Thickness`` (mm; NaN when the gauge's limit filter rejected the reading) and then increments
 ``Sequence``; the client answers each sequence number by writing ``W1Offset`` (mm; only when it
 stepped) and then ``Ack`` = that number. The controller applies the offset and cuts on to the
-next reading only after the Ack, so a run over OPC UA is step for step the in-process run.
+next reading only after the Ack, so a run over OPC UA is step for step the in-process run. The
+controller also publishes ``Pockets`` (how many it will finish); the client sets ``Fault`` = true
+when its interlocks stop the loop, and the controller then holds W1 and stops feeding.
+
+Every adapter runs the same interlocks (:class:`ncadapt.processes.skin.Interlocks`) between the
+readings and the compensator.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 
 NAMESPACE = "urn:ncadapt:skin"
 
 
-def run(source, sink, compensator, target_thickness: float, *, on_step=None) -> int:
-    """Read until the source is exhausted; return the number of compensator steps."""
+def run(source, sink, compensator, target_thickness: float, *, guard=None, on_step=None) -> int:
+    """Read until the source is exhausted; return the number of compensator steps.
+
+    ``guard`` (:class:`ncadapt.processes.skin.Interlocks`) decides which readings reach the
+    compensator and bounds the commands it gives: a rejected reading holds the command in force
+    (``sink.skip()``), too many in a row raise :class:`ncadapt.processes.skin.LoopStopped` with W1
+    held. Without a guard only missing and non-finite readings are skipped (for tests of the
+    compensators alone)."""
     n = 0
-    for t in source:
-        if t is None or compensator is None or not math.isfinite(t):
+    for i, t in enumerate(source):
+        if guard is not None:
+            reason = guard.check(t)
+            if reason is not None or compensator is None:
+                sink.skip()
+                if reason is not None:
+                    guard.reject(reason, i)
+                continue
+        elif t is None or compensator is None or not math.isfinite(t):
             sink.skip()
             continue
         compensator.step(t - target_thickness)
-        sink.write(compensator.w1_offset)
+        w1 = guard.bound(compensator) if guard is not None else compensator.w1_offset
+        sink.write(w1)
         n += 1
         if on_step:
-            on_step(n, t, compensator.w1_offset)
+            on_step(n, t, w1)
     return n
 
 
@@ -48,7 +68,10 @@ class MachineLink:
 
     def __iter__(self):
         while not self.machine.done:
-            yield self.machine.advance()
+            t = self.machine.advance()
+            if t is None and self.machine.done:
+                return  # the path ended before the next reading
+            yield t
 
     def write(self, offset: float) -> None:
         self.machine.command(self.target_depth + offset)
@@ -57,11 +80,11 @@ class MachineLink:
         pass
 
 
-def run_in_process(machine, compensator) -> int:
-    from .sim.skin import A_G, T_TARGET
-
-    link = MachineLink(machine, A_G)
-    return run(link, link, compensator, T_TARGET)
+def run_in_process(machine, compensator, target_thickness: float, target_depth: float, *, guard=None) -> int:
+    """Run a compensator on an in-process machine (a source of readings with ``done``,
+    ``advance()`` and ``command(depth)``)."""
+    link = MachineLink(machine, target_depth)
+    return run(link, link, compensator, target_thickness, guard=guard)
 
 
 class CsvSource:
@@ -72,6 +95,7 @@ class CsvSource:
         self.path = str(path)
         self.header: list[str] = []
         self.row: list[str] = []
+        self.line = 1  # the line of the current row (1: the header)
 
     def __iter__(self):
         from ._io import csv_column, csv_reader
@@ -85,6 +109,7 @@ class CsvSource:
         k = head.index("thickness")
         for row in r:
             self.row = row
+            self.line = r.line_num
             v = row[k].strip() if k < len(row) else ""
             if not v:
                 yield None
@@ -136,9 +161,11 @@ class CsvSink:
 
 # ------------------------------------------------------------------------------------ OPC UA
 async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
-                        ready=None, poll: float = 0.0005):
+                        ready=None, poll: float = 0.0005, status: dict | None = None):
     """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
-    its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done."""
+    its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done.
+    ``Pockets`` tells the client how many pockets there are; a client that sets ``Fault`` stops
+    the run with W1 held (``status["fault"]`` becomes True)."""
     from asyncua import Server, ua
 
     server = Server()
@@ -151,7 +178,9 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
     seq = await obj.add_variable(idx, "Sequence", 0, varianttype=ua.VariantType.Int64)
     w1 = await obj.add_variable(idx, "W1Offset", 0.0)
     ack = await obj.add_variable(idx, "Ack", 0, varianttype=ua.VariantType.Int64)
-    for v in (w1, ack):
+    fault = await obj.add_variable(idx, "Fault", False, varianttype=ua.VariantType.Boolean)
+    await obj.add_variable(idx, "Pockets", len(machines), varianttype=ua.VariantType.Int64)
+    for v in (w1, ack, fault):
         await v.set_writable()
     async with server:
         if ready is not None:
@@ -165,6 +194,13 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
                 await seq.write_value(n, ua.VariantType.Int64)
                 while await ack.read_value() != n:
                     await asyncio.sleep(poll)
+                if await fault.read_value():
+                    # the client stopped the loop: hold W1 (no new command) and stop feeding
+                    if status is not None:
+                        status["fault"] = True
+                    await seq.write_value(0, ua.VariantType.Int64)
+                    await asyncio.sleep(0.05)
+                    return
                 if t is not None:
                     m.command(target_depth + float(await w1.read_value()))
             # a new pocket: the client starts its compensator afresh
@@ -177,23 +213,63 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
         await asyncio.sleep(0.05)
 
 
-async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int, poll: float = 0.0005,
-                    latencies: list | None = None) -> int:
-    """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
-    each pocket (a negative Sequence announces the next one). Returns the number of steps;
-    ``latencies`` collects, per reading, the seconds from seeing the new Sequence to writing Ack."""
-    from asyncua import Client, ua
+async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4.0):
+    """An asyncua client connected to ``url``, retrying (0.1 s, doubling to 1 s) for up to
+    ``timeout`` seconds while the server is still starting (refused or timed-out connections);
+    the last error once the time is up."""
+    from asyncua import Client
 
-    steps = 0
-    async with Client(url=url) as client:
+    deadline = time.monotonic() + max(0.0, float(timeout))
+    delay = 0.1
+    while True:
+        client = Client(url=url, timeout=request_timeout)
+        try:
+            await client.connect()
+            return client
+        except (OSError, asyncio.TimeoutError):
+            with contextlib.suppress(Exception):
+                await client.disconnect()
+            if time.monotonic() + delay > deadline:
+                raise
+            await asyncio.sleep(delay)
+            delay = min(2 * delay, 1.0)
+
+
+async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int | None = None,
+                    poll: float = 0.0005, latencies: list | None = None, make_guard=None,
+                    connect_timeout: float = 30.0, info: dict | None = None) -> int:
+    """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
+    each pocket (a negative Sequence announces the next one), ``make_guard()`` its interlocks
+    (:class:`ncadapt.processes.skin.Interlocks`, the same as in a replay). ``pockets``: how many to
+    finish; None reads the controller's ``Pockets``. Returns the number of steps; ``latencies``
+    collects, per reading, the seconds from seeing the new Sequence to writing Ack; ``info`` gets
+    ``pockets``, ``rejected`` and ``max_abs_w1``.
+
+    When the interlocks stop the loop (persistent gauge faults) the client writes ``Fault`` = true
+    on the controller — its signal to hold W1 and stop feeding — acknowledges the reading, and
+    raises :class:`ncadapt.processes.skin.LoopStopped`."""
+    from asyncua import ua
+
+    info = {} if info is None else info
+    steps = rejected = 0
+    max_abs_w1 = 0.0
+    client = await connect(url, connect_timeout)
+    try:
         idx = await client.get_namespace_index(NAMESPACE)
         obj = await client.nodes.objects.get_child(f"{idx}:Controller")
         thick = await obj.get_child(f"{idx}:Thickness")
         seq = await obj.get_child(f"{idx}:Sequence")
         w1 = await obj.get_child(f"{idx}:W1Offset")
         ack = await obj.get_child(f"{idx}:Ack")
+        fault = await obj.get_child(f"{idx}:Fault")
+        if pockets is None:
+            pockets = int(await (await obj.get_child(f"{idx}:Pockets")).read_value())
+            if pockets < 1:
+                raise ValueError(f"the controller announces {pockets} pockets")
+        info["pockets"] = pockets
         comp = make_compensator()
-        last, done = 0, 0
+        guard = make_guard() if make_guard is not None else None
+        last, done, i = 0, 0, 0
         while done < pockets:
             s = await seq.read_value()
             if s == last or s == 0:
@@ -205,13 +281,42 @@ async def run_opcua(url: str, make_compensator, target_thickness: float, *, pock
                 done += 1
                 if comp is not None:
                     steps += comp.steps
+                if guard is not None:
+                    rejected += guard.rejected
+                    max_abs_w1 = max(max_abs_w1, guard.max_abs_w1)
                 comp = make_compensator()
+                guard = make_guard() if make_guard is not None else None
             else:
                 t = await thick.read_value()
-                if comp is not None and math.isfinite(t):
-                    comp.step(t - target_thickness)
-                    await w1.write_value(ua.DataValue(ua.Variant(float(comp.w1_offset), ua.VariantType.Double)))
+                value = None
+                try:
+                    if guard is not None:
+                        reason = guard.check(None if t is None or not math.isfinite(t) else t)
+                        if reason is not None:
+                            guard.reject(reason, i)
+                        elif comp is not None:
+                            comp.step(t - target_thickness)
+                            value = guard.bound(comp)
+                    elif comp is not None and math.isfinite(t):
+                        comp.step(t - target_thickness)
+                        value = comp.w1_offset
+                except Exception:
+                    await fault.write_value(ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)))
+                    await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
+                    if comp is not None:
+                        info["steps"] = steps + comp.steps
+                    if guard is not None:
+                        info["rejected"] = rejected + guard.rejected
+                        info["max_abs_w1"] = max(max_abs_w1, guard.max_abs_w1)
+                    raise
+                i += 1
+                if value is not None:
+                    await w1.write_value(ua.DataValue(ua.Variant(float(value), ua.VariantType.Double)))
             await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
             if latencies is not None:
                 latencies.append(time.perf_counter() - t0)
+    finally:
+        with contextlib.suppress(Exception):
+            await client.disconnect()
+    info.update(steps=steps, rejected=rejected, max_abs_w1=max_abs_w1)
     return steps

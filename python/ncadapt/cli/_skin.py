@@ -9,6 +9,7 @@ import click
 
 from ..errors import InputError
 from .. import constants
+from ..processes.skin import GAUGE_LIMIT as ps_limit, MAX_FAULTS, STUCK, W1_STEP_MAX
 from ._common import FiniteRange, check_outputs, handle_errors, json_option, seed_option, summary, write_json
 
 
@@ -20,9 +21,10 @@ def skin() -> None:
 @skin.command("simulate")
 @click.option("--method", type=click.Choice(["none", "mirror", "secant", "kalman"]), default="kalman",
               show_default=True, help="Compensator (kalman: ours).")
-@click.option("--noise", type=FiniteRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
-@click.option("--latency-ms", type=FiniteRange(min=0), default=45.0, show_default=True,
-              help="Dead time from reading to axis motion, ms.")
+@click.option("--noise", type=FiniteRange(min=0, max=0.1), default=0.005, show_default=True,
+              help="Gauge noise σ, mm (0 to 0.1: a third of the gauge's 0.3 mm tolerance).")
+@click.option("--latency-ms", type=FiniteRange(min=0, max=1000), default=45.0, show_default=True,
+              help="Dead time from reading to axis motion, ms (0 to 1000: 25 mm of path at the testbed's feed).")
 @seed_option
 @click.option("--protocol", is_flag=True, help="The paper's noise-free protocol at the checkpoints instead.")
 @json_option
@@ -98,9 +100,11 @@ def _report(path, run) -> None:
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--thickness", "map_path", type=click.Path(exists=True, dir_okay=False, path_type=Path), required=True,
               help="Thickness map: CSV with columns x,y,thickness (mm), on a grid or scattered.")
-@click.option("--target", type=FiniteRange(), required=True, help="Target wall thickness T, mm.")
-@click.option("--allowance", type=FiniteRange(min=0), default=0.0, show_default=True,
-              help="Material the finishing pass was planned to remove (0: the map is after finishing), mm.")
+@click.option("--target", type=FiniteRange(min=0, min_open=True, max=ps_limit), required=True,
+              help=f"Target wall thickness T, mm (> 0, at most {ps_limit:g}: the gauge's limit).")
+@click.option("--allowance", type=FiniteRange(min=0, max=ps_limit), default=0.0, show_default=True,
+              help=f"Material the finishing pass was planned to remove (0: the map is after finishing; a second "
+                   f"round), mm (0 to {ps_limit:g}).")
 @click.option("--into", type=click.Choice(["-z", "+z"]), default="-z", show_default=True,
               help="Direction in which the tool cuts deeper.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
@@ -132,6 +136,13 @@ def correct(program, map_path, target, allowance, into, output, limit, outside, 
              f"mean {excess.mean():+.4f} mm")
     summary(f"  blocks changed {c.blocks_changed:,}, lines added {c.lines_added:,}; displacement max "
              f"{c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm")
+    if allowance > 0:
+        summary(f"  not corrected: the finishing pass's own deflection under the {allowance:g} mm it removes "
+                "(largest mid-pocket); measure the finished wall and run `skin correct` on the corrected "
+                "program with that map and --allowance 0 for a second round")
+    else:
+        summary("  the re-cut engages the residual plus the deflection the previous pass had; measure again "
+                "after it (a round leaves about (2κ − 1) of the residual, κ the wall's compliance ratio)")
     for w in c.warnings:
         echo_err(f"  warning: {w}")
     if json_path:
@@ -157,26 +168,40 @@ def _quiet_asyncua() -> None:
 @skin.command("loop")
 @click.option("--method", type=click.Choice(["mirror", "secant", "kalman"]), default="kalman", show_default=True,
               help="Compensator (kalman: ours).")
-@click.option("--target", type=FiniteRange(min=0, min_open=True), required=True,
-              help="Target wall thickness T_g, mm.")
-@click.option("--depth", type=FiniteRange(min=0, min_open=True), required=True,
-              help="Target depth a_g = T_s − T_g of the finishing pass, mm.")
-@click.option("--noise", type=FiniteRange(min=0, min_open=True), default=0.005, show_default=True,
-              help="The gauge's noise σ, mm (kalman and secant).")
+@click.option("--target", type=FiniteRange(min=0.01, max=ps_limit), required=True,
+              help=f"Target wall thickness T_g, mm (0.01 to {ps_limit:g}, the gauge's limit).")
+@click.option("--depth", type=FiniteRange(min=0.001, max=ps_limit), required=True,
+              help=f"Target depth a_g = T_s − T_g of the finishing pass, mm (0.001 to {ps_limit:g}).")
+@click.option("--noise", type=FiniteRange(min=1e-6, max=0.3), default=0.005, show_default=True,
+              help="The gauge's noise σ, mm (kalman and secant; 1e-6 to 0.3, the gauge's tolerance).")
+@click.option("--w1-max", type=FiniteRange(min=0, min_open=True), default=None,
+              help="Bound of the W1 command |W1|, mm; below --target (a W1 of T_g would cut through the wall). "
+                   "Default min(2 × --depth, --target / 2).")
+@click.option("--w1-step-max", type=FiniteRange(min=0, min_open=True, max=ps_limit), default=W1_STEP_MAX,
+              show_default=True, help="Bound of the change of W1 per reading, mm.")
+@click.option("--max-faults", type=click.IntRange(min=1, max=10**6), default=MAX_FAULTS, show_default=True,
+              help="Rejected readings in a row (NaN, ≤ 0, above 10 mm, more than 0.3 mm from --target, "
+                   "--stuck identical in a row) that stop the loop with W1 held (exit 1).")
+@click.option("--stuck", type=click.IntRange(min=2, max=10**6), default=STUCK, show_default=True,
+              help="Identical readings in a row that make a stuck gauge (the N-th and later are rejected).")
 @click.option("--replay", "replay_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Recorded gauge readings: CSV with a column thickness (empty or NaN: rejected).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               help="With --replay: the readings' rows with the W1 offset commanded after each in a column "
-                   "w1_offset (empty where none was).")
+                   "w1_offset (empty where the command in force was held).")
 @click.option("--opcua", "url", metavar="URL",
               help="The controller's OPC UA server (namespace urn:ncadapt:skin, object Controller).")
-@click.option("--pockets", type=click.IntRange(min=1), default=1, show_default=True,
-              help="With --opcua: pockets to finish before stopping.")
+@click.option("--pockets", type=click.IntRange(min=1), default=None,
+              help="With --opcua: pockets to finish before stopping (default: the controller's Pockets).")
+@click.option("--connect-timeout", type=FiniteRange(min=0, max=3600), default=30.0, show_default=True,
+              help="With --opcua: seconds to keep retrying while the server is still starting (0: one try).")
 @json_option
 @handle_errors
-def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, json_path):
+def loop_cmd(method, target, depth, noise, w1_max, w1_step_max, max_faults, stuck, replay_path, output, url, pockets,
+             connect_timeout, json_path):
     """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
-    live as an OPC UA client of the controller."""
+    live as an OPC UA client of the controller. Both go through the same interlocks: the gauge
+    filter, bounds on W1 and its step, and a stop on persistent faults."""
     import asyncio
 
     import numpy as np
@@ -188,56 +213,92 @@ def loop_cmd(method, target, depth, noise, replay_path, output, url, pockets, js
         raise click.UsageError("give exactly one of --replay FILE or --opcua URL")
     if (replay_path is None) != (output is None):
         raise click.UsageError("--replay and -o go together")
+    if url is None and pockets is not None:
+        raise click.UsageError("--pockets goes with --opcua")
+    if w1_max is not None and not w1_max < target:
+        raise click.BadParameter(f"{w1_max:g} mm is not below --target {target:g} mm: a W1 of the target "
+                                 "thickness would cut through the wall", param_hint="'--w1-max'")
     check_outputs({"gauge readings": replay_path}, {"-o": output, "--json": json_path})
-    comps = []
+    comps, guards = [], []
 
     def fresh():
-        comps.append(ps.make(method, depth, noise=noise))
+        comps.append(ps.make(method, depth, noise=noise, max_step=max(w1_step_max, 1e-9)))
         return comps[-1]
 
+    def guard():
+        guards.append(ps.Interlocks(target, depth, w1_max=w1_max, w1_step_max=w1_step_max, max_faults=max_faults,
+                                     stuck=stuck))
+        return guards[-1]
+
     d = {"method": method, "target": target, "depth": depth, "noise": noise}
+    stopped = None
     if replay_path is not None:
         source = lp.CsvSource(replay_path)
         sink = lp.CsvSink(output, source)
         offsets = []
-        steps = lp.run(source, sink, fresh(), target,
-                       on_step=lambda n, t, w: offsets.append(w))
-        sink.close()
+        lines = []
+        try:
+            steps = lp.run(source, sink, fresh(), target, guard=guard(),
+                           on_step=lambda n, t, w: offsets.append(w))
+        except ps.LoopStopped as e:
+            stopped = e
+            where = f"{replay_path}:{source.line}"
+        else:
+            sink.close()
         d.update(source=str(replay_path), output=str(output))
-        summary(f"{replay_path}: {steps} readings stepped -> {output}")
+        if stopped is None:
+            summary(f"{replay_path}: {steps} readings stepped -> {output}")
     else:
         from asyncua import ua
 
         _quiet_asyncua()
         lat: list = []
+        info: dict = {}
         try:
-            steps = asyncio.run(lp.run_opcua(url, fresh, target, pockets=pockets, latencies=lat))
+            steps = asyncio.run(lp.run_opcua(url, fresh, target, pockets=pockets, latencies=lat, make_guard=guard,
+                                             connect_timeout=connect_timeout, info=info))
+        except ps.LoopStopped as e:
+            stopped, where, steps = e, url, info.get("steps", 0)
         except (OSError, asyncio.TimeoutError) as err:
             raise InputError(f"cannot reach the controller: {err or type(err).__name__}", url) from None
         except (ua.UaError, ValueError) as err:
-            raise InputError(f"not an ncadapt skin controller (namespace {lp.NAMESPACE}, object Controller): {err}",
-                             url) from None
+            raise InputError(f"not an ncadapt skin controller (namespace {lp.NAMESPACE}, object Controller "
+                             f"with Thickness, Sequence, W1Offset, Ack, Fault, Pockets): {err}", url) from None
         offsets = []
+        pockets = info.get("pockets", pockets)
         d.update(source=url, pockets=pockets, latency_median_ms=float(np.median(lat) * 1e3) if lat else None,
                  latency_p99_ms=float(np.percentile(lat, 99) * 1e3) if lat else None)
         if lat:
             summary(f"{url}: {len(lat)} readings, latency median {d['latency_median_ms']:.2f} ms, "
                     f"p99 {d['latency_p99_ms']:.2f} ms")
+    if stopped is not None:
+        from ..errors import RefusedError
+
+        signal = "; Fault set on the controller" if url is not None else "; nothing written"
+        raise RefusedError(f"{where}: {stopped}{signal}",
+                           [f"rejected readings: {sum(g.rejected for g in guards)}",
+                            *(f"{k}: {v}" for g in guards[-1:] for k, v in g.reasons.items())])
     fallbacks = sum(c.fallbacks for c in comps)
-    d.update(steps=steps, fallbacks=fallbacks)
+    rejected = sum(g.rejected for g in guards)
+    max_abs_w1 = max((g.max_abs_w1 for g in guards), default=0.0)
+    clamped = sum(g.clamped for g in guards)
+    d.update(steps=steps, fallbacks=fallbacks, rejected=rejected, max_abs_w1=max_abs_w1, clamped=clamped,
+             w1_max=guards[0].w1_max if guards else w1_max, w1_step_max=w1_step_max, max_faults=max_faults, stuck=stuck)
     if offsets:
         d.update(w1_offset_min=float(min(offsets)), w1_offset_max=float(max(offsets)))
-    summary(f"{method}: {steps} steps, {fallbacks} fallbacks"
-               + (f"; W1 offset {min(offsets):+.4f} .. {max(offsets):+.4f} mm" if offsets else ""))
+    summary(f"{method}: {steps} steps, {fallbacks} fallbacks, {rejected} readings rejected, {clamped} commands "
+            f"bounded; |W1| max {max_abs_w1:.4f} mm"
+            + (f" (W1 offset {min(offsets):+.4f} .. {max(offsets):+.4f} mm)" if offsets else ""))
     if json_path:
         write_json(json_path, d)
 
 
 @skin.command("serve")
 @click.option("--endpoint", default=_ENDPOINT, show_default=True, help="Where the virtual controller listens.")
-@click.option("--noise", type=FiniteRange(min=0), default=0.005, show_default=True, help="Gauge noise σ, mm.")
-@click.option("--latency-ms", type=FiniteRange(min=0), default=45.0, show_default=True,
-              help="Dead time from reading to axis motion, ms.")
+@click.option("--noise", type=FiniteRange(min=0, max=0.1), default=0.005, show_default=True,
+              help="Gauge noise σ, mm (0 to 0.1: a third of the gauge's 0.3 mm tolerance).")
+@click.option("--latency-ms", type=FiniteRange(min=0, max=1000), default=45.0, show_default=True,
+              help="Dead time from reading to axis motion, ms (0 to 1000: 25 mm of path at the testbed's feed).")
 @seed_option
 @json_option
 @handle_errors
@@ -255,9 +316,10 @@ def serve(endpoint, noise, latency_ms, seed, json_path):
     _quiet_asyncua()
     ms = sk.machines(noise=noise, latency_ms=latency_ms, seed=seed)
     ready = threading.Event()
+    status: dict = {}
 
     async def main():
-        task = asyncio.create_task(lp.serve_machine(ms, sk.A_G, endpoint=endpoint, ready=ready))
+        task = asyncio.create_task(lp.serve_machine(ms, sk.A_G, endpoint=endpoint, ready=ready, status=status))
         while not ready.is_set() and not task.done():
             await asyncio.sleep(0.01)
         if ready.is_set():
@@ -269,6 +331,11 @@ def serve(endpoint, noise, latency_ms, seed, json_path):
         asyncio.run(main())
     except OSError as err:
         raise InputError(f"cannot serve: {err}", endpoint) from None
+    if status.get("fault"):
+        from ..errors import RefusedError
+
+        raise RefusedError("the client set Fault (its interlocks stopped the loop): W1 held, feed stopped; "
+                           "the pockets are not finished")
     run = sk.result("opcua client", ms, [None] * len(ms), noise=noise, latency_ms=latency_ms, seed=seed)
     d = run.as_dict()
     d["endpoint"] = endpoint

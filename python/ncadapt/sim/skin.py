@@ -246,13 +246,15 @@ class Run:
     rejected: int = 0
     steps: int = 0
     path_errors: list = field(default_factory=list)  # per pocket: the true error along the path
+    max_abs_w1: float = 0.0  # mm, the largest W1 command
+    clamped: int = 0  # commands the interlocks bounded
 
     def as_dict(self) -> dict:
         e = np.abs([c["error"] for c in self.checkpoints])
         return {"method": self.method, "noise": self.noise, "latency_ms": self.latency_ms, "seed": self.seed,
                 "max_abs_error": float(e.max()), "min_abs_error": float(e.min()), "mean_abs_error": float(e.mean()),
                 "checkpoints": self.checkpoints, "fallbacks": self.fallbacks, "rejected_readings": self.rejected,
-                "compensator_steps": self.steps}
+                "compensator_steps": self.steps, "max_abs_w1": self.max_abs_w1, "clamped": self.clamped}
 
 
 class Machine:
@@ -346,15 +348,25 @@ def result(method: str, ms: list, comps: list, *, noise: float, latency_ms: floa
 
 
 def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1) -> Run:
-    """Finish both pockets along the toolpath with a compensator (``none``: without), in process."""
+    """Finish both pockets along the toolpath with a compensator (``none``: without), in process,
+    behind the loop's interlocks with their defaults (:class:`ncadapt.processes.skin.Interlocks`);
+    if they stop the loop, the pocket is finished with W1 held."""
     from .. import loop as lp
 
     ms = machines(noise=noise, latency_ms=latency_ms, seed=seed)
-    comps = []
+    comps, guards = [], []
     for m in ms:
         comps.append(compensator(method, max(noise, 1e-4)))
-        lp.run_in_process(m, comps[-1])
-    return result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
+        guards.append(ps.Interlocks(T_TARGET, A_G))
+        try:
+            lp.run_in_process(m, comps[-1], T_TARGET, A_G, guard=guards[-1])
+        except ps.LoopStopped:
+            while not m.done:
+                m.advance()
+    out = result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
+    out.max_abs_w1 = max(g.max_abs_w1 for g in guards)
+    out.clamped = sum(g.clamped for g in guards)
+    return out
 
 
 # ------------------------------------------------------------------------------ offline mode
@@ -375,6 +387,18 @@ def finishing_program(pocket: int = 0, depth: float = A_G) -> str:
         out.append(f"G1 X{cx + x1:.3f} F{FEED * 60:.0f}")
     out += ["G0 Z5.000", "M5", "M2"]
     return "\n".join(out) + "\n"
+
+
+def recut(lx, ly, t_now, depth, t_s=T_INITIAL):
+    """The wall thickness after a pass programmed ``depth`` (mm below the roughed floor, Z = −depth)
+    over a floor already cut to thickness ``t_now`` (pocket-local x, y; the roughed thickness
+    ``t_s``): the cutter engages a = depth − (T_s − t_now) of material (nothing when a ≤ 0), the
+    wall, now t_now thick, deflects by f(a) under that cut, and a − f(a) is removed. The testbed's
+    own law for the offline rounds (no compensator formula in it)."""
+    lx, ly, t_now, depth, t_s = np.broadcast_arrays(*(np.asarray(v, float) for v in (lx, ly, t_now, depth, t_s)))
+    a = np.maximum(depth - (t_s - t_now), 0.0)
+    f = deflection(lx, ly, a, t_now)
+    return t_now - (a - f)
 
 
 def thickness_map(depth: float, *, pocket: int = 0, spacing: float = 10.0, noise: float = 0.005, seed: int = 1):
