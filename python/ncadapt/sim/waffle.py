@@ -143,18 +143,27 @@ class Result:
     retuned: np.ndarray  # (rows, cells) bool: semi-finished first
     backlash: dict = field(default_factory=dict)
 
-    def as_dict(self) -> dict:
+    def out_of_tolerance(self, tolerance: float = BAND) -> np.ndarray:
+        """(rows, cells) int: the points of each finished cell with |T − T_ref| > ``tolerance``."""
+        return (np.abs(self.maps) > tolerance).sum(axis=(2, 3))
+
+    def as_dict(self, tolerance: float = BAND) -> dict:
         e = self.maps
+        out = self.out_of_tolerance(tolerance)
         cells = [{"row": int(r + 1), "cell": int(c + 1), "B": cell_centre(r, c)[0], "Z": cell_centre(r, c)[1],
                   "rms_error": float(np.sqrt(np.mean(e[r, c] ** 2))), "max_abs_error": float(np.abs(e[r, c]).max()),
-                  "retuned": bool(self.retuned[r, c])} for r in range(e.shape[0]) for c in range(e.shape[1])]
+                  "points_out_of_tolerance": int(out[r, c]), "retuned": bool(self.retuned[r, c])}
+                 for r in range(e.shape[0]) for c in range(e.shape[1])]
         return {"strategy": self.strategy, "seed": self.seed, "rms_error": float(np.sqrt(np.mean(e ** 2))),
                 "max_abs_error": float(np.abs(e).max()), "retunes": int(self.retuned.sum()),
                 "cells_total": int(self.retuned.size), "rms_error_uncorrected": float(np.sqrt(np.mean(self.before ** 2))),
+                "tolerance": tolerance, "cells_out_of_tolerance": int((out > 0).sum()),
+                "points_out_of_tolerance": int(out.sum()), "points_total": int(e.size),
                 "backlash": self.backlash, "cells": cells}
 
 
-def simulate(strategy: str = "combined", seed: int = 1) -> Result:
+def simulate(strategy: str = "combined", seed: int = 1, *, on_cell=None) -> Result:
+    """Mill the shell's 96 cells with a strategy; ``on_cell(done, total)`` after each cell."""
     if strategy not in STRATEGIES:
         raise ValueError(f"strategy must be one of {', '.join(STRATEGIES)}, got {strategy!r}")
     from scipy.ndimage import gaussian_filter1d
@@ -186,11 +195,7 @@ def simulate(strategy: str = "combined", seed: int = 1) -> Result:
             # separate streams: the cut's noise is the same whatever the strategy
             cut_rng, gauge_rng = np.random.default_rng([seed, 1, r, c]), np.random.default_rng([seed, 2, r, c])
             order = r * CELLS + c
-            v_true = shell.v(bb, zz)
-            tilt_err = -R_TOOL * np.abs(shell.slope(bb, zz))
-            w = pw.copy(v_true.ravel(), GAP, TAU, dt).reshape(uu.shape)
-            drift = DRIFT * (order / n_total - 0.5) + (FLANGE if r in (0, ROWS - 1) else -FLANGE)
-            base = tilt_err + (v_true - w) + pattern + drift  # the error of an uncorrected pass
+            base = cell_error(shell, r, c)  # the error of an uncorrected pass
             k_dist = 0.0
             if use_dist:
                 k_dist = k_field.values(bb.ravel(), zz.ravel()).reshape(uu.shape)
@@ -213,7 +218,77 @@ def simulate(strategy: str = "combined", seed: int = 1) -> Result:
             if use_fb:
                 gauged = T_REF + maps[r, c] + gauge_rng.normal(0, NOISE_UT, uu.shape)
                 tuner.finished(gaussian_filter1d(gauged, 2.0, axis=1, mode="nearest"))
+            if on_cell is not None:
+                on_cell(order + 1, n_total)
     return Result(strategy, seed, maps, before, retuned, backlash)
+
+
+def cell_error(shell: Shell, row: int, cell: int) -> np.ndarray:
+    """The web-thickness error an uncorrected pass leaves in a cell (0-based row and cell),
+    without noise: (lines, samples) along the cell's zig-zag, mm (see the module's docstring)."""
+    uu, ww = cell_path()
+    bc, zc = cell_centre(row, cell)
+    bb, zz = bc + uu, zc + ww
+    dt = STEP_B * MM_PER_DEG / FEED
+    v_true = shell.v(bb, zz)
+    tilt_err = -R_TOOL * np.abs(shell.slope(bb, zz))
+    w = pw.copy(v_true.ravel(), GAP, TAU, dt).reshape(uu.shape)
+    order = row * CELLS + cell
+    drift = DRIFT * (order / (ROWS * CELLS) - 0.5) + (FLANGE if row in (0, ROWS - 1) else -FLANGE)
+    return tilt_err + (v_true - w) + rib_pattern(uu, ww) + drift
+
+
+def program_depth(program, row: int, cell: int, depth: float = 8.0) -> np.ndarray:
+    """The depth axis Y a program commands along a cell's zig-zag, at the testbed's samples
+    ((lines, samples), mm): the program's feed blocks at cutting depth (Y > ``depth``/2) on each
+    line's Z, Y linear in B between their ends (the machine interpolates B and Y together)."""
+    from .. import nc
+
+    bl = nc.read(program).blocks
+    end = bl.end
+    feed = (bl.motion == 1) & np.isfinite(end[:, 1]) & np.isfinite(end[:, 2]) & np.isfinite(end[:, 4])
+    feed &= end[:, 1] > depth / 2
+    uu, ww = cell_path()
+    bc, zc = cell_centre(row, cell)
+    out = np.empty(uu.shape)
+    for k, w in enumerate(Z_LINES):
+        on = feed & (np.abs(end[:, 2] - (zc + w)) < 1e-6)
+        if on.sum() < 2:
+            raise ValueError(f"the program does not cut the line Z = {zc + w:g} mm of row {row + 1} cell {cell + 1}")
+        bs, ys = end[on, 4], end[on, 1]
+        order = np.argsort(bs, kind="stable")
+        bs, ys = bs[order], ys[order]
+        if not (bs[0] <= bc + uu[k].min() + 1e-9 and bs[-1] >= bc + uu[k].max() - 1e-9):
+            raise ValueError(f"the program does not cover the line Z = {zc + w:g} mm across the cell")
+        out[k] = np.interp(bc + uu[k], bs, ys)
+    return out
+
+
+def machine_program(program, seed: int, row: int = 0, cell: int = 0, *, depth: float = 8.0) -> np.ndarray:
+    """Cut a cell (0-based row and cell) of the seeded shell with a program (a path or text file in
+    the form of :func:`cell_program`, corrected or not) and return the web thickness T at the
+    zig-zag's samples ((lines, samples), mm): T = T_ref + (the uncorrected pass's error) −
+    (Y − ``depth``) + machining noise, Y the depth the program commands (:func:`program_depth`).
+    ``depth`` is the finishing depth of the uncorrected program; a semi-finishing program at
+    ``depth`` − b leaves b more."""
+    shell = Shell.make(seed)
+    y = program_depth(program, row, cell, depth)
+    noise = np.random.default_rng([seed, 1, row, cell]).normal(0, NOISE_CUT, y.shape)
+    return T_REF + cell_error(shell, row, cell) - (y - depth) + noise
+
+
+def gauge_map(thickness: np.ndarray, seed: int, row: int = 0, cell: int = 0, *, step: int = 5):
+    """The ultrasonic thickness map of a machined cell: every ``step``-th sample along B of every
+    line (0.5° at the default), with σ = 8 µm; (n, 3) rows of B (deg), Z (mm), thickness (mm)."""
+    uu, ww = cell_path()
+    bc, zc = cell_centre(row, cell)
+    rng = np.random.default_rng([seed, 5, row, cell])
+    rows = []
+    for k in range(len(Z_LINES)):
+        order = np.argsort(uu[k])
+        for j in order[::step]:
+            rows.append((bc + uu[k, j], zc + ww[k, j], thickness[k, j] + rng.normal(0, NOISE_UT)))
+    return np.asarray(rows)
 
 
 def backlash_pair(seed: int = 1, noise: float = 0.002):
