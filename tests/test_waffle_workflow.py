@@ -54,7 +54,7 @@ def test_the_shipped_examples_are_what_the_documented_commands_give(tmp_path):
     import runpy
 
     runpy.run_path(str(EXAMPLES / "make_examples.py"), run_name="examples")["main"](tmp_path)
-    for name in ("tracking.csv", "thickness_r1c1_semi.csv", "cell_r1c1.ngc", "cell_r1c2.ngc", "cell_r1c1_semi.ngc",
+    for name in ("tracking.csv", "thickness_r1c1.csv", "cell_r1c1.ngc", "cell_r1c2.ngc", "cell_r1c1_semi.ngc",
                  "finished/thickness_r1c1.csv"):
         assert (tmp_path / name).read_text() == (EXAMPLES / name).read_text(), name
 
@@ -64,7 +64,7 @@ def test_documented_commands_finish_the_web(shop):
     error is within 3 µm of the target and its RMS less than a third of the uncorrected pass's (the
     testbed's thickness, not the corrector's). Correcting the tilt twice (K_fb from a semi-finishing
     pass without K_dist) leaves the web too thick by the tilt."""
-    r = _cli("waffle", "correct", "cell_r1c1.ngc", *COMMON, "--thickness", "thickness_r1c1_semi.csv", "--target", 2.0,
+    r = _cli("waffle", "correct", "cell_r1c1.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
              "--allowance", 0.3, "-o", "fin.ngc", cwd=shop)
     assert r.exit_code == 0, r.output
     fin = sw.machine_program(shop / "fin.ngc", 1, 0, 0)
@@ -88,10 +88,10 @@ def test_documented_commands_finish_the_web(shop):
 def test_cell_reuse_with_cell_origins(shop):
     """Item 8: cell 2's program with cell 1's K_fb moved by the pitch (15°) — refused as outside
     without the origins; with them, cell 2 finishes within a third of its uncorrected RMS."""
-    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1_semi.csv", "--target", 2.0,
+    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
              "--allowance", 0.3, "-o", "c2.ngc", cwd=shop)
     assert r.exit_code == 1 and "outside" in r.output  # a safety refusal: nothing written
-    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1_semi.csv", "--target", 2.0,
+    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
              "--allowance", 0.3, "--map-origin", "7.5,-180", "--cell-origin", "22.5,-180", "-o", "c2.ngc",
              "--json", "c2.json", cwd=shop)
     assert r.exit_code == 0, r.output
@@ -99,7 +99,7 @@ def test_cell_reuse_with_cell_origins(shop):
     fin = sw.machine_program(shop / "c2.ngc", 1, 0, 1)
     plain = sw.machine_program(shop / "cell_r1c2.ngc", 1, 0, 1)
     assert _rms(fin) < _rms(plain) / 3
-    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1_semi.csv", "--target", 2.0,
+    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
              "--map-origin", "7.5", "--cell-origin", "22.5,-180", "-o", "c2.ngc", cwd=shop)
     assert r.exit_code == 2 and "--map-origin" in r.output
 

@@ -8,9 +8,9 @@ The workflow of Pas & Serkov's section 4 on row 1 of the virtual shell (`ncadapt
 2. the semi-finishing program of cell 1 (`cell_r1c1_semi.ngc`, the finishing program 0.3 mm
    shallower) corrected by the disturbance corrector K_dist:
    `ncadapt waffle correct cell_r1c1_semi.ngc --tracking tracking.csv --tool-radius 10 --diameter 1500 -o …`;
-3. the testbed cuts it and gauges the web: `thickness_r1c1_semi.csv` (K_fb's source — it carries
+3. the testbed cuts it and gauges the web: `thickness_r1c1.csv` (K_fb's source — it carries
    K_dist, so the tilt is not corrected twice);
-4. the finishing program of cell 1 corrected by K_dist + K_fb (`--thickness thickness_r1c1_semi.csv
+4. the finishing program of cell 1 corrected by K_dist + K_fb (`--thickness thickness_r1c1.csv
    --target 2.0 --allowance 0.3`); the testbed cuts it: `finished/thickness_r1c1.csv`;
 5. `ncadapt waffle cells --thickness-dir finished --cells 4x24 --target 2.0 --band 1.97,2.03` decides
    whether cell 2 needs a semi-finishing pass; if not, cell 2's program is corrected with cell 1's
@@ -72,10 +72,10 @@ def main(folder: Path = HERE) -> None:
     common = ("--tracking", "tracking.csv", "--tool-radius", sw.R_TOOL, "--diameter", sw.D)
     ncadapt("waffle", "correct", "cell_r1c1_semi.ngc", *common, "-o", "cell_r1c1_semi_corrected.ngc", cwd=folder)
     semi = sw.machine_program(folder / "cell_r1c1_semi_corrected.ngc", SEED, 0, 0)
-    write_map(folder / "thickness_r1c1_semi.csv", sw.gauge_map(semi, SEED, 0, 0),
+    write_map(folder / "thickness_r1c1.csv", sw.gauge_map(semi, SEED, 0, 0),
               f"ncadapt waffle testbed (seed {SEED}): web thickness after semi-finishing row 1 cell 1 with K_dist "
               f"(allowance {sw.ALLOWANCE} mm)")
-    fb = ("--thickness", "thickness_r1c1_semi.csv", "--target", sw.T_REF, "--allowance", sw.ALLOWANCE)
+    fb = ("--thickness", "thickness_r1c1.csv", "--target", sw.T_REF, "--allowance", sw.ALLOWANCE)
     ncadapt("waffle", "correct", "cell_r1c1.ngc", *common, *fb, "-o", "cell_r1c1_corrected.ngc", cwd=folder)
     fin = sw.machine_program(folder / "cell_r1c1_corrected.ngc", SEED, 0, 0)
     write_map(folder / "finished" / "thickness_r1c1.csv", sw.gauge_map(fin, SEED, 0, 0),

@@ -44,7 +44,17 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
         if json_path:
             write_json(json_path, r)
         return
-    run = sk.run(method, noise=noise, latency_ms=latency_ms, seed=seed)
+    from ._waffle import progress_bar
+
+    runs = 1 + (3 if report_path else 0)
+    with progress_bar(f"skin {method}", runs) as advance:
+        run = sk.run(method, noise=noise, latency_ms=latency_ms, seed=seed,
+                     on_progress=lambda done, total: advance(done / total))
+        others = {}
+        if report_path:
+            for k, m in enumerate(x for x in ("none", "mirror", "secant", "kalman") if x != method):
+                others[m] = sk.run(m, noise=noise, latency_ms=latency_ms, seed=seed,
+                                   on_progress=lambda done, total, _k=k: advance(1 + _k + done / total))
     d = run.as_dict()
     summary(f"{method}: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
                f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm; "
@@ -52,10 +62,10 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
     if json_path:
         write_json(json_path, d)
     if report_path:
-        _report(report_path, run)
+        _report(report_path, run, others)
 
 
-def _report(path, run) -> None:
+def _report(path, run, others=None) -> None:
     import numpy as np
 
     from ..report import figure_png, page, pyplot, table, write
@@ -76,7 +86,9 @@ def _report(path, run) -> None:
     d = run.as_dict()
     # every method on the same seed, noise and dead time, and the paper's noise-free protocol
     methods = ("none", "mirror", "secant", "kalman")
-    runs = {m: (run if m == run.method else sk.run(m, noise=run.noise, latency_ms=run.latency_ms, seed=run.seed)).as_dict()
+    others = others or {}
+    runs = {m: (run if m == run.method else others.get(m) or sk.run(m, noise=run.noise, latency_ms=run.latency_ms,
+                                                                    seed=run.seed)).as_dict()
             for m in methods}
     rows = [(c["pocket"], f"{c['x']:.0f}", f"{c['y']:.0f}", *(f"{runs[m]['checkpoints'][i]['error'] * 1000:+.1f}" for m in methods))
             for i, c in enumerate(run.checkpoints)]

@@ -381,24 +381,24 @@ def simulate(strategy, seed, tolerance, json_path, report_path):
     total = sw.ROWS * sw.CELLS * (1 + (len(sw.STRATEGIES) - 1 if report_path else 0))
     with progress_bar(f"waffle {strategy}", total) as advance:
         r = sw.simulate(strategy, seed, on_cell=lambda k, n: advance(k))
-        d = r.as_dict(tolerance)
-        summary(f"{strategy}: web thickness error RMS {d['rms_error'] * 1000:.1f} µm (uncorrected "
-                f"{d['rms_error_uncorrected'] * 1000:.1f}), max {d['max_abs_error'] * 1000:.1f} µm; "
-                f"{d['retunes']} of {d['cells_total']} cells semi-finished")
-        bad = [c for c in d["cells"] if c["points_out_of_tolerance"]]
-        summary(f"  out of tolerance ±{tolerance * 1000:g} µm: {len(bad)} of {d['cells_total']} cells, "
-                f"{d['points_out_of_tolerance']:,} of {d['points_total']:,} points")
-        for c in bad:
-            summary(f"    row {c['row']} cell {c['cell']} (B {c['B']:g} deg, Z {c['Z']:g} mm): "
-                    f"{c['points_out_of_tolerance']} points, max |error| {c['max_abs_error'] * 1000:.1f} µm")
-        if json_path:
-            write_json(json_path, d)
         if report_path:
             base = sw.ROWS * sw.CELLS
-            _report(report_path, r, tolerance, on_cell=lambda k, n, _b=[base]: advance(_b[0] + k), bump=lambda: None)
+            _report(report_path, r, tolerance, on_cell=lambda k, n: advance(base + k))
+    d = r.as_dict(tolerance)
+    summary(f"{strategy}: web thickness error RMS {d['rms_error'] * 1000:.1f} µm (uncorrected "
+            f"{d['rms_error_uncorrected'] * 1000:.1f}), max {d['max_abs_error'] * 1000:.1f} µm; "
+            f"{d['retunes']} of {d['cells_total']} cells semi-finished")
+    bad = [c for c in d["cells"] if c["points_out_of_tolerance"]]
+    summary(f"  out of tolerance ±{tolerance * 1000:g} µm: {len(bad)} of {d['cells_total']} cells, "
+            f"{d['points_out_of_tolerance']:,} of {d['points_total']:,} points")
+    for c in bad:
+        summary(f"    row {c['row']} cell {c['cell']} (B {c['B']:g} deg, Z {c['Z']:g} mm): "
+                f"{c['points_out_of_tolerance']} points, max |error| {c['max_abs_error'] * 1000:.1f} µm")
+    if json_path:
+        write_json(json_path, d)
 
 
-def _report(path, r, tolerance: float = 0.03, on_cell=None, bump=None) -> None:
+def _report(path, r, tolerance: float = 0.03, on_cell=None) -> None:
     import numpy as np
 
     from ..processes import waffle as pw

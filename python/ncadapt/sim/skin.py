@@ -347,22 +347,30 @@ def result(method: str, ms: list, comps: list, *, noise: float, latency_ms: floa
     return out
 
 
-def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1) -> Run:
+def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1,
+        on_progress=None) -> Run:
     """Finish both pockets along the toolpath with a compensator (``none``: without), in process,
     behind the loop's interlocks with their defaults (:class:`ncadapt.processes.skin.Interlocks`);
-    if they stop the loop, the pocket is finished with W1 held."""
+    if they stop the loop, the pocket is finished with W1 held. ``on_progress(done, total)`` gets
+    the path samples cut so far."""
     from .. import loop as lp
 
     ms = machines(noise=noise, latency_ms=latency_ms, seed=seed)
     comps, guards = [], []
-    for m in ms:
+    total = sum(len(m.path) for m in ms)
+    for k, m in enumerate(ms):
         comps.append(compensator(method, max(noise, 1e-4)))
         guards.append(ps.Interlocks(T_TARGET, A_G))
+        before = sum(len(p.path) for p in ms[:k])
+        step = None if on_progress is None else (lambda n, t, w, _m=m, _b=before: on_progress(_b + _m.i, total))
         try:
-            lp.run_in_process(m, comps[-1], T_TARGET, A_G, guard=guards[-1])
+            link = lp.MachineLink(m, A_G)
+            lp.run(link, link, comps[-1], T_TARGET, guard=guards[-1], on_step=step)
         except ps.LoopStopped:
             while not m.done:
                 m.advance()
+        if on_progress is not None:
+            on_progress(before + len(m.path), total)
     out = result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
     out.max_abs_w1 = max(g.max_abs_w1 for g in guards)
     out.clamped = sum(g.clamped for g in guards)
