@@ -54,7 +54,7 @@ def test_the_shipped_examples_are_what_the_documented_commands_give(tmp_path):
     import runpy
 
     runpy.run_path(str(EXAMPLES / "make_examples.py"), run_name="examples")["main"](tmp_path)
-    for name in ("tracking.csv", "thickness_r1c1.csv", "cell_r1c1.ngc", "cell_r1c2.ngc", "cell_r1c1_semi.ngc",
+    for name in ("tracking.csv", "backlash_signals.csv", "thickness_r1c1.csv", "cell_r1c1.ngc", "cell_r1c2.ngc", "cell_r1c1_semi.ngc",
                  "finished/thickness_r1c1.csv"):
         assert (tmp_path / name).read_text() == (EXAMPLES / name).read_text(), name
 

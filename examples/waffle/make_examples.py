@@ -4,7 +4,8 @@
 
 The workflow of Pas & Serkov's section 4 on row 1 of the virtual shell (`ncadapt.sim.waffle`):
 
-1. tracking pre-measurement of row 1, cells 1 and 2 (`tracking.csv`: B 0–30°, every 5 mm of Z);
+1. tracking pre-measurement of row 1, cells 1 and 2 (`tracking.csv`: B 0–30°, every 5 mm of Z),
+   and the pair of signals for the backlash (`backlash_signals.csv`, with its time column t);
 2. the semi-finishing program of cell 1 (`cell_r1c1_semi.ngc`, the finishing program 0.3 mm
    shallower) corrected by the disturbance corrector K_dist:
    `ncadapt waffle correct cell_r1c1_semi.ngc --tracking tracking.csv --tool-radius 10 --diameter 1500 -o …`;
@@ -62,10 +63,20 @@ def tracking(folder: Path) -> None:
                 f.write(f"{bi:.2f},{z:.1f},{vi:.4f}\n")
 
 
+def backlash(folder: Path) -> None:
+    """The pair of signals of section 3 (`sim.waffle.backlash_pair`) with their time column."""
+    vi, vm, dt = sw.backlash_pair(SEED)
+    with open(folder / "backlash_signals.csv", "w") as f:
+        f.write(f"# ncadapt waffle testbed (seed {SEED}): row 1 cell 1 zig-zag, dt = {dt:.5f} s\nt,V_ideal,V_measured\n")
+        for i, (a, b) in enumerate(zip(vi, vm)):
+            f.write(f"{i * dt:.5f},{a:.5f},{b:.5f}\n")
+
+
 def main(folder: Path = HERE) -> None:
     folder.mkdir(exist_ok=True)
     (folder / "finished").mkdir(exist_ok=True)
     tracking(folder)
+    backlash(folder)
     for cell in (0, 1):
         (folder / f"cell_r1c{cell + 1}.ngc").write_text(sw.cell_program(0, cell))
     (folder / "cell_r1c1_semi.ngc").write_text(sw.cell_program(0, 0, depth=8.0 - sw.ALLOWANCE))
