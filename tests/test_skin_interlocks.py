@@ -307,3 +307,118 @@ def test_skin_correct_says_what_remains(tmp_path):
              "--allowance", 0.2, "-o", tmp_path / "o.ngc")
     assert r.exit_code == 0, r.output
     assert "not corrected: the finishing pass's own deflection" in r.output and "--allowance 0" in r.output
+
+
+# ------------------------------------------------------------------------------ item 3: variants
+def test_spiral_path_geometry():
+    """The spiral out: inside the pocket's cutting area, 12.5 mm between rings, through the
+    centre and the checkpoints (±75, ±50) exactly, (±100, 0) on the ring of half-size 100."""
+    p = sk.spiral_path()
+    assert np.abs(p[:, 0]).max() <= 140 and np.abs(p[:, 1]).max() <= 87.5
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    np.testing.assert_allclose(steps, sk.STEP, atol=1e-9)
+    for x, y in ((0, 0), (75, 50), (-75, 50), (75, -50), (-75, -50), (100, 0), (-100, 0)):
+        assert np.hypot(p[:, 0] - x, p[:, 1] - y).min() < 1e-9
+    r = sk.readable(p)
+    assert not r[0] and not r[-1] and r.mean() > 0.85
+
+
+def test_fixed_rate_gauge_and_servo_closed_forms():
+    """A fixed-rate gauge reads every round(v/(f·step)) samples; a first-order W1 servo reaches
+    1 − e^(−t/τ) of a command's step after t."""
+    m = sk.machines(seed=1, variant="fixed-rate")[0]
+    m.advance()
+    i0 = m.i
+    m.advance()
+    assert m.i - i0 == m.period and m.period in (4, 5)  # 25 mm/s at 20–25 Hz, 0.25 mm samples
+    m = sk.machines(seed=1, variant="servo")[0]
+    m.advance()
+    m.command(sk.A_G + 0.1)
+    start = m.i + m.lag
+    while m.i < start + 3:
+        m.advance()
+    n = m.i - start
+    dt = sk.STEP / sk.FEED
+    expected = sk.A_G + 0.1 * (1 - np.exp(-n * dt / 0.030))
+    assert m.a_eff == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.mark.parametrize("variant", ["spiral", "fast", "servo"])
+def test_the_default_beats_the_mirror_on_the_fresh_gauge_variants(variant):
+    """Issue 21 item 3, on 3 seeds here (20 in `make bench`): the default compensator with a
+    fresh gauge (ours) has a smaller maximum error than the mirror on every variant."""
+    assert ps.default_method("fresh") == "kalman"
+    for seed in (1, 2, 3):
+        k = sk.run("kalman", seed=seed, variant=variant).as_dict()["max_abs_error"]
+        m = sk.run("mirror", seed=seed, variant=variant).as_dict()["max_abs_error"]
+        assert k < m, (variant, seed, k, m)
+
+
+def test_a_fixed_rate_gauge_gets_the_mirror():
+    """On a fixed-rate gauge the Kalman filter identifies κ from readings cut at older depths and
+    runs away (the interlocks stop it); the default there is the mirror, which holds."""
+    assert ps.default_method("fixed-rate") == "mirror"
+    k = sk.run("kalman", seed=1, variant="fixed-rate").as_dict()
+    m = sk.run("mirror", seed=1, variant="fixed-rate").as_dict()
+    assert m["max_abs_error"] < 0.02 < k["max_abs_error"]
+    r = _cli("skin", "simulate", "--variant", "fixed-rate", "--seed", 1)
+    assert r.exit_code == 0 and r.output.startswith("mirror (fixed-rate):")
+
+
+# ------------------------------------------------------------------------------ item 2: watchdogs
+def test_a_killed_client_leaves_the_server_holding_w1(tmp_path):
+    """`skin serve` with a client that reads one reading and dies: after --ack-timeout the
+    controller holds W1, stops and exits 1 (it hung forever)."""
+    import subprocess
+    import sys
+    import time
+
+    pytest.importorskip("asyncua")
+    url = "opc.tcp://127.0.0.1:48418/ncadapt/"
+    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
+                            "--endpoint", url, "--ack-timeout", "1", "--json", str(tmp_path / "s.json")],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert srv.stderr.readline().startswith("serving")
+
+        async def die_after_one():
+            client = await lp.connect(url, 10)
+            idx = await client.get_namespace_index(lp.NAMESPACE)
+            obj = await client.nodes.objects.get_child(f"{idx}:Controller")
+            seq = await obj.get_child(f"{idx}:Sequence")
+            while await seq.read_value() == 0:
+                await asyncio.sleep(0.01)
+            await client.disconnect()  # and never acknowledges
+
+        t0 = time.monotonic()
+        asyncio.run(die_after_one())
+        out, err = srv.communicate(timeout=30)
+    finally:
+        srv.kill()
+        srv.communicate()
+    assert srv.returncode == 1, err
+    assert "stopped acknowledging" in err and time.monotonic() - t0 < 20
+    assert not (tmp_path / "s.json").exists()
+
+
+def test_a_killed_server_stops_the_client():
+    """`skin loop --opcua` against a server killed mid-run: exit 1 within the stale timeout and
+    the request timeout, saying the loop stopped."""
+    import subprocess
+    import sys
+    import time
+
+    pytest.importorskip("asyncua")
+    url = "opc.tcp://127.0.0.1:48419/ncadapt/"
+    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
+                            "--endpoint", url], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert srv.stderr.readline().startswith("serving")
+        threading.Timer(1.0, srv.kill).start()
+        t0 = time.monotonic()
+        r = _cli("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G, "--stale-timeout", 1)
+    finally:
+        srv.kill()
+        srv.communicate()
+    assert r.exit_code == 1, r.output
+    assert "the loop stopped" in r.output and time.monotonic() - t0 < 20

@@ -161,11 +161,13 @@ class CsvSink:
 
 # ------------------------------------------------------------------------------------ OPC UA
 async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
-                        ready=None, poll: float = 0.0005, status: dict | None = None):
+                        ready=None, poll: float = 0.0005, status: dict | None = None, ack_timeout: float = 5.0):
     """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
     its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done.
     ``Pockets`` tells the client how many pockets there are; a client that sets ``Fault`` stops
-    the run with W1 held (``status["fault"]`` becomes True)."""
+    the run with W1 held (``status["fault"]`` becomes True). A client that does not acknowledge a
+    reading within ``ack_timeout`` seconds is taken as lost: W1 held, the run stopped
+    (``status["lost"]`` becomes True) — the controller's watchdog."""
     from asyncua import Server, ua
 
     server = Server()
@@ -192,7 +194,13 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
                 n += 1
                 await thick.write_value(math.nan if t is None else float(t))
                 await seq.write_value(n, ua.VariantType.Int64)
+                deadline = time.monotonic() + ack_timeout
                 while await ack.read_value() != n:
+                    if time.monotonic() > deadline:
+                        if status is not None:
+                            status["lost"] = True
+                        await seq.write_value(0, ua.VariantType.Int64)
+                        return
                     await asyncio.sleep(poll)
                 if await fault.read_value():
                     # the client stopped the loop: hold W1 (no new command) and stop feeding
@@ -207,10 +215,20 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
             n += 1
             await thick.write_value(math.nan)
             await seq.write_value(-n, ua.VariantType.Int64)
+            deadline = time.monotonic() + ack_timeout
             while await ack.read_value() != -n:
+                if time.monotonic() > deadline:
+                    if status is not None:
+                        status["lost"] = True
+                    await seq.write_value(0, ua.VariantType.Int64)
+                    return
                 await asyncio.sleep(poll)
         await seq.write_value(0, ua.VariantType.Int64)
         await asyncio.sleep(0.05)
+
+
+class ControllerLost(Exception):
+    """The OPC UA controller stopped publishing readings, or the connection broke."""
 
 
 async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4.0):
@@ -237,7 +255,7 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
 
 async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int | None = None,
                     poll: float = 0.0005, latencies: list | None = None, make_guard=None,
-                    connect_timeout: float = 30.0, info: dict | None = None) -> int:
+                    connect_timeout: float = 30.0, info: dict | None = None, stale_timeout: float = 5.0) -> int:
     """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
     each pocket (a negative Sequence announces the next one), ``make_guard()`` its interlocks
     (:class:`ncadapt.processes.skin.Interlocks`, the same as in a replay). ``pockets``: how many to
@@ -247,76 +265,93 @@ async def run_opcua(url: str, make_compensator, target_thickness: float, *, pock
 
     When the interlocks stop the loop (persistent gauge faults) the client writes ``Fault`` = true
     on the controller — its signal to hold W1 and stop feeding — acknowledges the reading, and
-    raises :class:`ncadapt.processes.skin.LoopStopped`."""
+    raises :class:`ncadapt.processes.skin.LoopStopped`. When the controller publishes no new
+    reading for ``stale_timeout`` seconds, or the connection breaks, :class:`ControllerLost` is
+    raised (the client's watchdog; the controller's own holds W1 when the Acks stop)."""
     from asyncua import ua
 
     info = {} if info is None else info
-    steps = rejected = 0
-    max_abs_w1 = 0.0
     client = await connect(url, connect_timeout)
     try:
         idx = await client.get_namespace_index(NAMESPACE)
         obj = await client.nodes.objects.get_child(f"{idx}:Controller")
-        thick = await obj.get_child(f"{idx}:Thickness")
-        seq = await obj.get_child(f"{idx}:Sequence")
-        w1 = await obj.get_child(f"{idx}:W1Offset")
-        ack = await obj.get_child(f"{idx}:Ack")
-        fault = await obj.get_child(f"{idx}:Fault")
+        nodes = {name: await obj.get_child(f"{idx}:{name}")
+                 for name in ("Thickness", "Sequence", "W1Offset", "Ack", "Fault")}
         if pockets is None:
             pockets = int(await (await obj.get_child(f"{idx}:Pockets")).read_value())
             if pockets < 1:
                 raise ValueError(f"the controller announces {pockets} pockets")
         info["pockets"] = pockets
-        comp = make_compensator()
-        guard = make_guard() if make_guard is not None else None
-        last, done, i = 0, 0, 0
-        while done < pockets:
-            s = await seq.read_value()
-            if s == last or s == 0:
-                await asyncio.sleep(poll)
-                continue
-            t0 = time.perf_counter()
-            last = s
-            if s < 0:
-                done += 1
-                if comp is not None:
-                    steps += comp.steps
-                if guard is not None:
-                    rejected += guard.rejected
-                    max_abs_w1 = max(max_abs_w1, guard.max_abs_w1)
-                comp = make_compensator()
-                guard = make_guard() if make_guard is not None else None
-            else:
-                t = await thick.read_value()
-                value = None
-                try:
-                    if guard is not None:
-                        reason = guard.check(None if t is None or not math.isfinite(t) else t)
-                        if reason is not None:
-                            guard.reject(reason, i)
-                        elif comp is not None:
-                            comp.step(t - target_thickness)
-                            value = guard.bound(comp)
-                    elif comp is not None and math.isfinite(t):
-                        comp.step(t - target_thickness)
-                        value = comp.w1_offset
-                except Exception:
-                    await fault.write_value(ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)))
-                    await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
-                    if comp is not None:
-                        info["steps"] = steps + comp.steps
-                    if guard is not None:
-                        info["rejected"] = rejected + guard.rejected
-                        info["max_abs_w1"] = max(max_abs_w1, guard.max_abs_w1)
-                    raise
-                i += 1
-                if value is not None:
-                    await w1.write_value(ua.DataValue(ua.Variant(float(value), ua.VariantType.Double)))
-            await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
-            if latencies is not None:
-                latencies.append(time.perf_counter() - t0)
+        try:
+            await _exchange(nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies,
+                            stale_timeout, info)
+        except (OSError, asyncio.TimeoutError, ua.UaError) as e:
+            raise ControllerLost(f"the connection to the controller broke: {e or type(e).__name__}") from None
     finally:
         with contextlib.suppress(Exception):
             await client.disconnect()
-    info.update(steps=steps, rejected=rejected, max_abs_w1=max_abs_w1)
-    return steps
+    return info["steps"]
+
+
+async def _exchange(nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies, stale_timeout,
+                    info) -> None:
+    """The client's side of the exchange (see :func:`run_opcua`); the totals go to ``info``."""
+    from asyncua import ua
+
+    thick, seq, w1, ack, fault = (nodes[k] for k in ("Thickness", "Sequence", "W1Offset", "Ack", "Fault"))
+    totals = {"steps": 0, "rejected": 0, "max_abs_w1": 0.0}
+
+    def add(comp, guard) -> None:
+        if comp is not None:
+            totals["steps"] += comp.steps
+        if guard is not None:
+            totals["rejected"] += guard.rejected
+            totals["max_abs_w1"] = max(totals["max_abs_w1"], guard.max_abs_w1)
+
+    comp = make_compensator()
+    guard = make_guard() if make_guard is not None else None
+    last, done, i = 0, 0, 0
+    seen = time.monotonic()
+    while done < pockets:
+        s = await seq.read_value()
+        if s == last or s == 0:
+            if time.monotonic() - seen > stale_timeout:
+                raise ControllerLost(f"the controller published no new reading for {stale_timeout:g} s")
+            await asyncio.sleep(poll)
+            continue
+        seen = time.monotonic()
+        t0 = time.perf_counter()
+        last = s
+        if s < 0:
+            done += 1
+            add(comp, guard)
+            comp = make_compensator()
+            guard = make_guard() if make_guard is not None else None
+        else:
+            t = await thick.read_value()
+            value = None
+            try:
+                if guard is not None:
+                    reason = guard.check(None if t is None or not math.isfinite(t) else t)
+                    if reason is not None:
+                        guard.reject(reason, i)
+                    elif comp is not None:
+                        comp.step(t - target_thickness)
+                        value = guard.bound(comp)
+                elif comp is not None and math.isfinite(t):
+                    comp.step(t - target_thickness)
+                    value = comp.w1_offset
+            except Exception:
+                # the interlocks stopped the loop: tell the controller, acknowledge, report
+                await fault.write_value(ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)))
+                await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
+                add(comp, guard)
+                info.update(totals)
+                raise
+            i += 1
+            if value is not None:
+                await w1.write_value(ua.DataValue(ua.Variant(float(value), ua.VariantType.Double)))
+        await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
+        if latencies is not None:
+            latencies.append(time.perf_counter() - t0)
+    info.update(totals)

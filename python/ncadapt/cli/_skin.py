@@ -9,7 +9,9 @@ import click
 
 from ..errors import InputError
 from .. import constants
-from ..processes.skin import GAUGE_LIMIT as ps_limit, MAX_FAULTS, STUCK, W1_STEP_MAX
+from ..processes.skin import GAUGE_LIMIT as ps_limit, GAUGES, MAX_FAULTS, STUCK, W1_STEP_MAX
+
+VARIANT_NAMES = ("paper", "fixed-rate", "spiral", "fast", "servo")
 from ._common import FiniteRange, check_outputs, handle_errors, json_option, seed_option, summary, write_json
 
 
@@ -19,8 +21,11 @@ def skin() -> None:
 
 
 @skin.command("simulate")
-@click.option("--method", type=click.Choice(["none", "mirror", "secant", "kalman"]), default="kalman",
-              show_default=True, help="Compensator (kalman: ours).")
+@click.option("--method", type=click.Choice(["none", "mirror", "secant", "kalman"]), default=None,
+              help="Compensator (kalman: ours); default kalman, the mirror on the fixed-rate gauge variant.")
+@click.option("--variant", type=click.Choice(list(VARIANT_NAMES)), default="paper", show_default=True,
+              help="Testbed condition: the paper's; a fixed-rate gauge (20–25 Hz); a spiral-out path; "
+                   "6000 mm/min with 60 ms; W1 as a 30 ms first-order servo.")
 @click.option("--noise", type=FiniteRange(min=0, max=0.1), default=0.005, show_default=True,
               help="Gauge noise σ, mm (0 to 0.1: a third of the gauge's 0.3 mm tolerance).")
 @click.option("--latency-ms", type=FiniteRange(min=0, max=1000), default=45.0, show_default=True,
@@ -31,10 +36,15 @@ def skin() -> None:
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="HTML report with the error along the toolpath.")
 @handle_errors
-def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
+def simulate(method, variant, noise, latency_ms, seed, protocol, json_path, report_path):
     """Finish the testbed's two pockets with a compensator; errors at the 13 checkpoints."""
+    from ..processes import skin as ps
     from ..sim import skin as sk
 
+    if method is None:
+        method = ps.default_method("fixed-rate" if variant == "fixed-rate" else "fresh")
+    if report_path and variant != "paper":
+        raise click.UsageError("--report shows the paper's condition; leave out --variant")
     check_outputs({}, {"--json": json_path, "--report": report_path})
     if protocol:
         if method in ("none",):
@@ -48,7 +58,7 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
 
     runs = 1 + (3 if report_path else 0)
     with progress_bar(f"skin {method}", runs) as advance:
-        run = sk.run(method, noise=noise, latency_ms=latency_ms, seed=seed,
+        run = sk.run(method, noise=noise, latency_ms=latency_ms, seed=seed, variant=variant,
                      on_progress=lambda done, total: advance(done / total))
         others = {}
         if report_path:
@@ -56,7 +66,8 @@ def simulate(method, noise, latency_ms, seed, protocol, json_path, report_path):
                 others[m] = sk.run(m, noise=noise, latency_ms=latency_ms, seed=seed,
                                    on_progress=lambda done, total, _k=k: advance(1 + _k + done / total))
     d = run.as_dict()
-    summary(f"{method}: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
+    d["variant"] = variant
+    summary(f"{method}{'' if variant == 'paper' else ' (' + variant + ')'}: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
                f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm; "
                f"{d['compensator_steps']} steps, {d['fallbacks']} fallbacks, {d['rejected_readings']} readings rejected")
     if json_path:
@@ -178,8 +189,11 @@ def _quiet_asyncua() -> None:
 
 
 @skin.command("loop")
-@click.option("--method", type=click.Choice(["mirror", "secant", "kalman"]), default="kalman", show_default=True,
-              help="Compensator (kalman: ours).")
+@click.option("--method", type=click.Choice(["mirror", "secant", "kalman"]), default=None,
+              help="Compensator (kalman: ours); default kalman with a fresh gauge, the mirror with a fixed-rate one.")
+@click.option("--gauge", type=click.Choice(list(GAUGES)), default="fresh", show_default=True,
+              help="fresh: each reading reflects the latest W1 command (the paper's controller); fixed-rate: "
+                   "readings at a fixed rate, most cut before the latest command landed.")
 @click.option("--target", type=FiniteRange(min=0.01, max=ps_limit), required=True,
               help=f"Target wall thickness T_g, mm (0.01 to {ps_limit:g}, the gauge's limit).")
 @click.option("--depth", type=FiniteRange(min=0.001, max=ps_limit), required=True,
@@ -207,10 +221,12 @@ def _quiet_asyncua() -> None:
               help="With --opcua: pockets to finish before stopping (default: the controller's Pockets).")
 @click.option("--connect-timeout", type=FiniteRange(min=0, max=3600), default=30.0, show_default=True,
               help="With --opcua: seconds to keep retrying while the server is still starting (0: one try).")
+@click.option("--stale-timeout", type=FiniteRange(min=0.1, max=3600), default=5.0, show_default=True,
+              help="With --opcua: seconds without a new reading after which the controller is taken as lost (exit 1).")
 @json_option
 @handle_errors
-def loop_cmd(method, target, depth, noise, w1_max, w1_step_max, max_faults, stuck, replay_path, output, url, pockets,
-             connect_timeout, json_path):
+def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_faults, stuck, replay_path, output, url, pockets,
+             connect_timeout, stale_timeout, json_path):
     """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
     live as an OPC UA client of the controller. Both go through the same interlocks: the gauge
     filter, bounds on W1 and its step, and a stop on persistent faults."""
@@ -223,6 +239,8 @@ def loop_cmd(method, target, depth, noise, w1_max, w1_step_max, max_faults, stuc
 
     if (replay_path is None) == (url is None):
         raise click.UsageError("give exactly one of --replay FILE or --opcua URL")
+    if method is None:
+        method = ps.default_method(gauge)
     if (replay_path is None) != (output is None):
         raise click.UsageError("--replay and -o go together")
     if url is None and pockets is not None:
@@ -268,9 +286,14 @@ def loop_cmd(method, target, depth, noise, w1_max, w1_step_max, max_faults, stuc
         info: dict = {}
         try:
             steps = asyncio.run(lp.run_opcua(url, fresh, target, pockets=pockets, latencies=lat, make_guard=guard,
-                                             connect_timeout=connect_timeout, info=info))
+                                             connect_timeout=connect_timeout, info=info,
+                                             stale_timeout=stale_timeout))
         except ps.LoopStopped as e:
             stopped, where, steps = e, url, info.get("steps", 0)
+        except lp.ControllerLost as e:
+            from ..errors import RefusedError
+
+            raise RefusedError(f"{url}: {e}; the loop stopped (the controller's watchdog holds W1)") from None
         except (OSError, asyncio.TimeoutError) as err:
             raise InputError(f"cannot reach the controller: {err or type(err).__name__}", url) from None
         except (ua.UaError, ValueError) as err:
@@ -312,9 +335,11 @@ def loop_cmd(method, target, depth, noise, w1_max, w1_step_max, max_faults, stuc
 @click.option("--latency-ms", type=FiniteRange(min=0, max=1000), default=45.0, show_default=True,
               help="Dead time from reading to axis motion, ms (0 to 1000: 25 mm of path at the testbed's feed).")
 @seed_option
+@click.option("--ack-timeout", type=FiniteRange(min=0.1, max=3600), default=5.0, show_default=True,
+              help="Seconds to wait for the client's Ack before holding W1 and stopping (the watchdog).")
 @json_option
 @handle_errors
-def serve(endpoint, noise, latency_ms, seed, json_path):
+def serve(endpoint, noise, latency_ms, seed, ack_timeout, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1
     offsets a client writes (try `skin loop --opcua` against it before a real controller), and
     report the errors at the 13 checkpoints when both pockets are finished."""
@@ -331,7 +356,8 @@ def serve(endpoint, noise, latency_ms, seed, json_path):
     status: dict = {}
 
     async def main():
-        task = asyncio.create_task(lp.serve_machine(ms, sk.A_G, endpoint=endpoint, ready=ready, status=status))
+        task = asyncio.create_task(lp.serve_machine(ms, sk.A_G, endpoint=endpoint, ready=ready, status=status,
+                                                    ack_timeout=ack_timeout))
         while not ready.is_set() and not task.done():
             await asyncio.sleep(0.01)
         if ready.is_set():
@@ -343,6 +369,11 @@ def serve(endpoint, noise, latency_ms, seed, json_path):
         asyncio.run(main())
     except OSError as err:
         raise InputError(f"cannot serve: {err}", endpoint) from None
+    if status.get("lost"):
+        from ..errors import RefusedError
+
+        raise RefusedError("the client stopped acknowledging readings (watchdog, --ack-timeout): W1 held, feed "
+                           "stopped; the pockets are not finished")
     if status.get("fault"):
         from ..errors import RefusedError
 
