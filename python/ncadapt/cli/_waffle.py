@@ -38,8 +38,15 @@ def progress_bar(description: str, total: int):
         yield lambda done: bar.update(task, completed=done)
 
 
-def _pair(value, what):
-    return None if value is None else comma_floats(value, 2, what)
+def _pair(value, what, option):
+    """Two comma-separated finite numbers of ``option`` (None when not given)."""
+    if value is None:
+        return None
+    try:
+        return comma_floats(value, 2, what)
+    except click.BadParameter as e:
+        e.param_hint = f"'{option}'"
+        raise
 
 
 @click.group()
@@ -128,16 +135,8 @@ def correct(program, log, tool_radius, diameter, segment, z_tol, map_path, targe
         raise click.UsageError("--target, --allowance, --map-origin and --cell-origin go with --thickness")
     if (map_origin is None) != (cell_origin is None):
         raise click.UsageError("--map-origin and --cell-origin go together")
-    try:
-        map_origin = _pair(map_origin, "B,Z (deg,mm)")
-    except click.BadParameter as e:
-        e.param_hint = "'--map-origin'"
-        raise
-    try:
-        cell_origin = _pair(cell_origin, "B,Z (deg,mm)")
-    except click.BadParameter as e:
-        e.param_hint = "'--cell-origin'"
-        raise
+    map_origin = _pair(map_origin, "B,Z (deg,mm)", "--map-origin")
+    cell_origin = _pair(cell_origin, "B,Z (deg,mm)", "--cell-origin")
     shift = (0.0, 0.0) if map_origin is None else (cell_origin[0] - map_origin[0], cell_origin[1] - map_origin[1])
     check_outputs({"input program": program, "tracking log": log, "thickness map": map_path},
                   {"-o": output, "--json": json_path})
@@ -298,7 +297,7 @@ def cells(folder, shape, target, band, prog_dir, allowance, depth_axis, into, ou
     from ..processes import waffle as pw
 
     rows, cols = _cells_shape(shape)
-    t_lo, t_hi = comma_floats(band, 2, "TMIN,TMAX in mm")
+    t_lo, t_hi = _pair(band, "TMIN,TMAX in mm", "--band")
     if not t_lo < target < t_hi:
         raise click.BadParameter(f"the band {t_lo:g}..{t_hi:g} mm must contain --target {target:g} mm",
                                  param_hint="'--band'")
