@@ -10,9 +10,10 @@ import click
 from ..errors import InputError
 from .. import constants
 from ..processes.skin import GAUGE_LIMIT as ps_limit, GAUGES, MAX_FAULTS, STUCK, W1_STEP_MAX
-
-VARIANT_NAMES = ("paper", "fixed-rate", "spiral", "fast", "servo")
 from ._common import FiniteRange, check_outputs, handle_errors, json_option, seed_option, summary, write_json
+
+#: the testbed's conditions (ncadapt.sim.skin.VARIANTS, named here so the CLI loads without the testbed)
+VARIANT_NAMES = ("paper", "fixed-rate", "spiral", "fast", "servo")
 
 
 @click.group()
@@ -43,8 +44,8 @@ def simulate(method, variant, noise, latency_ms, seed, protocol, json_path, repo
 
     if method is None:
         method = ps.default_method("fixed-rate" if variant == "fixed-rate" else "fresh")
-    if report_path and variant != "paper":
-        raise click.UsageError("--report shows the paper's condition; leave out --variant")
+    if (report_path or protocol) and variant != "paper":
+        raise click.UsageError("--report and --protocol are the paper's condition; leave out --variant")
     check_outputs({}, {"--json": json_path, "--report": report_path})
     if protocol:
         if method in ("none",):
@@ -252,7 +253,7 @@ def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_fault
     comps, guards = [], []
 
     def fresh():
-        comps.append(ps.make(method, depth, noise=noise, max_step=max(w1_step_max, 1e-9)))
+        comps.append(ps.make(method, depth, noise=noise, max_step=w1_step_max))
         return comps[-1]
 
     def guard():
@@ -260,13 +261,12 @@ def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_fault
                                      stuck=stuck))
         return guards[-1]
 
-    d = {"method": method, "target": target, "depth": depth, "noise": noise}
+    d = {"method": method, "gauge": gauge, "target": target, "depth": depth, "noise": noise}
     stopped = None
     if replay_path is not None:
         source = lp.CsvSource(replay_path)
         sink = lp.CsvSink(output, source)
         offsets = []
-        lines = []
         try:
             steps = lp.run(source, sink, fresh(), target, guard=guard(),
                            on_step=lambda n, t, w: offsets.append(w))
