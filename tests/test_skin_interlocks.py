@@ -208,7 +208,7 @@ def test_unreachable_controller_after_the_connect_timeout():
 
     url = "opc.tcp://127.0.0.1:48417/ncadapt/"  # nothing listens here
     t0 = time.monotonic()
-    r = _cli("skin", "loop", "--opcua", url, "--target", 1.5, "--depth", A_G, "--connect-timeout", 1)
+    r = _cli("skin", "loop", "--opcua", url, "--target", 1.5, "--depth", A_G, "--connect-timeout", 1, "--insecure")
     assert r.exit_code == 2 and r.output.startswith(f"{url}: error: cannot reach the controller")
     assert 0.5 < time.monotonic() - t0 < 10
 
@@ -376,7 +376,7 @@ def test_a_killed_client_leaves_the_server_holding_w1(tmp_path):
     pytest.importorskip("asyncua")
     url = "opc.tcp://127.0.0.1:48418/ncadapt/"
     srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url, "--ack-timeout", "1", "--json", str(tmp_path / "s.json")],
+                            "--endpoint", url, "--ack-timeout", "1", "--insecure", "--json", str(tmp_path / "s.json")],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert srv.stderr.readline().startswith("serving")
@@ -411,14 +411,56 @@ def test_a_killed_server_stops_the_client():
     pytest.importorskip("asyncua")
     url = "opc.tcp://127.0.0.1:48419/ncadapt/"
     srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            "--endpoint", url, "--insecure"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert srv.stderr.readline().startswith("serving")
         threading.Timer(1.0, srv.kill).start()
         t0 = time.monotonic()
-        r = _cli("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G, "--stale-timeout", 1)
+        r = _cli("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G, "--stale-timeout", 1, "--insecure")
     finally:
         srv.kill()
         srv.communicate()
     assert r.exit_code == 1, r.output
     assert "the loop stopped" in r.output and time.monotonic() - t0 < 20
+
+
+def test_secured_exchange_equals_the_in_process_run(tmp_path, monkeypatch):
+    """Basic256Sha256 SignAndEncrypt with certificates (`skin certs`) and a user and password: the
+    run equals the in-process one; a wrong password, a client without security and a command
+    without either --insecure or the credentials are refused (exit 2)."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("asyncua")
+    r = _cli("skin", "certs", tmp_path)
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "client.pem").stat().st_mode & 0o077 == 0  # a private key: its owner's only
+    url = "opc.tcp://127.0.0.1:48420/ncadapt/"
+    env = dict(__import__("os").environ, NCADAPT_OPCUA_PASSWORD="s3cret")
+    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
+                            "--endpoint", url, "--seed", "4", "--cert", str(tmp_path / "controller.der"), "--key",
+                            str(tmp_path / "controller.pem"), "--user", "op", "--json", str(tmp_path / "srv.json")],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    client = ("--cert", tmp_path / "client.der", "--key", tmp_path / "client.pem", "--server-cert",
+              tmp_path / "controller.der", "--user", "op")
+    common = ("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G)
+    try:
+        assert "Basic256Sha256 SignAndEncrypt" in srv.stderr.readline()
+        monkeypatch.setenv("NCADAPT_OPCUA_PASSWORD", "wrong")
+        r = _cli(*common, *client)
+        assert r.exit_code == 2 and "refused the session" in r.output and "BadUserAccessDenied" in r.output
+        r = _cli(*common, "--insecure")
+        assert r.exit_code == 2 and "refused the session" in r.output
+        r = _cli(*common)
+        assert r.exit_code == 2 and "--insecure" in r.output
+        monkeypatch.setenv("NCADAPT_OPCUA_PASSWORD", "s3cret")
+        r = _cli(*common, *client, "--json", tmp_path / "cl.json")
+        assert r.exit_code == 0, r.output
+        out, err = srv.communicate(timeout=60)
+    finally:
+        srv.kill()
+        srv.communicate()
+    assert srv.returncode == 0, err
+    ref = sk.run("kalman", seed=4).as_dict()
+    assert json.loads((tmp_path / "srv.json").read_text())["checkpoints"] == ref["checkpoints"]
+    assert json.loads((tmp_path / "cl.json").read_text())["steps"] == ref["compensator_steps"]

@@ -13,7 +13,9 @@ OPC UA exchange (namespace ``urn:ncadapt:skin``, object ``Controller``): the con
 ``Thickness`` (mm; NaN when the gauge's limit filter rejected the reading) and then increments
 ``Sequence``; the client answers each sequence number by writing ``W1Offset`` (mm; only when it
 stepped) and then ``Ack`` = that number. The controller applies the offset and cuts on to the
-next reading only after the Ack, so a run over OPC UA is step for step the in-process run. The
+next reading only after the Ack, so a run over OPC UA is step for step the in-process run.
+Security: Basic256Sha256 with SignAndEncrypt, application certificates and a user name and
+password (:class:`Security`); NoSecurity only when asked for (``--insecure``). The
 controller also publishes ``Pockets`` (how many it will finish); the client sets ``Fault`` = true
 when its interlocks stop the loop, and the controller then holds W1 and stops feeding.
 
@@ -27,8 +29,64 @@ import asyncio
 import contextlib
 import math
 import time
+from dataclasses import dataclass
 
 NAMESPACE = "urn:ncadapt:skin"
+SERVER_URI = "urn:ncadapt:skin:controller"
+CLIENT_URI = "urn:ncadapt:skin:client"
+
+
+@dataclass(frozen=True)
+class Security:
+    """OPC UA security of the exchange: Basic256Sha256 with SignAndEncrypt, an application
+    certificate (DER) and private key (PEM) per side, and a user name and password. The client also
+    names the controller's certificate (``peer_cert``); the controller accepts ``user`` with
+    ``password`` only. None instead of a Security is NoSecurity (``--insecure``)."""
+
+    cert: str
+    key: str
+    user: str
+    password: str
+    peer_cert: str | None = None
+
+
+async def make_certificates(folder, host: str = "127.0.0.1") -> dict:
+    """Self-signed application certificates (one year) for the controller and the client, as
+    asyncua makes them: ``controller.der``/``controller.pem``, ``client.der``/``client.pem`` in
+    ``folder``; an existing valid pair is kept. Returns the paths."""
+    from pathlib import Path
+
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    folder = Path(folder)
+    out = {}
+    for name, uri, use in (("controller", SERVER_URI, ExtendedKeyUsageOID.SERVER_AUTH),
+                           ("client", CLIENT_URI, ExtendedKeyUsageOID.CLIENT_AUTH)):
+        key, cert = folder / f"{name}.pem", folder / f"{name}.der"
+        await setup_self_signed_certificate(key, cert, uri, host, [use], {"commonName": f"ncadapt skin {name}"})
+        key.chmod(0o600)  # a private key: its owner's only
+        out[name] = (str(cert), str(key))
+    return out
+
+
+def ua_error():
+    from asyncua import ua
+
+    return ua.UaError
+
+
+def _user_manager(security: Security):
+    from asyncua.crypto.permission_rules import User, UserRole
+    from asyncua.server.user_managers import UserManager
+
+    class _Users(UserManager):
+        def get_user(self, iserver, username=None, password=None, certificate=None):  # noqa: ARG002
+            if username == security.user and password == security.password:
+                return User(role=UserRole.User)
+            return None
+
+    return _Users()
 
 
 def run(source, sink, compensator, target_thickness: float, *, guard=None, on_step=None) -> int:
@@ -161,7 +219,8 @@ class CsvSink:
 
 # ------------------------------------------------------------------------------------ OPC UA
 async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
-                        ready=None, poll: float = 0.0005, status: dict | None = None, ack_timeout: float = 5.0):
+                        ready=None, poll: float = 0.0005, status: dict | None = None, ack_timeout: float = 5.0,
+                        security: Security | None = None):
     """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
     its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done.
     ``Pockets`` tells the client how many pockets there are; a client that sets ``Fault`` stops
@@ -170,10 +229,17 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
     (``status["lost"]`` becomes True) — the controller's watchdog."""
     from asyncua import Server, ua
 
-    server = Server()
+    server = Server(user_manager=_user_manager(security)) if security is not None else Server()
     await server.init()
     server.set_endpoint(endpoint)
-    server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    if security is None:
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    else:
+        await server.set_application_uri(SERVER_URI)
+        server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+        server.set_security_IDs(["Username"])
+        await server.load_certificate(security.cert)
+        await server.load_private_key(security.key)
     idx = await server.register_namespace(NAMESPACE)
     obj = await server.nodes.objects.add_object(idx, "Controller")
     thick = await obj.add_variable(idx, "Thickness", math.nan)
@@ -231,7 +297,12 @@ class ControllerLost(Exception):
     """The OPC UA controller stopped publishing readings, or the connection broke."""
 
 
-async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4.0):
+class ConnectionRefused(Exception):
+    """The controller refused the session: no endpoint with the client's security, or the user
+    name, password or certificate rejected."""
+
+
+async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4.0, security: Security | None = None):
     """An asyncua client connected to ``url``, retrying (0.1 s, doubling to 1 s) for up to
     ``timeout`` seconds while the server is still starting (refused or timed-out connections);
     the last error once the time is up."""
@@ -241,9 +312,22 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
     delay = 0.1
     while True:
         client = Client(url=url, timeout=request_timeout)
+        if security is not None:
+            from asyncua import ua
+            from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+            client.application_uri = CLIENT_URI
+            await client.set_security(SecurityPolicyBasic256Sha256, security.cert, security.key,
+                                      server_certificate=security.peer_cert, mode=ua.MessageSecurityMode.SignAndEncrypt)
+            client.set_user(security.user)
+            client.set_password(security.password)
         try:
             await client.connect()
             return client
+        except ua_error() as e:
+            with contextlib.suppress(Exception):
+                await client.disconnect()
+            raise ConnectionRefused(str(e).strip() or type(e).__name__) from None
         except (OSError, asyncio.TimeoutError):
             with contextlib.suppress(Exception):
                 await client.disconnect()
@@ -255,7 +339,8 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
 
 async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int | None = None,
                     poll: float = 0.0005, latencies: list | None = None, make_guard=None,
-                    connect_timeout: float = 30.0, info: dict | None = None, stale_timeout: float = 5.0) -> int:
+                    connect_timeout: float = 30.0, info: dict | None = None, stale_timeout: float = 5.0,
+                    security: Security | None = None) -> int:
     """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
     each pocket (a negative Sequence announces the next one), ``make_guard()`` its interlocks
     (:class:`ncadapt.processes.skin.Interlocks`, the same as in a replay). ``pockets``: how many to
@@ -271,7 +356,7 @@ async def run_opcua(url: str, make_compensator, target_thickness: float, *, pock
     from asyncua import ua
 
     info = {} if info is None else info
-    client = await connect(url, connect_timeout)
+    client = await connect(url, connect_timeout, security=security)
     try:
         idx = await client.get_namespace_index(NAMESPACE)
         obj = await client.nodes.objects.get_child(f"{idx}:Controller")

@@ -179,6 +179,52 @@ def correct(program, map_path, target, allowance, into, output, limit, outside, 
 
 
 _ENDPOINT = "opc.tcp://127.0.0.1:48400/ncadapt/"
+#: where the OPC UA password is read from (never a command-line argument: it would show in ps)
+PASSWORD_ENV = "NCADAPT_OPCUA_PASSWORD"
+
+_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+def _security(insecure, cert, key, user, peer_cert=None, *, client: bool):
+    """The exchange's security from the options: Basic256Sha256 SignAndEncrypt with certificates
+    and a user, or NoSecurity with --insecure (exactly one)."""
+    from .. import loop as lp
+
+    given = [n for n, v in (("--cert", cert), ("--key", key), ("--user", user)) + ((("--server-cert", peer_cert),)
+                                                                                  if client else ()) if v is not None]
+    if insecure:
+        if given:
+            raise click.UsageError(f"--insecure and {', '.join(given)} exclude each other")
+        return None
+    needed = ["--cert", "--key", "--user"] + (["--server-cert"] if client else [])
+    missing = [n for n in needed if n not in given]
+    if missing:
+        raise click.UsageError(f"the exchange is secured (Basic256Sha256, SignAndEncrypt): give {', '.join(missing)} "
+                               f"(`ncadapt skin certs DIR` makes certificates) and the password in {PASSWORD_ENV}, "
+                               "or --insecure for NoSecurity")
+    import os
+
+    password = os.environ.get(PASSWORD_ENV)
+    if not password:
+        raise click.UsageError(f"the password for --user {user!r} goes in the environment variable {PASSWORD_ENV}")
+    return lp.Security(str(cert), str(key), user, password, str(peer_cert) if peer_cert else None)
+
+
+def _security_options(client: bool):
+    def deco(f):
+        opts = [click.option("--insecure", is_flag=True,
+                             help="No OPC UA security (NoSecurity): only on a closed machine network."),
+                click.option("--cert", type=_FILE, help="This side's application certificate (DER) for Basic256Sha256."),
+                click.option("--key", type=_FILE, help="Its private key (PEM)."),
+                click.option("--user", help=f"User name of the session (password in {PASSWORD_ENV}).")]
+        if client:
+            opts.append(click.option("--server-cert", "peer_cert", type=_FILE,
+                                     help="The controller's certificate (DER)."))
+        for o in reversed(opts):
+            f = o(f)
+        return f
+
+    return deco
 
 
 def _quiet_asyncua() -> None:
@@ -224,10 +270,11 @@ def _quiet_asyncua() -> None:
               help="With --opcua: seconds to keep retrying while the server is still starting (0: one try).")
 @click.option("--stale-timeout", type=FiniteRange(min=0.1, max=3600), default=5.0, show_default=True,
               help="With --opcua: seconds without a new reading after which the controller is taken as lost (exit 1).")
+@_security_options(client=True)
 @json_option
 @handle_errors
 def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_faults, stuck, replay_path, output, url, pockets,
-             connect_timeout, stale_timeout, json_path):
+             connect_timeout, stale_timeout, insecure, cert, key, user, peer_cert, json_path):
     """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
     live as an OPC UA client of the controller. Both go through the same interlocks: the gauge
     filter, bounds on W1 and its step, and a stop on persistent faults."""
@@ -244,8 +291,9 @@ def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_fault
         method = ps.default_method(gauge)
     if (replay_path is None) != (output is None):
         raise click.UsageError("--replay and -o go together")
-    if url is None and pockets is not None:
-        raise click.UsageError("--pockets goes with --opcua")
+    if url is None and (pockets is not None or insecure or cert or key or user or peer_cert):
+        raise click.UsageError("--pockets, --insecure, --cert, --key, --user and --server-cert go with --opcua")
+    security = _security(insecure, cert, key, user, peer_cert, client=True) if url is not None else None
     if w1_max is not None and not w1_max < target:
         raise click.BadParameter(f"{w1_max:g} mm is not below --target {target:g} mm: a W1 of the target "
                                  "thickness would cut through the wall", param_hint="'--w1-max'")
@@ -287,9 +335,12 @@ def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_fault
         try:
             steps = asyncio.run(lp.run_opcua(url, fresh, target, pockets=pockets, latencies=lat, make_guard=guard,
                                              connect_timeout=connect_timeout, info=info,
-                                             stale_timeout=stale_timeout))
+                                             stale_timeout=stale_timeout, security=security))
         except ps.LoopStopped as e:
             stopped, where, steps = e, url, info.get("steps", 0)
+        except lp.ConnectionRefused as e:
+            raise InputError(f"the controller refused the session: {e}; check --cert, --key, --server-cert, --user "
+                             f"and {PASSWORD_ENV} (or --insecure on both sides)", url) from None
         except lp.ControllerLost as e:
             from ..errors import RefusedError
 
@@ -337,9 +388,10 @@ def loop_cmd(method, gauge, target, depth, noise, w1_max, w1_step_max, max_fault
 @seed_option
 @click.option("--ack-timeout", type=FiniteRange(min=0.1, max=3600), default=5.0, show_default=True,
               help="Seconds to wait for the client's Ack before holding W1 and stopping (the watchdog).")
+@_security_options(client=False)
 @json_option
 @handle_errors
-def serve(endpoint, noise, latency_ms, seed, ack_timeout, json_path):
+def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, user, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1
     offsets a client writes (try `skin loop --opcua` against it before a real controller), and
     report the errors at the 13 checkpoints when both pockets are finished."""
@@ -349,6 +401,7 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, json_path):
     from .. import loop as lp
     from ..sim import skin as sk
 
+    security = _security(insecure, cert, key, user, client=False)
     check_outputs({}, {"--json": json_path})
     _quiet_asyncua()
     ms = sk.machines(noise=noise, latency_ms=latency_ms, seed=seed)
@@ -357,12 +410,13 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, json_path):
 
     async def main():
         task = asyncio.create_task(lp.serve_machine(ms, sk.A_G, endpoint=endpoint, ready=ready, status=status,
-                                                    ack_timeout=ack_timeout))
+                                                    ack_timeout=ack_timeout, security=security))
         while not ready.is_set() and not task.done():
             await asyncio.sleep(0.01)
         if ready.is_set():
             click.echo(f"serving the skin testbed at {endpoint} (seed {seed}): target thickness {sk.T_TARGET} mm, "
-                       f"depth {sk.A_G} mm, {len(ms)} pockets", err=True)
+                       f"depth {sk.A_G} mm, {len(ms)} pockets, "
+                       + ("NoSecurity" if security is None else "Basic256Sha256 SignAndEncrypt"), err=True)
         await task
 
     try:
@@ -388,3 +442,20 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, json_path):
                f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm")
     if json_path:
         write_json(json_path, d)
+
+
+@skin.command("certs")
+@click.argument("folder", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--host", default="127.0.0.1", show_default=True, help="Host name in the certificates.")
+@handle_errors(staged=False)
+def certs(folder, host):
+    """Make self-signed application certificates (one year) for the OPC UA exchange in FOLDER:
+    controller.der/.pem (for `skin serve` or a test controller) and client.der/.pem (for `skin loop`);
+    a valid existing pair is kept."""
+    import asyncio
+
+    from .. import loop as lp
+
+    paths = asyncio.run(lp.make_certificates(folder, host))
+    for name, (cert, key) in paths.items():
+        summary(f"{name}: {cert} (certificate), {key} (private key)")
