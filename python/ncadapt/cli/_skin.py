@@ -456,6 +456,9 @@ def certs(folder, host):
 
     from .. import loop as lp
 
-    paths = asyncio.run(lp.make_certificates(folder, host))
+    try:
+        paths = asyncio.run(lp.make_certificates(folder, host))
+    except OSError as e:
+        raise InputError(f"cannot write the certificates: {e.strerror or e}", str(folder)) from None
     for name, (cert, key) in paths.items():
         summary(f"{name}: {cert} (certificate), {key} (private key)")
