@@ -55,7 +55,7 @@ def simulate(method, variant, noise, latency_ms, seed, protocol, json_path, repo
         if json_path:
             write_json(json_path, r)
         return
-    from ._waffle import progress_bar
+    from ._common import progress_bar
 
     runs = 1 + (3 if report_path else 0)
     with progress_bar(f"skin {method}", runs) as advance:

@@ -7,11 +7,9 @@ from pathlib import Path
 
 import click
 
-import contextlib
-
 from .. import constants
-from ._common import (FiniteRange, about, check_outputs, comma_floats, echo_err, err_console, handle_errors, json_option,
-                      progress, seed_option, summary, write_json)
+from ._common import (FiniteRange, about, check_outputs, comma_floats, echo_err, handle_errors, json_option, progress,
+                      progress_bar, seed_option, summary, write_json)
 
 #: physical bounds of the options: a cutter's radius up to 1 m, a shell's diameter 1 mm to 100 m
 _RADIUS = dict(type=FiniteRange(min=0.01, max=1000), required=True,
@@ -20,22 +18,6 @@ _DIAMETER = dict(type=FiniteRange(min=1, max=1e5), required=True,
                  help="Shell diameter D, mm (1 to 100,000).")
 _Z_TOL = dict(type=FiniteRange(min=0, max=1000), default=0.01, show_default=True,
               help="Rows whose Z differs from the previous row's by at most this are one pass (encoder jitter), mm.")
-
-
-@contextlib.contextmanager
-def progress_bar(description: str, total: int):
-    """A rich progress bar with percentage and time left on a terminal (quiet otherwise); yields
-    ``advance(done)`` taking the count done so far. (A local equivalent of a shared helper:
-    cli/_common.py has only a status line.)"""
-    if not err_console.is_terminal:
-        yield lambda done: None
-        return
-    from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
-
-    with Progress(TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeRemainingColumn(),
-                  console=err_console, transient=True) as bar:
-        task = bar.add_task(description, total=total)
-        yield lambda done: bar.update(task, completed=done)
 
 
 def _pair(value, what, option):
