@@ -300,7 +300,8 @@ def test_analyze_and_compensate_cli(tmp_path, bench):
     assert a["n_points"] == len(p) and a["moran"]["systematic"] is True
     assert set(a["moran"]) >= {"I", "expected", "variance_normality", "variance_randomization", "z_normality",
                                "z_randomization", "p_value", "systematic", "weights"}
-    assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None}
+    assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None,
+                                     "chosen": False}
     args = ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
             "--tool-radius", "4", "--extent", "0,80,0,60", "--extrapolate-nominal", "--surface", str(tmp_path / "c.step"),
             "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"]
@@ -610,3 +611,22 @@ def test_the_border_holds_the_nearest_measured_value():
     out = extrapolate_border(u, v, np.where(known, vals, 0.0), known, mode="hold")
     assert out[0, 0] == vals[1, 1] and out[5, 4] == vals[4, 3] and out[0, 2] == vals[1, 2]
     np.testing.assert_array_equal(out[known], vals[known])
+
+
+def test_the_plain_csv_path_reads_what_the_row_by_row_reader_reads(tmp_path):
+    # a plain file is parsed at once; the same rows with a quoted id go row by row: equal results
+    rows = [f"P{k},{x},{y},{0.1 * x},0,0,1,{0.001 * (x - y):.4f}" for k, (x, y) in
+            enumerate((x, y) for x in range(12) for y in range(9))]
+    plain, quoted = tmp_path / "plain.csv", tmp_path / "quoted.csv"
+    plain.write_text("id,x,y,z,i,j,k,dev\r\n" + "\r\n".join(rows) + "\r\n")
+    quoted.write_text("id,x,y,z,i,j,k,dev\n" + "\n".join(['"' + r.replace(",", '",', 1) for r in rows]) + "\n")
+    a, b = measure.read(plain), measure.read(quoted)
+    for f in ("nominal", "normal", "deviation", "lines"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    assert a.ids == b.ids == tuple(f"P{k}" for k in range(108))
+    # an error in a plain file is still located at its line and column
+    bad = tmp_path / "bad.csv"
+    bad.write_text("id,x,y,z,i,j,k,dev\n" + "\n".join(rows[:5] + [rows[5].replace(",0,0,1,", ",0,0,x,")] + rows[6:]) + "\n")
+    with pytest.raises(InputError, match="k: expected a number") as e:
+        measure.read(bad)
+    assert e.value.line == 7

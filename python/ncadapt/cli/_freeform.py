@@ -13,8 +13,9 @@ from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_
 
 def _moran_options(f):
     opts = [
-        click.option("--weights", type=click.Choice(["idw", "knn"]), default="idw", show_default=True,
-                     help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours."),
+        click.option("--weights", type=click.Choice(["auto", "idw", "knn"]), default="auto", show_default=True,
+                     help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours; auto: 1/d^K over "
+                          "all pairs up to 3,000 points (or with --threshold), 8 nearest neighbours above."),
         click.option("--power", type=FiniteRange(min=1), default=1.0, show_default=True, help="K of idw weights."),
         click.option("--threshold", type=FiniteRange(min=0, min_open=True), default=None,
                      help="Distance band for idw weights, mm (default: all pairs)."),
@@ -48,7 +49,7 @@ def _print_analysis(a) -> None:
     from ..stats import p_text
 
     m, d = a.moran, a.deviation
-    summary(f"points: {a.n_points:,}")
+    summary(f"points: {a.n_points:,}; weights: {m.weights.describe()}")
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
     o, v = a.offset, a.verdict
     if m.p_permutation is None:

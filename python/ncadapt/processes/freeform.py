@@ -256,8 +256,19 @@ def compensate(surface: Surface, meas: Measurements, systematic, *, frame: Frame
     frame = frame_of(meas, frame)
     xy = frame.uv(meas.nominal)
     U, V = np.meshgrid(surface.u, surface.v, indexing="ij")
-    lin = LinearNDInterpolator(xy, sysv)
-    inside = lin(U, V)
+    grid = _on_grid(xy)
+    if grid is not None:
+        # a measured grid: bilinear on it (a triangulation of a regular grid is degenerate and slow:
+        # 30 s for 100,000 points); both are linear between the measured values, equal at them
+        from scipy.interpolate import RegularGridInterpolator
+
+        xs, ys, flat = grid
+        g = np.empty(len(xs) * len(ys))
+        g[flat] = sysv
+        inside = RegularGridInterpolator((xs, ys), g.reshape(len(xs), len(ys)), bounds_error=False,
+                                         fill_value=np.nan)(np.stack([U, V], axis=-1))
+    else:
+        inside = LinearNDInterpolator(xy, sysv)(U, V)
     known = np.isfinite(inside)
     if known.sum() < 16:
         raise InputError("the measured points cover fewer than 16 nodes of the surface grid", meas.source)

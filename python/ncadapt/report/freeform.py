@@ -59,10 +59,7 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     deviations of the re-machined part at the same points."""
     m = analysis.moran
     p_txt = p_text(m.p_value, 2)
-    w = m.weights
-    w_txt = (f"k nearest neighbours, k = {w.neighbors}" if w.kind == "knn" else
-             f"1/d^{w.power:g}, " + (f"pairs closer than {w.threshold:g} mm" if w.threshold else "all pairs")
-             if w.kind == "idw" else w.kind) + ", row-standardised"
+    w_txt = m.weights.describe() + ", row-standardised"
     v, o = analysis.verdict, analysis.offset
     o_txt = p_text(o.p_value, 2)
     verdict = (f"<p class='verdict {'yes' if v.systematic else 'no'}'>The deviations are "
