@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import needs_rs274
+from helpers import skin_server
 from rs274 import canonical
 
 from ncadapt import loop as lp
@@ -321,14 +322,10 @@ def test_loop_cli_replays_a_recording(tmp_path):
 def test_serve_and_loop_clis_over_opcua_equal_the_in_process_run(tmp_path):
     """`skin serve` (a separate process playing the controller) and `skin loop --opcua` (the
     client): the checkpoint errors and the compensator's steps equal the in-process run."""
-    import subprocess
-    import sys
 
     pytest.importorskip("asyncua")
     url = "opc.tcp://127.0.0.1:48412/ncadapt/"
-    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url, "--seed", "4", "--insecure", "--json", str(tmp_path / "srv.json")],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    srv = skin_server("--endpoint", url, "--seed", "4", "--insecure", "--json", tmp_path / "srv.json")
     try:
         line = srv.stderr.readline()
         assert line.startswith(f"serving the skin testbed at {url}"), line + srv.stderr.read()

@@ -11,6 +11,7 @@ import threading
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import skin_server
 
 from ncadapt import loop as lp
 from ncadapt.processes import skin as ps
@@ -369,15 +370,11 @@ def test_a_fixed_rate_gauge_gets_the_mirror():
 def test_a_killed_client_leaves_the_server_holding_w1(tmp_path):
     """`skin serve` with a client that reads one reading and dies: after --ack-timeout the
     controller holds W1, stops and exits 1 (it hung forever)."""
-    import subprocess
-    import sys
     import time
 
     pytest.importorskip("asyncua")
     url = "opc.tcp://127.0.0.1:48418/ncadapt/"
-    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url, "--ack-timeout", "1", "--insecure", "--json", str(tmp_path / "s.json")],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    srv = skin_server("--endpoint", url, "--ack-timeout", "1", "--insecure", "--json", tmp_path / "s.json")
     try:
         assert srv.stderr.readline().startswith("serving")
 
@@ -404,14 +401,11 @@ def test_a_killed_client_leaves_the_server_holding_w1(tmp_path):
 def test_a_killed_server_stops_the_client():
     """`skin loop --opcua` against a server killed mid-run: exit 1 within the stale timeout and
     the request timeout, saying the loop stopped."""
-    import subprocess
-    import sys
     import time
 
     pytest.importorskip("asyncua")
     url = "opc.tcp://127.0.0.1:48419/ncadapt/"
-    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url, "--insecure"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    srv = skin_server("--endpoint", url, "--insecure")
     try:
         assert srv.stderr.readline().startswith("serving")
         threading.Timer(1.0, srv.kill).start()
@@ -428,8 +422,6 @@ def test_secured_exchange_equals_the_in_process_run(tmp_path, monkeypatch):
     """Basic256Sha256 SignAndEncrypt with certificates (`skin certs`) and a user and password: the
     run equals the in-process one; a wrong password, a client without security and a command
     without either --insecure or the credentials are refused (exit 2)."""
-    import subprocess
-    import sys
 
     pytest.importorskip("asyncua")
     r = _cli("skin", "certs", tmp_path)
@@ -437,10 +429,8 @@ def test_secured_exchange_equals_the_in_process_run(tmp_path, monkeypatch):
     assert (tmp_path / "client.pem").stat().st_mode & 0o077 == 0  # a private key: its owner's only
     url = "opc.tcp://127.0.0.1:48420/ncadapt/"
     env = dict(__import__("os").environ, NCADAPT_OPCUA_PASSWORD="s3cret")
-    srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url, "--seed", "4", "--cert", str(tmp_path / "controller.der"), "--key",
-                            str(tmp_path / "controller.pem"), "--user", "op", "--json", str(tmp_path / "srv.json")],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    srv = skin_server("--endpoint", url, "--seed", "4", "--cert", tmp_path / "controller.der", "--key",
+                      tmp_path / "controller.pem", "--user", "op", "--json", tmp_path / "srv.json", env=env)
     client = ("--cert", tmp_path / "client.der", "--key", tmp_path / "client.pem", "--server-cert",
               tmp_path / "controller.der", "--user", "op")
     common = ("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G)
