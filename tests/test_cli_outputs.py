@@ -217,3 +217,17 @@ def test_a_shift_beyond_any_machine_is_a_usage_error(prog, tmp_path):
     r = run("correct", prog, "--shift", "6e106,0,0", "-o", tmp_path / "o.ngc")
     assert r.exit_code == 2 and "--shift" in r.stderr and "within ±1e+06 mm" in r.stderr, r.output
     assert not (tmp_path / "o.ngc").exists()
+
+
+def test_a_reader_that_goes_away_ends_the_printing_not_the_command(tmp_path, prog):
+    # `ncadapt correct … | head -1`: the pipe closes after the first line; the command still writes
+    # its output and exits 0, without an internal error
+    exe = Path(sys.executable).with_name("ncadapt")
+    out = tmp_path / "o.ngc"
+    proc = subprocess.Popen([str(exe), "correct", str(prog), "--shift", "0,0,0.01", "-o", str(out), "--json", "-"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.readline()
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0 and "internal error" not in err, err
+    assert out.stat().st_size > 0

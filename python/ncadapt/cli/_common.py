@@ -42,7 +42,18 @@ def echo_err(msg: str) -> None:
 
 def summary(msg: str = "") -> None:
     """A line of a command's human summary: on stdout (stderr when ``--json -`` writes there)."""
-    click.echo(msg, err=_state["summary_to_stderr"])
+    echo_out(msg, err=_state["summary_to_stderr"])
+
+
+def echo_out(msg: str, err: bool = False, nl: bool = True) -> None:
+    """``click.echo``, except that a reader who went away (``ncadapt … | head``) ends the printing,
+    not the command: the rest of what it prints is dropped, its files are still written."""
+    try:
+        click.echo(msg, err=err, nl=nl)
+    except BrokenPipeError:
+        stream = sys.stderr if err else sys.stdout
+        with contextlib.suppress(OSError, ValueError):  # what is left goes nowhere, flushes included
+            os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
 
 
 def debugging() -> bool:
@@ -245,7 +256,7 @@ def write_json(path, payload: dict) -> None:
     """The JSON of a command, to a file (all or nothing) or to stdout (``-``)."""
     text = json.dumps(payload, indent=2, allow_nan=False) + "\n"
     if str(path) == "-":
-        click.echo(text, nl=False)
+        echo_out(text, nl=False)
     else:
         atomic_write(path, text.encode())
 

@@ -33,7 +33,9 @@ def demo(out_dir, seed, method):
                f"(max {s['systematic_max_abs_before'] * 1000:.1f} µm)")
     summary(f"systematic error RMS after one compensation: {s['systematic_rms_after'] * 1000:.1f} µm "
                f"(max {s['systematic_max_abs_after'] * 1000:.1f} µm), {100 * s['ratio']:.1f} % of before")
-    m = s["moran"]
-    summary(f"Moran's I {m['I']:.3f}, z {m['z_randomization']:.1f}: systematic {'yes' if m['systematic'] else 'no'}")
+    m, v = s["moran"], s["verdict"]
+    by = " and ".join("Moran's I" if b == "moran" else "the offset" for b in v["by"])
+    summary(f"Moran's I {m['I']:.3f}, z {m['z_randomization']:.1f}; mean offset {s['offset']['mean'] * 1000:+.1f} µm, "
+            f"t {s['offset']['t']:.1f}: systematic {'yes, by ' + by if v['systematic'] else 'no'}")
     for name, f in r.files.items():
         summary(f"  {name:22s} {out_dir / f}")
