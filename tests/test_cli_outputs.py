@@ -228,6 +228,7 @@ def test_a_reader_that_goes_away_ends_the_printing_not_the_command(tmp_path, pro
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     proc.stdout.readline()
     proc.stdout.close()
-    err = proc.stderr.read().decode()
+    with proc.stderr:
+        err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 0 and "internal error" not in err, err
     assert out.stat().st_size > 0
