@@ -15,10 +15,10 @@ $(VENV)/bin/python:
 
 # the package with its Rust extension, built in release mode by maturin
 install: $(VENV)/bin/python rust
-	$(PIP) install -q -e .
+	$(PIP) install -q -e '.[all]'
 
 install-test: install system-deps
-	$(PIP) install -q -e '.[test]'
+	$(PIP) install -q -e '.[all,test]'
 
 # Rust toolchain: the one on the PATH (rustup's), else Debian's cargo and rustc
 rust:

@@ -232,3 +232,25 @@ def test_a_reader_that_goes_away_ends_the_printing_not_the_command(tmp_path, pro
         err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 0 and "internal error" not in err, err
     assert out.stat().st_size > 0
+
+
+@pytest.mark.parametrize("module, args, extra", [
+    ("OCP", ["compensate", "{m}", "--surface", "{tmp}/s.step"], "cad"),
+    ("matplotlib", ["analyze", "{m}", "--report", "{tmp}/r.html"], "report"),
+])
+def test_a_missing_optional_part_is_named_with_its_extra(tmp_path, monkeypatch, module, args, extra):
+    import sys as _sys
+
+    from click.testing import CliRunner
+
+    from ncadapt.cli import main
+
+    m = tmp_path / "m.csv"
+    m.write_text("x,y,z,i,j,k,dev\n" + "".join(f"{x},{y},0,0,0,1,{0.01 + 0.0003 * x:.5f}\n"
+                                               for x in range(0, 50, 5) for y in range(0, 50, 5)))
+    for name in [n for n in _sys.modules if n == module or n.startswith(module + ".")]:
+        monkeypatch.delitem(_sys.modules, name)
+    monkeypatch.setitem(_sys.modules, module, None)  # import raises ModuleNotFoundError
+    r = CliRunner().invoke(main, [a.format(m=m, tmp=tmp_path) for a in args])
+    assert r.exit_code == 2 and f"pip install 'ncadapt[{extra}]'" in r.output, r.output
+    assert not any(tmp_path.glob("[sr].*"))

@@ -92,6 +92,12 @@ def _on_signal(signum, frame):  # noqa: ARG001 - a signal handler's signature
     raise SystemExit(128 + signum)
 
 
+#: The optional parts of ncadapt (pyproject's extras): the module a command imports when it needs
+#: one, the extra that installs it and what it is for.
+EXTRAS = {"OCP": ("cad", "OpenCASCADE (STEP and IGES files)"), "asyncua": ("opcua", "asyncua (OPC UA)"),
+          "matplotlib": ("report", "matplotlib (reports and plots)")}
+
+
 def handle_errors(f=None, *, staged: bool = True):
     """Run a command with the documented exit codes: ncadapt's errors become compiler-style
     messages (exit 2 bad input, 1 refused), anything unexpected exit 3. Every file the command
@@ -127,6 +133,12 @@ def handle_errors(f=None, *, staged: bool = True):
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort, SystemExit,
                 KeyboardInterrupt):
             raise
+        except ModuleNotFoundError as e:
+            extra = EXTRAS.get((e.name or "").split(".")[0])
+            if extra is None:
+                raise
+            echo_err(f"error: this needs {extra[1]}, an optional part of ncadapt: pip install 'ncadapt[{extra[0]}]'")
+            sys.exit(EXIT_BAD_INPUT)
         except Exception as e:  # noqa: BLE001 - the contract: anything unexpected is exit 3
             ctx = click.get_current_context(silent=True)
             internal_error(e, " ".join(["ncadapt"] + (ctx.command_path.split()[1:] if ctx else [f.__name__])))
