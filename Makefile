@@ -7,7 +7,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # rustup installs cargo here; maturin needs it on the PATH
 export PATH := $(HOME)/.cargo/bin:$(PATH)
 
-.PHONY: demo test fuzz bench install install-test system-deps rust clean
+.PHONY: demo test fuzz bench wheel install install-test system-deps rust clean
 
 $(VENV)/bin/python:
 	python3 -m venv $(VENV)
@@ -58,5 +58,13 @@ bench: install-test
 	$(PY) benchmarks/bench_skin.py
 	$(PY) benchmarks/bench_waffle.py
 
+# a manylinux abi3 wheel built with maturin and zig (no docker), then installed into fresh virtual
+# environments by tests/test_wheel.py: the base install corrects a program, [all] runs the demo
+wheel: install-test
+	$(PIP) install -q 'maturin>=1.7,<2' ziglang
+	rm -rf dist
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(VENV)/bin/maturin build --release --zig --compatibility manylinux2014 -o dist
+	NCADAPT_WHEEL="$$(ls dist/ncadapt-*.whl)" $(PY) -m pytest -q tests/test_wheel.py
+
 clean:
-	rm -rf $(VENV) target demo-out
+	rm -rf $(VENV) target demo-out dist
