@@ -5,7 +5,7 @@ and either the measured point m or the deviation e directly. The deviation is
 
     e = (m − p) · n                      e > 0: material left over
 
-(DESIGN.md's sign convention). When the measured points are probe-tip centres, the surface point is
+(the sign convention of every ncadapt deviation). When the measured points are probe-tip centres, the surface point is
 the centre moved back along the normal by the tip radius: e = (m − p) · n − r.
 
 Readers (:func:`read` picks one from the file's contents):
