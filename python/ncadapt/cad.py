@@ -169,7 +169,7 @@ def faces(shape) -> list:
     out = []
     ex = TopExp_Explorer(shape, TopAbs_FACE)
     while ex.More():
-        out.append(TopoDS.Face_s(ex.Current()))
+        out.append(TopoDS.Face(ex.Current()))
         ex.Next()
     return out
 
@@ -231,7 +231,7 @@ def face_edge_points(face, per_edge: int = 2000) -> np.ndarray:
     out = []
     ex = TopExp_Explorer(face, TopAbs_EDGE)
     while ex.More():
-        e = TopoDS.Edge_s(ex.Current())
+        e = TopoDS.Edge(ex.Current())
         ex.Next()
         if BRep_Tool.Degenerated_s(e):
             continue

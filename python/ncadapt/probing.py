@@ -216,7 +216,7 @@ def _admissible(face, uu, vv, edges_tree, margin):
 
 def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: int = 0) -> FacePoints:
     """``n`` points on an OpenCASCADE face, none closer than ``margin`` mm to an edge: a grid
-    uniform in (u, v), or (``adaptive``) drawn with weights 1 + κ/mean(κ) from a fine grid, κ the
+    uniform in (u, v), or (``adaptive``) drawn with weights 0.2 + κ/mean(κ) from a fine grid, κ the
     largest absolute principal curvature, so that points gather where the face bends most."""
     from scipy.spatial import cKDTree
 
@@ -237,8 +237,7 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
     top = float(edges[:, 2].max())
 
     def grid(m, a0, a1, b0, b1, pad=True):
-        nu = max(2, int(round(math.sqrt(m * aspect))))
-        nv = max(2, int(round(m / nu)))
+        nu, nv = _grid_shape(m, aspect)
         if pad:  # cell centres: no point on the parameter box's border
             us = a0 + (np.arange(nu) + 0.5) * (a1 - a0) / nu
             vs = b0 + (np.arange(nv) + 0.5) * (b1 - b0) / nv
@@ -254,7 +253,7 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
         raise ValueError(f"no point of the face is {margin:g} mm or more from its edges: the stylus does not fit")
     if adaptive:
         kmean = float(kk[ok].mean())
-        w = 1.0 + (kk[ok] / kmean if kmean > 0 else 0.0)
+        w = 0.2 + (kk[ok] / kmean if kmean > 0 else 0.8)
         if ok.sum() < n:
             raise ValueError(f"the face has room for {int(ok.sum())} points {margin:g} mm from its edges, fewer than {n}")
         rng = np.random.default_rng(seed)
@@ -263,8 +262,8 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
         idx = np.flatnonzero(ok)[pick]
         tu, tv = fu[idx], fv[idx]
     else:
-        a0, a1 = fu[ok].min(), fu[ok].max()
-        b0, b1 = fv[ok].min(), fv[ok].max()
+        a0, a1, b0, b1 = _tight_box(face, tree, margin, fu[ok].min(), fu[ok].max(), fv[ok].min(), fv[ok].max(),
+                                    (u0, u1, v0, v1))
         m = n
         for _ in range(40):
             gu, gv = grid(m, a0, a1, b0, b1, pad=False) if n > 1 else (np.array([(a0 + a1) / 2]), np.array([(b0 + b1) / 2]))
@@ -280,6 +279,46 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
     ok, p, nn, kk, dd = _admissible(face, tu, tv, tree, margin)
     assert ok.all()
     return FacePoints(p, nn, kk, dd, top=max(top, float(p[:, 2].max())))
+
+
+def _tight_box(face, tree, margin, a0, a1, b0, b1, bounds):
+    """Widen the admissible parameter box found on a grid towards the face's parameter bounds, each
+    side by bisection, while a line of points along that side stays ``margin`` from the edges."""
+    from . import cad
+
+    box = [a0, a1, b0, b1]
+    for side, limit in enumerate(bounds):
+        def fine(t):
+            q = list(box)
+            q[side] = t
+            if side < 2:
+                uu, vv = np.full(101, t), np.linspace(q[2], q[3], 101)
+            else:
+                uu, vv = np.linspace(q[0], q[1], 101), np.full(101, t)
+            p, _, _ = cad.face_evaluate(face, uu, vv)
+            d, _ = tree.query(p)
+            return bool((d >= margin).all())
+
+        good, bad = box[side], limit
+        for _ in range(30):
+            mid = (good + bad) / 2
+            if fine(mid):
+                good = mid
+            else:
+                bad = mid
+        box[side] = good
+    return tuple(box)
+
+
+def _grid_shape(m: int, aspect: float) -> tuple[int, int]:
+    """nu x nv, at least 2 each, with nu·nv ≥ m, as few extra points and as near the aspect as can be."""
+    best = None
+    for nu in range(2, max(3, 4 * int(math.sqrt(m * max(aspect, 1.0))) + 3)):
+        nv = max(2, -(-m // nu))
+        score = 10.0 * (nu * nv - m) / m + abs(math.log(nu / nv / aspect))
+        if best is None or score < best[0]:
+            best = (score, nu, nv)
+    return best[1], best[2]
 
 
 def points_program(points, normals, *, approach: float, overtravel: float, feed: float, safe_z: float,

@@ -135,6 +135,8 @@ def grid(extent, program, margin, step, nx, ny, safe_z, depth, feed, fast_feed, 
 @click.option("--points", "points_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="CSV of points to probe (columns x,y,z, mm), each within 0.01 mm of the face, instead of --n.")
 @click.option("--stylus-radius", type=FiniteRange(0, 1000), required=True, help="Radius of the stylus ball, mm, 0 to 1000.")
+@click.option("--edge-margin", type=FiniteRange(0, COORD_MAX), default=None,
+              help="Keep the points at least this far from the face's edges, mm [default and least: the stylus radius].")
 @click.option("--approach", type=_POSITIVE, required=True,
               help="Start of each probe move: this far from the surface along the normal, mm (more than the stylus radius).")
 @click.option("--overtravel", type=_POSITIVE, required=True,
@@ -151,7 +153,7 @@ def grid(extent, program, margin, step, nx, ny, safe_z, depth, feed, fast_feed, 
               help="Plan to write (id, nominal x,y,z,i,j,k): `analyze PLAN` and `compensate PLAN` read it with its log.")
 @json_option
 @handle_errors
-def points(nominal, face_id, n, adaptive, points_path, stylus_radius, approach, overtravel, feed, fast_feed, safe_z,
+def points(nominal, face_id, n, adaptive, points_path, stylus_radius, edge_margin, approach, overtravel, feed, fast_feed, safe_z,
            dialect, log_name, output, plan_path, json_path):
     """An inspection program: points on a face of the CAD model, each probed along its outward
     normal, with a retract to a safe plane between points."""
@@ -170,6 +172,8 @@ def points(nominal, face_id, n, adaptive, points_path, stylus_radius, approach, 
                                  "clear of the surface")
     if fast_feed is not None and not fast_feed > feed:
         raise _bad("--fast-feed", f"{fast_feed:g} must exceed --feed {feed:g} (the second touch is the slow one)")
+    if edge_margin is not None and edge_margin < stylus_radius:
+        raise _bad("--edge-margin", f"{edge_margin:g} mm is less than --stylus-radius {stylus_radius:g} mm")
     check_outputs({"CAD model": nominal, "points file": points_path},
                   {"-o": output, "--plan": plan_path, "--json": json_path})
     with progress() as say:
@@ -182,7 +186,8 @@ def points(nominal, face_id, n, adaptive, points_path, stylus_radius, approach, 
         say("placing the points")
         if n is not None:
             try:
-                fp = probing.face_points(face, n, margin=stylus_radius, adaptive=adaptive)
+                margin = stylus_radius if edge_margin is None else edge_margin
+                fp = probing.face_points(face, n, margin=margin, adaptive=adaptive)
             except ValueError as e:
                 raise InputError(f"face {face_id}: {e}", str(nominal)) from None
             p, nn, top = fp.points, fp.normals, fp.top
