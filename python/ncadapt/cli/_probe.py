@@ -100,7 +100,8 @@ def grid(extent, program, margin, step, nx, ny, safe_z, depth, feed, fast_feed, 
 
             say(f"reading {program}")
             tp = nc.read(program).toolpath(rapids=False)
-            pts = tp.points[np.isfinite(tp.points).all(axis=1)]
+            pts = np.vstack([tp.starts, tp.points])  # feed moves from where they start
+            pts = pts[np.isfinite(pts).all(axis=1)]
             if len(pts) == 0:
                 raise _bad("--program", f"{program} has no feed moves to take the area from")
             lo, hi = pts[:, :2].min(axis=0) - margin, pts[:, :2].max(axis=0) + margin
