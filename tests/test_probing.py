@@ -221,7 +221,7 @@ def test_grid_refusals():
     assert r.exit_code == 2 and "error: --depth: -2 must be below --safe-z -3" in r.output
     r = run(["probe", "grid", "--extent", "0,10,0,10", "--step", "0.001", "--safe-z", "3", "--depth", "-2",
              "--feed", "1", "-o", "x.ngc"])
-    assert r.exit_code == 2 and "error: --step: 10001 x 10001" in r.output
+    assert r.exit_code == 2 and "error: --step: a spacing of 0.001 mm over 10 x 10 mm needs 10001 x 10001" in r.output
     r = run(["probe", "grid", "--extent", "0,10,0,10", "--safe-z", "3", "--depth", "-2", "--feed", "1", "-o", "x.ngc"])
     assert r.exit_code == 2 and "--step MM, or --nx N and --ny N" in r.output
     r = run(["probe", "grid", "--extent", "0,10,0,10", "--step", "1", "--safe-z", "3", "--depth", "-2", "--feed",

@@ -81,8 +81,11 @@ def grid_points(extent, step: float | None = None, nx: int | None = None, ny: in
     if step is not None:
         if not step > 0:
             raise ValueError(f"step must be positive, got {step}")
-        nx = int(math.ceil((x1 - x0) / step - 1e-9)) + 1
-        ny = int(math.ceil((y1 - y0) / step - 1e-9)) + 1
+        fx, fy = math.ceil((x1 - x0) / step - 1e-9) + 1.0, math.ceil((y1 - y0) / step - 1e-9) + 1.0
+        if not fx * fy <= MAX_POINTS:
+            raise ValueError(f"a spacing of {step:g} mm over {x1 - x0:g} x {y1 - y0:g} mm needs {fx:.0f} x {fy:.0f} "
+                             f"points: more than {MAX_POINTS:,}; use a larger step")
+        nx, ny = int(fx), int(fy)
         nx, ny = max(nx, 2), max(ny, 2)
     if nx is None or ny is None or nx < 2 or ny < 2:
         raise ValueError("a grid needs at least 2 x 2 points")

@@ -62,7 +62,7 @@ def probe() -> None:
               help="Probe the area of this NC program's feed moves instead of --extent.")
 @click.option("--margin", type=FiniteRange(0, COORD_MAX), default=0.0, show_default=True,
               help="Widen the program's area by this on every side, mm (with --program).")
-@click.option("--step", type=_POSITIVE, help="Largest spacing of the grid, mm.")
+@click.option("--step", type=FiniteRange(0.001, COORD_MAX), help="Largest spacing of the grid, mm, 0.001 to 1000000.")
 @click.option("--nx", type=click.IntRange(2, 100_000), help="Points along X (with --ny).")
 @click.option("--ny", type=click.IntRange(2, 100_000), help="Points along Y (with --nx).")
 @click.option("--safe-z", type=_LENGTH, required=True, help="Height the probe retracts to between points, mm (work Z).")
@@ -131,7 +131,7 @@ def grid(extent, program, margin, step, nx, ny, safe_z, depth, feed, fast_feed, 
               help="The part's CAD model, STEP (.step/.stp) or IGES (.igs/.iges).")
 @click.option("--face", "face_id", type=click.IntRange(1, 10_000_000), default=1, show_default=True,
               help="Face to probe, numbered from 1 in the file's order.")
-@click.option("--n", "n", type=click.IntRange(1, 100_000), help="Number of points to place on the face.")
+@click.option("--n", "n", type=click.IntRange(1, 5000), help="Number of points to place on the face, 1 to 5000.")
 @click.option("--adaptive", is_flag=True, help="Place the points denser where the face bends more (with --n).")
 @click.option("--points", "points_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="CSV of points to probe (columns x,y,z, mm), each within 0.01 mm of the face, instead of --n.")
