@@ -495,3 +495,22 @@ def test_virtual_probe_stops_the_program_without_contact(tmp_path):
     assert e.value.log == ""
     lines = text.splitlines()
     assert lines[e.value.line - 1].startswith("G38.2")
+
+
+def test_plan_with_grbl_two_touches_takes_the_slow_one(tmp_path):
+    step = plane_step(tmp_path / "plate.step")
+    plan = tmp_path / "plan.csv"
+    r = run(["probe", "points", "--nominal", step, "--n", "4", "--stylus-radius", "1", "--approach", "2",
+             "--overtravel", "1", "--feed", "50", "--fast-feed", "500", "--dialect", "grbl", "-o", tmp_path / "o.nc",
+             "--plan", plan, "--log", "grbl.log"])
+    assert r.exit_code == 0, r.output
+    p = probing.read_plan(plan)
+    assert p.touches == 2
+    e = np.array([0.01, -0.02, 0.005, 0.0])
+    rows = ["[G54:-100.000,-50.000,-20.000]"]
+    for q, d in zip(p.nominal, e):
+        for over in (0.004, 0.0):  # the fast touch runs on further
+            c = q + (1 + d - over) * p.normal[0] + [-100, -50, -20]
+            rows.append(f"[PRB:{c[0]:.3f},{c[1]:.3f},{c[2]:.3f}:1]")
+    (tmp_path / "grbl.log").write_text("\n".join(rows) + "\n")
+    np.testing.assert_allclose(measure.read(plan).deviation, e, atol=6e-4)  # grbl prints 3 decimals

@@ -358,13 +358,18 @@ def points_program(points, normals, *, approach: float, overtravel: float, feed:
 
 
 # --------------------------------------------------------------------------------------- plan
-def plan_text(points, normals, *, stylus_radius: float, log: str, ids=None) -> str:
-    """The plan file: the nominal points in probing order, paired line by line with the log."""
+def plan_text(points, normals, *, stylus_radius: float, log: str, ids=None, touches: int = 1) -> str:
+    """The plan file: the nominal points in probing order, paired line by line with the log
+    (``touches`` = 2: the log has two entries per point, a fast and a slow touch, as grbl reports
+    them; the second counts)."""
     p = np.asarray(points, float)
     nn = np.asarray(normals, float)
     ids = ids or [f"P{k + 1}" for k in range(len(p))]
     rows = [f"{PLAN_MAGIC}: point k is line k of the probe log",
-            f"# log={log}", f"# stylus_radius={stylus_radius:.6f}", "id,x,y,z,i,j,k"]
+            f"# log={log}", f"# stylus_radius={stylus_radius:.6f}"]
+    if touches != 1:
+        rows.append(f"# touches={touches}")
+    rows.append("id,x,y,z,i,j,k")
     rows += [f"{i}," + ",".join(f"{v:.6f}" for v in (*q, *m)) for i, q, m in zip(ids, p, nn)]
     return "\n".join(rows) + "\n"
 
@@ -382,6 +387,7 @@ class Plan:
     stylus_radius: float
     log: str | None
     source: str
+    touches: int = 1
 
 
 def read_plan(path) -> Plan:
@@ -394,7 +400,7 @@ def read_plan(path) -> Plan:
     lines = read_text(path).splitlines()
     if not lines or not is_plan(lines[0]):
         raise InputError(f"not an ncadapt probe plan: the first line must start with {PLAN_MAGIC!r}", src, 1, 1)
-    radius, log = None, None
+    radius, log, touches = None, None, 1
     ids, vals, lns = [], [], []
     header_seen = False
     for n, raw in enumerate(lines, 1):
@@ -407,6 +413,11 @@ def read_plan(path) -> Plan:
                 radius = _num(body.split("=", 1)[1], src, n, raw.find("=") + 2, "stylus_radius")
                 if radius < 0:
                     raise InputError(f"stylus_radius must not be negative, found {radius:g}", src, n, 1)
+            elif body.startswith("touches="):
+                t = body.split("=", 1)[1].strip()
+                if t not in ("1", "2"):
+                    raise InputError(f"touches must be 1 or 2, found {t!r}", src, n, 1)
+                touches = int(t)
             elif body.startswith("log="):
                 log = body.split("=", 1)[1].strip() or None
             continue
@@ -431,7 +442,7 @@ def read_plan(path) -> Plan:
     if not vals:
         raise InputError("the plan has no points", src)
     a = np.asarray(vals)
-    return Plan(tuple(ids), a[:, :3], a[:, 3:], np.asarray(lns), radius, log, src)
+    return Plan(tuple(ids), a[:, :3], a[:, 3:], np.asarray(lns), radius, log, src, touches)
 
 
 def read_log(path) -> tuple[np.ndarray, np.ndarray]:
@@ -482,6 +493,11 @@ def read_log_with_plan(plan_path, log_path=None, probe_radius: float = 0.0):
         raise InputError(f"the plan records the stylus radius {plan.stylus_radius:g} mm; --probe-radius "
                          f"{probe_radius:g} disagrees (leave it out)", plan.source, 3, 1)
     measured, lns = read_log(log_path)
+    if plan.touches == 2:  # a fast and a slow touch per point: the slow one counts
+        if len(measured) % 2:
+            raise InputError(f"the plan has two touches per point and the log {len(measured)} entries, an odd number: "
+                             "the probing stopped between the two touches", str(log_path))
+        measured, lns = measured[1::2], lns[1::2]
     k, n = len(measured), len(plan.nominal)
     if k < n:
         raise InputError(f"the log has {k} probed point(s), the plan {n}: the probing stopped before point "

@@ -226,7 +226,9 @@ def points(nominal, face_id, n, adaptive, points_path, stylus_radius, edge_margi
                                       stylus_radius=stylus_radius, dialect=dialect, log=log_name, fast_feed=fast_feed)
         atomic_write(output, text.encode())
         if plan_path is not None:
-            atomic_write(plan_path, probing.plan_text(p, nn, stylus_radius=stylus_radius, log=log_name).encode())
+            touches = 2 if fast_feed is not None and dialect == "grbl" else 1  # grbl reports both touches
+            atomic_write(plan_path, probing.plan_text(p, nn, stylus_radius=stylus_radius, log=log_name,
+                                                      touches=touches).encode())
     summary(f"{output}: {len(p):,} points on face {face_id} of {nominal} ({dialect}), safe Z {safe_z:.4f} mm")
     if plan_path is not None:
         summary(f"{plan_path}: the plan; after probing, `ncadapt analyze {plan_path}` reads it with {log_name} beside it")
