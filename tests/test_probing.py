@@ -514,3 +514,23 @@ def test_plan_with_grbl_two_touches_takes_the_slow_one(tmp_path):
             rows.append(f"[PRB:{c[0]:.3f},{c[1]:.3f},{c[2]:.3f}:1]")
     (tmp_path / "grbl.log").write_text("\n".join(rows) + "\n")
     np.testing.assert_allclose(measure.read(plan).deviation, e, atol=6e-4)  # grbl prints 3 decimals
+
+
+def test_safe_plane_clears_the_whole_face(tmp_path):
+    """The default safe plane is above the face's highest point (the demo dome's 9.895 mm, found
+    on a fine grid of ncadapt's own surface) plus the approach, however few points are probed."""
+    import json
+
+    from ncadapt import cad
+    from ncadapt.sim import freeform as ff
+
+    part = ff.demo_part()
+    step = cad.write(part, tmp_path / "part.step")
+    r = run(["probe", "points", "--nominal", step, "--n", "3", "--stylus-radius", "1", "--approach", "3",
+             "--overtravel", "1", "--feed", "50", "-o", tmp_path / "o.ngc", "--json", tmp_path / "o.json"])
+    assert r.exit_code == 0, r.output
+    x, y = np.meshgrid(np.linspace(0, 80, 401), np.linspace(0, 60, 301))
+    assert json.loads((tmp_path / "o.json").read_text())["safe_z"] >= part.point(x, y)[..., 2].max() + 3
+    r = run(["probe", "points", "--nominal", step, "--n", "3", "--stylus-radius", "1", "--approach", "3",
+             "--overtravel", "1", "--feed", "50", "--safe-z", "9", "-o", tmp_path / "o.ngc"])
+    assert r.exit_code == 2 and "error: --safe-z: 9 is below" in r.output

@@ -263,3 +263,13 @@ def face_project(face, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     inside = face_inside(face, uv[:, 0], uv[:, 1])
     dist[~inside] = np.inf
     return p, n, dist
+
+
+def face_top(face) -> float:
+    """An upper bound of a face's Z, mm (OpenCASCADE's bounding box, which may be a little above)."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    BRepBndLib.Add_s(face, box)
+    return float(box.CornerMax().Z())

@@ -204,7 +204,7 @@ class FacePoints:
     normals: np.ndarray
     curvature: np.ndarray
     edge_distance: np.ndarray
-    top: float  # highest point of the face's edges and samples, mm
+    top: float  # an upper bound of the face's Z (its bounding box), mm
 
 
 def _admissible(face, uu, vv, edges_tree, margin):
@@ -237,7 +237,7 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
     lu = np.linalg.norm(np.diff(cad.face_evaluate(face, np.linspace(u0, u1, 33), np.full(33, vm))[0], axis=0), axis=1).sum()
     lv = np.linalg.norm(np.diff(cad.face_evaluate(face, np.full(33, um), np.linspace(v0, v1, 33))[0], axis=0), axis=1).sum()
     aspect = max(lu, 1e-9) / max(lv, 1e-9)
-    top = float(edges[:, 2].max())
+    top = max(float(edges[:, 2].max()), cad.face_top(face))
 
     def grid(m, a0, a1, b0, b1, pad=True):
         nu, nv = _grid_shape(m, aspect)

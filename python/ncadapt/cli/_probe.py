@@ -208,7 +208,7 @@ def points(nominal, face_id, n, adaptive, points_path, stylus_radius, edge_margi
             bad = np.flatnonzero(~np.isfinite(nn).all(axis=1))
             if len(bad):
                 raise InputError("the face has no normal at this point", str(points_path), int(lines[bad[0]]), 1)
-            top = float(cad.face_edge_points(face)[:, 2].max())
+            top = cad.face_top(face)
         steep = np.flatnonzero(nn[:, 2] < np.cos(np.radians(80.0)))
         if len(steep):
             k = int(steep[0])
