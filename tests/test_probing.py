@@ -470,7 +470,7 @@ def flat_zmap(h=2.0):
     return ZMap(0.0, 0.0, 0.25, np.full((161, 121), h))
 
 
-def test_virtual_probe_trips_where_the_ball_touches():
+def test_virtual_probe_trips_where_the_ball_touches(tmp_path):
     from ncadapt.sim import probing as sp
 
     g = probing.grid_points((10, 30, 10, 20), nx=3, ny=2)
@@ -481,8 +481,10 @@ def test_virtual_probe_trips_where_the_ball_touches():
     np.testing.assert_allclose(res.trips[:, 2], 3.5 - 0.004, atol=2e-6)
     log = res.log.splitlines()
     assert len(log) == 6 and len(log[0].split()) == 9
-    f = fields.read_probe_log  # the log reads back as LinuxCNC's
-    assert f.__name__ == "read_probe_log"
+    (tmp_path / "probe-log.txt").write_text(res.log)  # read back as LinuxCNC's log: a 3 x 2 grid
+    f = fields.read(tmp_path / "probe-log.txt")
+    assert isinstance(f, fields.GridField) and f.dz.shape == (2, 3)
+    np.testing.assert_allclose(f.dz, 3.5 - 0.004, atol=2e-6)
 
 
 def test_virtual_probe_stops_the_program_without_contact(tmp_path):
