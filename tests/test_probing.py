@@ -536,3 +536,16 @@ def test_safe_plane_clears_the_whole_face(tmp_path):
     r = run(["probe", "points", "--nominal", step, "--n", "3", "--stylus-radius", "1", "--approach", "3",
              "--overtravel", "1", "--feed", "50", "--safe-z", "9", "-o", tmp_path / "o.ngc"])
     assert r.exit_code == 2 and "error: --safe-z: 9 is below" in r.output
+
+
+@needs_rs274
+def test_points_with_two_touches_run_in_rs274(tmp_path):
+    step = plane_step(tmp_path / "plate.step")
+    out = tmp_path / "p2.ngc"
+    r = run(["probe", "points", "--nominal", step, "--n", "5", "--stylus-radius", "1", "--approach", "3",
+             "--overtravel", "1", "--feed", "20", "--fast-feed", "200", "-o", out])
+    assert r.exit_code == 0, r.output
+    probes = [c for k, c in rs274(out) if k == "STRAIGHT_PROBE"]
+    assert len(probes) == 10
+    np.testing.assert_allclose([c[2] for c in probes], 4.0, atol=1e-4)  # z = 5 − overtravel 1, both touches
+    assert out.read_text().count("(LOG,#5061 #5062 #5063)") == 5
