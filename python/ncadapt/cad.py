@@ -130,33 +130,75 @@ def read_surface_points(path: str | os.PathLike, u, v) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------ reading a STEP face
-def read_shape(path: str | os.PathLike):
-    """The shape of a STEP (``.step``/``.stp``) or IGES file, read by OpenCASCADE; an unreadable
-    file or one without a face is an :class:`InputError` naming it."""
+#: Longest time OpenCASCADE may take to read a CAD file, s.
+READ_TIMEOUT = 300.0
+
+
+def _read_child(path: str, kind: str, out: str, msg: str) -> None:
+    """In a child process: read the file with OpenCASCADE and write its shape as a BRep file (or
+    a message); a crash of the translator on a malformed file ends only the child."""
+    from OCP.BRepTools import BRepTools
     from OCP.IFSelect import IFSelect_RetDone
 
-    p = Path(path)
-    kind = FORMATS.get(p.suffix.lower())
-    if kind is None:
-        raise InputError(f"unknown CAD format {p.suffix!r}; use .step, .stp, .igs or .iges", str(p))
     if kind == "step":
         from OCP.STEPControl import STEPControl_Reader as Reader
     else:
         from OCP.IGESControl import IGESControl_Reader as Reader
     try:
+        with _quiet():
+            r = Reader()
+            if r.ReadFile(path) != IFSelect_RetDone:
+                Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE could not read it)")
+                return
+            r.TransferRoots()
+            shape = r.OneShape()
+            if shape is None or shape.IsNull() or not faces(shape):
+                Path(msg).write_text("no face in the file")
+                return
+            BRepTools.Write_s(shape, out)
+    except Exception as e:  # noqa: BLE001 - OpenCASCADE's own failures: the file is not readable
+        Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE: {type(e).__name__})")
+
+
+def read_shape(path: str | os.PathLike):
+    """The shape of a STEP (``.step``/``.stp``) or IGES file, read by OpenCASCADE; an unreadable
+    file or one without a face is an :class:`InputError` naming it.
+
+    The translator runs in a child process (forked): on some malformed files it crashes the
+    process, which then ends the child only and becomes an input error here. The shape comes back
+    as an OpenCASCADE BRep file, which is read back exactly."""
+    import multiprocessing
+    import tempfile
+
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.TopoDS import TopoDS_Shape
+
+    p = Path(path)
+    kind = FORMATS.get(p.suffix.lower())
+    if kind is None:
+        raise InputError(f"unknown CAD format {p.suffix!r}; use .step, .stp, .igs or .iges", str(p))
+    try:
         with open(p, "rb"):
             pass
     except OSError as e:
         raise InputError(f"cannot read: {e.strerror}", str(p)) from None
-    with _quiet():
-        r = Reader()
-        status = r.ReadFile(str(p))
-        if status != IFSelect_RetDone:
-            raise InputError(f"not a readable {kind.upper()} file (OpenCASCADE could not read it)", str(p))
-        r.TransferRoots()
-        shape = r.OneShape()
-    if shape is None or shape.IsNull() or not faces(shape):
-        raise InputError("no face in the file", str(p))
+    with tempfile.TemporaryDirectory(prefix="ncadapt-cad-") as d:
+        out, msg = Path(d) / "shape.brep", Path(d) / "message.txt"
+        proc = multiprocessing.get_context("fork").Process(target=_read_child, args=(str(p), kind, str(out), str(msg)))
+        proc.start()
+        proc.join(READ_TIMEOUT)
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
+            raise InputError(f"OpenCASCADE did not finish reading the file in {READ_TIMEOUT:g} s", str(p))
+        if proc.exitcode != 0:
+            raise InputError(f"not a readable {kind.upper()} file (OpenCASCADE's translator crashed on it)", str(p))
+        if msg.exists():
+            raise InputError(msg.read_text(), str(p))
+        shape = TopoDS_Shape()
+        if not out.exists() or not BRepTools.Read_s(shape, str(out), BRep_Builder()):
+            raise InputError(f"not a readable {kind.upper()} file (no shape came back from OpenCASCADE)", str(p))
     return shape
 
 
