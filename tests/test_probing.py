@@ -549,3 +549,12 @@ def test_points_with_two_touches_run_in_rs274(tmp_path):
     assert len(probes) == 10
     np.testing.assert_allclose([c[2] for c in probes], 4.0, atol=1e-4)  # z = 5 − overtravel 1, both touches
     assert out.read_text().count("(LOG,#5061 #5062 #5063)") == 5
+
+
+def test_companion_inputs_name_the_plans_log(tmp_path):
+    plan = tmp_path / "plan.csv"
+    plan.write_text(probing.plan_text([[0, 0, 0]], [[0, 0, 1]], stylus_radius=1, log="run1.txt"))
+    assert probing.companion_inputs(plan) == {"probe log": tmp_path / "run1.txt"}
+    other = tmp_path / "m.csv"
+    other.write_text("x,y,z,i,j,k,dev\n")
+    assert probing.companion_inputs(other) == {}

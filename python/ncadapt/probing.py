@@ -39,7 +39,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["DIALECTS", "GridPlan", "FacePoints", "Plan", "grid_points", "grid_program", "face_points", "points_program",
-           "plan_text", "read_plan", "read_log", "read_log_with_plan", "is_plan", "PLAN_MAGIC", "MAX_POINTS"]
+           "plan_text", "read_plan", "companion_inputs", "read_log", "read_log_with_plan", "is_plan", "PLAN_MAGIC", "MAX_POINTS"]
 
 DIALECTS = ("linuxcnc", "grbl", "fanuc", "sinumerik")
 #: Most points one program probes.
@@ -473,6 +473,22 @@ def read_log(path) -> tuple[np.ndarray, np.ndarray]:
         out.append(row)
         lns.append(n)
     return np.asarray(out).reshape(-1, 3), np.asarray(lns, dtype=np.int64)
+
+
+def companion_inputs(path) -> dict[str, Path]:
+    """The other files a measurement input reads: for a probe plan, the log it names (for a
+    command's check that no output replaces an input); empty for any other file."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(4096).decode("utf-8", "replace")
+    except OSError:
+        return {}
+    if not is_plan(head):
+        return {}
+    m = next((ln for ln in head.splitlines()[1:4] if ln.startswith("# log=")), None)
+    name = m.split("=", 1)[1].strip() if m else ""
+    return {"probe log": p.parent / name} if name else {}
 
 
 def read_log_with_plan(plan_path, log_path=None, probe_radius: float = 0.0):
