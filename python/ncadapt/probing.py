@@ -39,7 +39,8 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["DIALECTS", "GridPlan", "FacePoints", "Plan", "grid_points", "grid_program", "face_points", "points_program",
-           "plan_text", "read_plan", "companion_inputs", "read_log", "read_log_with_plan", "is_plan", "PLAN_MAGIC", "MAX_POINTS"]
+           "plan_text", "read_plan", "companion_inputs", "read_log", "read_log_with_plan", "is_plan", "PLAN_MAGIC",
+           "MAX_POINTS"]
 
 DIALECTS = ("linuxcnc", "grbl", "fanuc", "sinumerik")
 #: Most points one program probes.
