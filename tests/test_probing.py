@@ -256,15 +256,18 @@ def test_grbl_console_log_in_work_coordinates(tmp_path):
 def test_grbl_plain_capture_with_the_offsets_report_and_two_touches(tmp_path):
     g54, g92, tlo = (-10.0, -20.0, -30.0), (1.0, 2.0, 3.0), 0.5
     rows = [f"[G54:{g54[0]:.3f},{g54[1]:.3f},{g54[2]:.3f}]", "[G55:0.000,0.000,0.000]",
-            f"[G92:{g92[0]:.3f},{g92[1]:.3f},{g92[2]:.3f}]", f"[TLO:{tlo:.3f}]", "[PRB:0.000,0.000,0.000:0]"[:0]]
+            f"[G92:{g92[0]:.3f},{g92[1]:.3f},{g92[2]:.3f}]", f"[TLO:{tlo:.3f}]",
+            "[PRB:0.000,0.000,0.000:0]", "ok"]  # the `$#` report's last line: no probe since power-up
     off = np.add(g54, g92) + [0, 0, tlo]
     for x, y in ((0, 0), (10, 0), (10, 10), (0, 10)):
         z = plane(x, y)
         rows.append(f"[PRB:{x + off[0]:.3f},{y + off[1]:.3f},{z + off[2] - 0.3:.3f}:1]")  # the fast touch
         rows.append(f"[PRB:{x + off[0]:.3f},{y + off[1]:.3f},{z + off[2]:.3f}:1]")  # the slow one counts
+    rows += rows[:4] + [rows[-1], "ok"]  # `$#` again at the end: its PRB repeats the last probe
     log = tmp_path / "capture.txt"
     log.write_text("\n".join(rows) + "\n")
     f = fields.read(log)
+    assert isinstance(f, fields.GridField) and f.dz.shape == (2, 2)
     q = np.array([[4.0, 7.0, 0.0]])
     assert f(q)[0, 2] == pytest.approx(plane(4.0, 7.0), abs=5e-4)
 

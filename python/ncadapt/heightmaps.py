@@ -16,7 +16,9 @@ Formats (read from the senders' sources):
   is refused: the map would be in machine coordinates. Sender console logs (UGS, cncjs, bCNC) carry
   the reports with prefixes (time stamps, ``>>``, ``<``): a report is found anywhere on its line.
   Consecutive reports at one (x, y) are touches of one point (a fast and a slow touch): the last
-  counts. ``$13=1`` (reports in inches) is refused.
+  counts. ``$13=1`` (reports in inches) is refused. The ``$#`` report ends with ``[TLO:…]`` and a
+  ``[PRB:…]`` that repeats the last probe (zeros and flag 0 after power-up): a report on the line
+  after ``[TLO:…]`` is that one, not a probe move, and is skipped.
 - **OpenCNCPilot** (``HeightMap.Save``): ``<heightmap MinX MinY MaxX MaxY SizeX SizeY>`` with one
   ``<point X="i" Y="j">height</point>`` per probed node; node (i, j) is at
   (MinX + i (MaxX − MinX)/(SizeX − 1), MinY + j (MaxY − MinY)/(SizeY − 1)).
@@ -84,7 +86,11 @@ def prb_reports(path) -> list[tuple[int, np.ndarray]]:
     offsets: dict[str, list[float]] = {}
     wcs = "G54"
     out: list[tuple[int, np.ndarray]] = []
+    after_tlo = False  # the `$#` report ends [TLO:…] [PRB:…]: that PRB repeats the last probe, or zeros
     for n, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        in_report, after_tlo = after_tlo, "[TLO:" in line
         if _INCH.search(line):
             raise InputError("$13=1: grbl reports positions in inches; set $13=0 (mm) and probe again", src, n, 1)
         for m in _WCO.finditer(line):
@@ -103,6 +109,8 @@ def prb_reports(path) -> list[tuple[int, np.ndarray]]:
             if w:
                 wcs = w.group(0)
         for m in _PRB.finditer(line):
+            if in_report:
+                continue  # the `$#` report's line, not a probe move
             body = m.group(1)
             col = m.start(1) + 1
             if ":" not in body:
