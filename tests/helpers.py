@@ -1,8 +1,18 @@
-"""Shared checks for the NC tests."""
+"""Shared checks for the tests."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
+
+
+def skin_server(*args, env=None) -> subprocess.Popen:
+    """``ncadapt skin serve ARGS`` in a process of its own (the controller of the OPC UA pair);
+    its first line on stderr says where it serves."""
+    return subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
+                             *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
 
 def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol: float) -> None:

@@ -39,6 +39,11 @@ from .errors import InputError
 from .neighbours import pairs_within
 
 WEIGHTS = ("idw", "knn")
+# weights="auto": all-pairs 1/d^k (the paper's) up to this many points, k nearest neighbours above
+# (all pairs cost n² distances: 30,000 points take over a minute, a scanner's 10⁶ would take hours)
+AUTO_ALL_PAIRS_MAX_N = 3000
+# all-pairs weights asked for explicitly are refused above this many points (n² = 4·10⁸ distances)
+ALL_PAIRS_MAX_N = 20_000
 # rows of the all-pairs inverse-distance weights computed at a time (memory: rows x n doubles)
 _DENSE_ROWS = 512
 # the decision's p value by permutation (exact under randomisation whatever the weights) up to
@@ -57,6 +62,17 @@ class Weights:
     power: float = 1.0
     threshold: float | None = None
     neighbors: int | None = None
+    chosen: bool = False  # by weights="auto" from the number of points
+
+    def describe(self) -> str:
+        """In words, for people."""
+        if self.kind == "knn":
+            out = f"{self.neighbors} nearest neighbours"
+        elif self.kind == "idw":
+            out = f"1/d^{self.power:g}, " + (f"pairs closer than {self.threshold:g} mm" if self.threshold else "all pairs")
+        else:
+            out = self.kind
+        return out + (f" (chosen for more than {AUTO_ALL_PAIRS_MAX_N:,} points)" if self.chosen else "")
 
 
 @dataclass(frozen=True)
@@ -227,15 +243,23 @@ def moran(
 
     Parameters
     ----------
-    weights : ``"idw"`` or ``"knn"``
+    weights : ``"idw"``, ``"knn"`` or ``"auto"``
         ``idw``: w_ij = 1 / d_ij^power over all pairs, or over the pairs closer than ``threshold``;
-        ``knn``: 1 for the ``neighbors`` nearest points (default 8).
+        ``knn``: 1 for the ``neighbors`` nearest points (default 8); ``auto``: ``idw`` up to
+        ``AUTO_ALL_PAIRS_MAX_N`` points (or with a threshold), ``knn`` above.
     alpha : float
         Significance of the decision :attr:`Moran.systematic`.
     progress : callable, optional
         ``progress(done, total)`` during the all-pairs weights (``n²`` distances: long for large n).
     """
     p, v = _check(points, values)
+    chosen = False
+    if weights == "auto":
+        chosen = threshold is None and len(v) > AUTO_ALL_PAIRS_MAX_N
+        weights = "knn" if chosen else "idw"
+    if weights == "idw" and threshold is None and len(v) > ALL_PAIRS_MAX_N:
+        raise InputError(f"all-pairs inverse-distance weights over {len(v):,} points need {len(v) ** 2:.2g} distances "
+                         f"(more than {ALL_PAIRS_MAX_N:,} points); give a distance band (--threshold MM) or knn weights")
     if not power >= 1:
         raise ValueError(f"power must be >= 1, got {power}")
     if not 0 < alpha < 1:
@@ -243,7 +267,7 @@ def moran(
     if threshold is not None and not threshold > 0:
         raise ValueError(f"threshold must be > 0 mm, got {threshold}")
     wt = Weights(weights, float(power) if weights == "idw" else None, threshold if weights == "idw" else None,
-                 (int(neighbors) if neighbors else 8) if weights == "knn" else None)
+                 (int(neighbors) if neighbors else 8) if weights == "knn" else None, chosen)
     z = _centred(v)
     if float(z @ z) == 0:
         raise InputError("all values are equal: Moran's I is undefined")

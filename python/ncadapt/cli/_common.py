@@ -272,3 +272,11 @@ def progress(console: Console | None = None):
 
     with bar:
         yield say
+
+
+@contextlib.contextmanager
+def progress_bar(description: str, total: int):
+    """:func:`progress` with a fixed description and total; yields ``advance(done)``."""
+    with progress() as say:
+        say(description, 0, total)
+        yield lambda done: say(description, done, total)

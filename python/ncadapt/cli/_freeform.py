@@ -7,13 +7,15 @@ from pathlib import Path
 import click
 
 from .. import constants
+from ..errors import InputError
 from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
 
 
 def _moran_options(f):
     opts = [
-        click.option("--weights", type=click.Choice(["idw", "knn"]), default="idw", show_default=True,
-                     help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours."),
+        click.option("--weights", type=click.Choice(["auto", "idw", "knn"]), default="auto", show_default=True,
+                     help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours; auto: 1/d^K over "
+                          "all pairs up to 3,000 points (or with --threshold), 8 nearest neighbours above."),
         click.option("--power", type=FiniteRange(min=1), default=1.0, show_default=True, help="K of idw weights."),
         click.option("--threshold", type=FiniteRange(min=0, min_open=True), default=None,
                      help="Distance band for idw weights, mm (default: all pairs)."),
@@ -47,7 +49,7 @@ def _print_analysis(a) -> None:
     from ..stats import p_text
 
     m, d = a.moran, a.deviation
-    summary(f"points: {a.n_points:,}")
+    summary(f"points: {a.n_points:,}; weights: {m.weights.describe()}")
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
     o, v = a.offset, a.verdict
     if m.p_permutation is None:
@@ -119,6 +121,12 @@ def _extent(ctx, param, value):
 @click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX",
               help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
                    "extrapolated into it (default: the measured area).")
+@click.option("--border", type=click.Choice(["hold", "cubic"]), default="hold", show_default=True,
+              help="The systematic error in the unmeasured border of the surface: the nearest measured value, or "
+                   "the paper's cubic extrapolation (bounded by the measured range widened by 25 %).")
+@click.option("--extrapolate-nominal", is_flag=True,
+              help="Accept a surface reaching beyond the measured points (--extent, or the corners of a scatter): "
+                   "there the nominal is extrapolated from them, not measured; the JSON and the report say how far.")
 @click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
               help="Refuse if any program displacement exceeds this, mm.")
 @click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
@@ -129,8 +137,8 @@ def _extent(ctx, param, value):
 @click.option("--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points.")
 @_moran_options
 @handle_errors
-def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, limit,
-               outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, units,
+def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, border,
+               extrapolate_nominal, limit, outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, units,
                json_path, report_path):
     """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
     surface and compensated points."""
@@ -156,7 +164,14 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         say("separating systematic and random error")
         d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, frame=frame, **kw)
         surf = pf.fit_height_surface(meas.nominal, extent=extent, frame=frame)
-        c = pf.compensate(surf, meas, d.systematic, frame=frame)
+        ext = pf.nominal_extrapolation(surf, meas.nominal, frame)
+        if ext.max_distance > 0 and not extrapolate_nominal:
+            raise InputError(
+                f"the compensated surface would reach {ext.max_distance:.3g} mm beyond the measured points "
+                f"({ext.area_fraction:.0%} of its grid, {'the --extent' if extent else 'the corners of the scatter'}): "
+                "there its nominal would be extrapolated from them, not measured; give --extrapolate-nominal to "
+                "accept that, or an --extent within the measured area", str(measurements))
+        c = pf.compensate(surf, meas, d.systematic, frame=frame, border=border)
         corr = None
         if program is not None:
             say(f"correcting {program}")
@@ -185,6 +200,10 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
             rows.append(",".join(f"{v:.6f}" for v in (*q, e, s, r, *cp)))
         atomic_write(points_out, ("\n".join(rows) + "\n").encode())
     payload = {"input": str(measurements), **a.as_dict(), **sysd}
+    if ext.max_distance > 0:
+        payload["extrapolation"] = ext.as_dict()
+        echo_err(f"warning: the nominal is extrapolated up to {ext.max_distance:.3g} mm beyond the measured points "
+                 f"over {ext.area_fraction:.0%} of the surface (--extrapolate-nominal)")
     if corr is not None:
         payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
     if json_path:
@@ -195,4 +214,5 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         write(report_path, rep.render(title=f"Freeform compensation: {measurements.name}", analysis=a, decomposition=d,
                                       xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation,
                                       files={k: str(v) for k, v in (("program", output), ("surface", surface_path),
-                                                                    ("points", points_out)) if v}))
+                                                                    ("points", points_out)) if v},
+                                      extrapolation=ext if ext.max_distance > 0 else None))

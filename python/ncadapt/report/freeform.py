@@ -37,16 +37,29 @@ def _hist(series):
     return figure_png(fig)
 
 
+def _strip(extrapolation, xy, names):
+    """The surface grid's nodes, the extrapolated ones in red, with the measured points."""
+    plt = pyplot()
+    e = extrapolation
+    U, V = np.meshgrid(e.u, e.v, indexing="ij")
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    ax.scatter(U[~e.outside], V[~e.outside], s=2, c="0.75", label="surface grid, measured area")
+    ax.scatter(U[e.outside], V[e.outside], s=2, c="tab:red", label="extrapolated nominal")
+    ax.scatter(xy[:, 0], xy[:, 1], s=6, c="k", label="measured points")
+    ax.set_xlabel(f"{names[0]}, mm")
+    ax.set_ylabel(f"{names[1]}, mm")
+    ax.set_aspect("equal")
+    ax.legend(fontsize=8, loc="upper right")
+    return figure_png(fig)
+
+
 def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None,
-           names=("x", "y")) -> str:
+           names=("x", "y"), extrapolation=None) -> str:
     """The report as HTML text. ``xy``: the points' (u, v), named ``names`` on the maps; ``after``:
     deviations of the re-machined part at the same points."""
     m = analysis.moran
     p_txt = p_text(m.p_value, 2)
-    w = m.weights
-    w_txt = (f"k nearest neighbours, k = {w.neighbors}" if w.kind == "knn" else
-             f"1/d^{w.power:g}, " + (f"pairs closer than {w.threshold:g} mm" if w.threshold else "all pairs")
-             if w.kind == "idw" else w.kind) + ", row-standardised"
+    w_txt = m.weights.describe() + ", row-standardised"
     v, o = analysis.verdict, analysis.offset
     o_txt = p_text(o.p_value, 2)
     verdict = (f"<p class='verdict {'yes' if v.systematic else 'no'}'>The deviations are "
@@ -80,6 +93,13 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
         sections.append(("After compensation", _maps(xy, [("before", deviation), ("after", after)],
                                                      "Deviation of the first part and of the re-machined part", names)
                          + _hist([("before", deviation), ("after", after)])))
+    if extrapolation is not None:
+        sections.append(("Extrapolated nominal", (
+            f"<p class='verdict no'>The compensated surface reaches up to <b>{extrapolation.max_distance:.3g} mm</b> "
+            f"beyond the measured points, over <b>{100 * extrapolation.area_fraction:.0f} %</b> of its grid. In that "
+            "strip its nominal is extrapolated from the measured points, not measured, and so is the systematic "
+            "error: check it against the CAD model before machining there.</p>")
+            + _strip(extrapolation, xy, names)))
     if files:
         sections.append(("Files", table([(k, v) for k, v in files.items()], ["", "file"])))
     return page(title, "ncadapt freeform compensation report", sections)

@@ -80,6 +80,41 @@ class ErrorModel:
         return (s.mean_curvature(x, y) - lo) / (hi - lo)
 
 
+@dataclass(frozen=True)
+class MachineError:
+    """A machine's own errors, in its axes — not the corrector's model of an error along the part's
+    normal. Geometric (ISO 230-1 terms, values of a worn mid-size mill):
+
+    - a positioning (scale) error of X, δx = ε_x (x − x_c): ``scale_x`` mm/mm (150 µm/m);
+    - a straightness error of X in Z, a sag δz = s ((x − x_c) / (L/2))²: ``sag`` mm at the ends;
+    - a roll of the table about X, δz = ρ (y − y_c): ``roll`` rad (0.3 mrad: 18 µm over 60 mm);
+
+    and a tool deflection away from the surface along its normal, δ = C (1 + R H), the ball's
+    engagement growing in concave regions (H the mean curvature, > 0 concave seen from the tool):
+    ``deflection`` C mm. x_c, y_c are the part's centre, L its length in x. On a sloped surface the
+    X error moves the surface by δx n_x along its normal, and the Z terms by δz n_z.
+    """
+
+    surface: Surface
+    scale_x: float = 150e-6
+    sag: float = 0.012
+    roll: float = 0.3e-3
+    deflection: float = 0.010
+    tool_radius: float = 4.0
+
+    def displacement(self, c: np.ndarray) -> np.ndarray:
+        """Where a tool position ``c`` (m, 3) really goes, minus where it was told to go."""
+        s = self.surface
+        xc, yc, half = (s.u[0] + s.u[-1]) / 2, (s.v[0] + s.v[-1]) / 2, (s.u[-1] - s.u[0]) / 2
+        x = np.clip(c[:, 0], s.u[0], s.u[-1])
+        y = np.clip(c[:, 1], s.v[0], s.v[-1])
+        d = np.zeros_like(c)
+        d[:, 0] = self.scale_x * (c[:, 0] - xc)
+        d[:, 2] = self.sag * ((c[:, 0] - xc) / half) ** 2 + self.roll * (c[:, 1] - yc)
+        d += (self.deflection * (1 + self.tool_radius * s.mean_curvature(x, y)))[:, None] * s.normal(x, y)
+        return d
+
+
 def random_error(n: int, amplitude: float, kind: str = "normal", seed: int = 0) -> np.ndarray:
     """Random error: ``normal`` (std = amplitude) or ``uniform`` (±amplitude)."""
     rng = np.random.default_rng(seed)
@@ -146,12 +181,15 @@ class ZMap:
                                        order=1, mode="nearest")
 
 
-def machine(program, surface: Surface, error: ErrorModel | None, tool_radius: float,
+def machine(program, surface: Surface, error: "ErrorModel | MachineError | None", tool_radius: float,
             cell: float = 0.25, step: float = 0.25) -> ZMap:
-    """Cut ``program`` (an :class:`ncadapt.nc.Program`) into a z-map of the part's area."""
+    """Cut ``program`` (an :class:`ncadapt.nc.Program`) into a z-map of the part's area, the tool
+    displaced by ``error``: an :class:`ErrorModel` along the normal, or a :class:`MachineError`."""
     tp = program.toolpath(max_segment=step, rapids=False)
     c = tp.points[np.isfinite(tp.points).all(axis=1)]
-    if error is not None:
+    if isinstance(error, MachineError):
+        c = c + error.displacement(c)
+    elif error is not None:
         # the machine's systematic error, along the part's normal where the tool works
         x = np.clip(c[:, 0], surface.u[0], surface.u[-1])
         y = np.clip(c[:, 1], surface.v[0], surface.v[-1])

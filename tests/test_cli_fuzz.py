@@ -14,8 +14,9 @@ command must keep its contract:
 - when the exit code is not 0, no output was created, changed or removed (outputs are sometimes
   made to exist beforehand, to see that a failure leaves them as they were).
 
-Budget: ``NCADAPT_CLI_FUZZ_EXAMPLES`` examples per target (default 100; a few slow targets get a
-fixed share of it, see ``scale``). The runs are derandomized, so the default run is reproducible.
+Budget: ``NCADAPT_CLI_FUZZ_EXAMPLES`` examples per target (default 100, about 3,500 cases in
+``make test``; ``make fuzz`` runs 300, about 10,500; a few slow targets get a fixed share of it,
+see ``scale``). The runs are derandomized, so the default run is reproducible.
 ``NCADAPT_CLI_FUZZ_TIMEOUT`` (seconds, default 30) fails a single call that hangs (a third of it,
 once a target has hung, so that shrinking a hang does not take many times that long).
 ``NCADAPT_CLI_FUZZ_COLLECT=FILE`` is a tool for triage: failures are appended to FILE as JSON
@@ -190,6 +191,11 @@ SEEDS: dict[str, bytes] = {
     "shaft_d20_l430.toml": _example("turning", "shaft_d20_l430.toml"),
     "shaft.toml": _shaft_coarse(),
     "probe.csv": _probe(),
+    # the same bore as a DMIS report of circle actuals (plane A first), one continued with $
+    "probe.dmo": b"DMISMN/'bore',05.0\nF(CA)=FEAT/CIRCLE,INNER,CART,0,0,55,0,0,1,40.0\n"
+                 b"FA(CA)=FEAT/CIRCLE,INNER,CART,0,0.002,55,0,0,1,39.748\n"
+                 b"FA(CM)=FEAT/CIRCLE,INNER,CART,0,0,30,0,0,1,$\n39.758\n"
+                 b"FA(CB)=FEAT/CIRCLE,INNER,CART,0.01,0,5,0,0,1,39.768\nENDFIL\n",
     "gauge.csv": b't,thickness,note\n0.00,1.52,"a, b"\n0.05,,\n0.10,1.51,\n0.15,nan,\n0.20,1.495,x\n'
                  b"0.25,1.503,\n0.30,1.498,\n0.35,1.501,\n",
     **_measurements(),
@@ -330,6 +336,11 @@ MUTATION_TARGETS = [
            ("shaft.toml", "lathe.ngc"), ("s.json",), "shaft.toml", scale=0.5),
     Target("turning-simulate-program", ("turning", "simulate", "shaft.toml", "lathe.ngc", "--json", "s.json"),
            ("shaft.toml", "lathe.ngc"), ("s.json",), "lathe.ngc", scale=0.5),
+    # the finished map of cell 1 read from the folder itself
+    Target("waffle-cells", ("waffle", "cells", "--thickness-dir", ".", "--cells", "1x2", "--target", "2", "--band",
+                            "1.9,2.1", "--json", "c.json"), ("thickness_r1c1.csv",), ("c.json",), "thickness_r1c1.csv"),
+    Target("bore-next-dmis", ("bore", "next", "--plan", "plan.json", "--measured", "probe.dmo", "--json", "n.json"),
+           ("plan.json", "probe.dmo"), ("n.json",), "probe.dmo", updates=("plan.json",)),
 ]
 
 _F, _I = "float", "int"
@@ -403,6 +414,11 @@ OPTION_TARGETS = [
     Target("turning-simulate", ("turning", "simulate", "shaft.toml", "lathe.ngc", "--json", "s.json"),
            ("shaft.toml", "lathe.ngc"), ("s.json",),
            options=(("--rho-sigma", _F), ("--stiffness-sigma", _F), ("--seed", _I)), scale=0.5),
+    Target("waffle-cells", ("waffle", "cells", "--thickness-dir", ".", "--cells", "1x2", "--json", "c.json"),
+           ("thickness_r1c1.csv",), ("c.json",), options=(("--target", _F), ("--band", "pair"))),
+    Target("bore-probe-program", ("bore", "probe-program", "--planes", "55,30,5", "-o", "p.ngc"), (), ("p.ngc",),
+           options=(("--diameter", _F), ("--points", _I), ("--feed", _F), ("--safe-z", _F)),
+           extras=((), ("--dialect", "fanuc"))),
 ]
 
 # options a target needs whatever else is drawn: a value from the extremes, or this valid one
@@ -416,7 +432,9 @@ _REQUIRED = {"bore-plan": {"--diameter": "40", "--t0": "0.5", "--allowance": "0.
              "probe-grid-n": {"--nx": "3", "--ny": "3", "--safe-z": "5", "--depth": "-2", "--feed": "100"},
              "probe-points": {"--n": "9", "--stylus-radius": "1", "--approach": "2", "--overtravel": "1",
                               "--feed": "100"},
-             "bore-simulate": {"--parts": "5"}}  # the default 1000 parts take seconds
+             "bore-simulate": {"--parts": "5"},
+             "waffle-cells": {"--target": "2", "--band": "1.9,2.1"},
+             "bore-probe-program": {"--diameter": "40"}}  # the default 1000 parts take seconds
 
 
 # ------------------------------------------------------------------------------------ strategies
@@ -521,6 +539,7 @@ OPTION_VALUES = {
     "int_small": st.sampled_from(SMALL_INTS),
     "parts": st.sampled_from(PARTS),
     "class": st.sampled_from(CLASSES),
+    "pair": st.lists(float_value, min_size=2, max_size=2).map(",".join) | st.sampled_from(["2", "2,1", ",", ""]),
     "shift": st.lists(float_value, min_size=3, max_size=3).map(",".join) | st.sampled_from(["0,0", "0,0,0,0", ",,", ""]),
     "extent": st.lists(float_value, min_size=4, max_size=4).map(",".join) | st.sampled_from(["0,0,0,0", "70,-10,40,0"]),
 }
