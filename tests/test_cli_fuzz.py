@@ -108,8 +108,9 @@ def _probe() -> bytes:
 
 
 def _height_maps() -> dict[str, bytes]:
-    """The plate's probe map (examples/nc/plate_probe.csv) as an OpenCNCPilot .hmap, a Candle .map
-    and a grbl console log (status reports with WCO, a fast and a slow touch per point)."""
+    """The plate's probe map (examples/nc/plate_probe.csv) as an OpenCNCPilot .hmap, a Candle .map,
+    a grbl console log (status reports with WCO, a fast and a slow touch per point) and a Fanuc
+    DPRNT log."""
     rows = [r.split(",") for r in _example("nc", "plate_probe.csv").decode().split()[1:]]
     pts = {(float(x), float(y)): float(dz) for x, y, dz in rows}
     xs, ys = sorted({x for x, _ in pts}), sorted({y for _, y in pts})
@@ -131,8 +132,9 @@ def _height_maps() -> dict[str, bytes]:
         for x in (gx if j % 2 == 0 else gx[::-1]):
             for dz in (-0.05, 0.0):
                 log += [">>> G38.2 Z-2 F100", f"[PRB:{x - 100:.3f},{y - 50:.3f},{z(x, y) - 20 + dz:.3f}:1]", "ok"]
+    fanuc = [f"X{x:10.4f} Y{y:10.4f} Z{z(x, y):10.4f}" for y in gy for x in gx]
     return {"plate.hmap": hmap.encode(), "plate.map": ("\r\n".join(candle) + "\r\n").encode(),
-            "plate_grbl.log": ("\n".join(log) + "\n").encode()}
+            "plate_grbl.log": ("\n".join(log) + "\n").encode(), "plate_fanuc.txt": ("\n".join(fanuc) + "\n").encode()}
 
 
 def _plate_step() -> bytes:
@@ -271,7 +273,7 @@ MUTATION_TARGETS = [
     Target("correct-field", ("correct", "plate.ngc", "--field", "plate_probe.csv", "-o", "o.ngc", "--json", "o.json"),
            ("plate.ngc", "plate_probe.csv"), ("o.ngc", "o.json"), "plate_probe.csv", extras=_CORRECT_EXTRAS),
     Target("correct-height-map", ("correct", "plate.ngc", "--field", "@", "-o", "o.ngc", "--json", "o.json"),
-           ("plate.ngc", "@"), ("o.ngc", "o.json"), "@", seeds=("plate.hmap", "plate.map", "plate_grbl.log"),
+           ("plate.ngc", "@"), ("o.ngc", "o.json"), "@", seeds=("plate.hmap", "plate.map", "plate_grbl.log", "plate_fanuc.txt"),
            extras=_CORRECT_EXTRAS),
     Target("probe-grid-program", ("probe", "grid", "--program", "@", "--margin", "1", "--step", "5", "--safe-z", "5",
                                   "--depth", "-2", "--feed", "100", "-o", "g.ngc", "--json", "g.json"), ("@",),

@@ -561,3 +561,24 @@ def test_companion_inputs_name_the_plans_log(tmp_path):
     other = tmp_path / "m.csv"
     other.write_text("x,y,z,i,j,k,dev\n")
     assert probing.companion_inputs(other) == {}
+
+
+def test_fanuc_dprnt_logs(tmp_path):
+    """DPRNT[X#5061[54]*Y#5062[54]*Z#5063[54]] prints X, the value, a space, …: as a field and
+    paired with a plan."""
+    rows = [f"X{x:10.4f} Y{y:10.4f} Z{plane(x, y):10.4f}" for y in (0.0, 10.0) for x in (0.0, 10.0, 20.0)]
+    log = tmp_path / "fanuc.txt"
+    log.write_text("\n".join(rows) + "\n")
+    f = fields.read(log)
+    assert isinstance(f, fields.GridField)
+    assert f(np.array([[15.0, 5.0, 0.0]]))[0, 2] == pytest.approx(plane(15.0, 5.0), abs=1e-4)
+    log.write_text("\n".join(rows[:2] + ["X1.0 Y2.0"] + rows[3:]) + "\n")
+    with pytest.raises(InputError, match="expected a line 'X<x> Y<y> Z<z>'") as e:
+        fields.read(log)
+    assert e.value.line == 3
+    plan = tmp_path / "plan.csv"
+    nominal = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 1.0, 2.0]])
+    plan.write_text(probing.plan_text(nominal, np.tile([0, 0, 1.0], (3, 1)), stylus_radius=0.5, log="fanuc.txt"))
+    e_known = np.array([0.01, -0.02, 0.003])
+    log.write_text("".join(f"X{q[0]:10.4f} Y{q[1]:10.4f} Z{q[2] + 0.5 + d:10.4f}\n" for q, d in zip(nominal, e_known)))
+    np.testing.assert_allclose(measure.read(plan).deviation, e_known, atol=1e-9)

@@ -497,7 +497,8 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
 
     ``.probe`` → bCNC; ``.csv`` with ``dx`` → scattered, with ``dz`` only → grid; ``.hmap`` →
     OpenCNCPilot, ``.map`` → Candle; ``.txt``/``.log`` or a file of numbers → grbl ``[PRB:…]``
-    reports when it holds any, else LinuxCNC probe log (:mod:`ncadapt.heightmaps`).
+    reports when it holds any, Fanuc ``DPRNT`` lines when it starts ``X…``, else LinuxCNC probe
+    log (:mod:`ncadapt.heightmaps`).
     """
     path = Path(path)
     _check_outside(outside)
@@ -517,8 +518,11 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
     if ext in (".txt", ".log", ".xyz", ""):
         from . import heightmaps
 
-        if heightmaps.is_grbl_log(read_text(path)):  # grbl [PRB:…] reports (a sender's console log)
+        text = read_text(path)
+        if heightmaps.is_grbl_log(text):  # grbl [PRB:…] reports (a sender's console log)
             return heightmaps.read_grbl_log(path, method, outside)
+        if heightmaps.is_worded_log(text):  # Fanuc DPRNT lines X… Y… Z…
+            return heightmaps.read_worded_log(path, method, outside)
         return read_probe_log(path, method, outside)
     raise InputError(
         f"unknown field format {ext!r}; expected .csv (x,y,dz or x,y,z,dx,dy,dz), .probe (bCNC), .hmap "

@@ -39,7 +39,8 @@ from ._io import read_text
 from .constants import COORD_MAX
 from .errors import InputError, cut
 
-__all__ = ["read_grbl_log", "read_hmap", "read_candle_map", "is_grbl_log", "prb_reports"]
+__all__ = ["read_grbl_log", "read_hmap", "read_candle_map", "read_worded_log", "is_grbl_log", "is_worded_log",
+           "prb_reports", "worded_points"]
 
 #: Most nodes of a height map read (a 1000 x 1000 map is far beyond any autolevel grid).
 MAX_NODES = 1_000_000
@@ -70,6 +71,43 @@ def _numbers(text: str, src: str, line: int, col: int, what: str) -> list[float]
         out.append(_num(w, src, line, pos, what))
         pos += len(w) + 1
     return out
+
+
+_WORDED = re.compile(r"^\s*X\s*(\S+?)\s*Y\s*(\S+?)\s*Z\s*(\S+?)\s*$")
+
+
+def is_worded_log(text: str) -> bool:
+    """Whether a log's first line that is not blank is ``X… Y… Z…`` (Fanuc ``DPRNT`` output)."""
+    first = next((ln for ln in text.splitlines() if ln.strip()), "")
+    return first.lstrip().upper().startswith("X")
+
+
+def worded_points(path) -> tuple[np.ndarray, np.ndarray]:
+    """The ``X… Y… Z…`` lines of a Fanuc ``DPRNT`` log (as the ``fanuc`` probing programs write
+    them), in order: (m, 3) mm and their line numbers."""
+    path = Path(path)
+    src = str(path)
+    out, lines = [], []
+    for n, line in enumerate(read_text(path).splitlines(), 1):
+        if not line.strip():
+            continue
+        m = _WORDED.match(line.upper())
+        if not m:
+            raise InputError("expected a line 'X<x> Y<y> Z<z>' (Fanuc DPRNT output)", src, n, 1)
+        out.append([_num(m.group(k), src, n, m.start(k) + 1, "probe position") for k in (1, 2, 3)])
+        lines.append(n)
+    if not out:
+        raise InputError("no probe points", src)
+    return np.asarray(out), np.asarray(lines, dtype=np.int64)
+
+
+def read_worded_log(path, method: str = "linear", outside: str = "error"):
+    """Read a Fanuc ``DPRNT`` probe log (``X… Y… Z…`` lines) as a field, Z displacement = probed Z."""
+    from . import fields
+
+    a, lines = worded_points(path)
+    return fields.from_values(np.round(a[:, 0], 6), np.round(a[:, 1], 6), a[:, 2], method=method, outside=outside,
+                              source=str(path), linenos=lines)
 
 
 def is_grbl_log(text: str) -> bool:

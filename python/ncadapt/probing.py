@@ -448,9 +448,10 @@ def read_plan(path) -> Plan:
 
 def read_log(path) -> tuple[np.ndarray, np.ndarray]:
     """The probed positions of a log in order: (m, 3) mm and their lines. A LinuxCNC PROBEOPEN
-    (or LOG) file — lines of numbers, x y z first — or grbl ``[PRB:…]`` reports."""
+    (or LOG) file or a Sinumerik WRITE file — lines of numbers, x y z first —, grbl ``[PRB:…]``
+    reports, or Fanuc DPRNT lines ``X… Y… Z…``."""
     from ._io import read_text
-    from .heightmaps import _num, is_grbl_log, prb_reports
+    from .heightmaps import _num, is_grbl_log, is_worded_log, prb_reports, worded_points
 
     path = Path(path)
     src = str(path)
@@ -458,6 +459,8 @@ def read_log(path) -> tuple[np.ndarray, np.ndarray]:
     if is_grbl_log(text):
         reps = prb_reports(path)
         return np.asarray([p for _, p in reps]).reshape(-1, 3), np.asarray([n for n, _ in reps], dtype=np.int64)
+    if is_worded_log(text):
+        return worded_points(path)
     out, lns = [], []
     for n, raw in enumerate(text.splitlines(), 1):
         words = raw.split()
