@@ -45,6 +45,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, Phase, given, note, settings
@@ -106,6 +107,61 @@ def _probe() -> bytes:
     return ("\n".join(rows) + "\n").encode()
 
 
+def _height_maps() -> dict[str, bytes]:
+    """The plate's probe map (examples/nc/plate_probe.csv) as an OpenCNCPilot .hmap, a Candle .map,
+    a grbl console log (status reports with WCO, a fast and a slow touch per point) and a Fanuc
+    DPRNT log."""
+    rows = [r.split(",") for r in _example("nc", "plate_probe.csv").decode().split()[1:]]
+    pts = {(float(x), float(y)): float(dz) for x, y, dz in rows}
+    xs, ys = sorted({x for x, _ in pts}), sorted({y for _, y in pts})
+    hmap = (f'<?xml version="1.0" encoding="utf-8"?>\n<heightmap MinX="{xs[0]}" MinY="{ys[0]}" MaxX="{xs[-1]}" '
+            f'MaxY="{ys[-1]}" SizeX="{len(xs)}" SizeY="{len(ys)}">\n')
+    uniform = np.allclose(np.diff(xs), xs[1] - xs[0]) and np.allclose(np.diff(ys), ys[1] - ys[0])
+    gx = np.linspace(xs[0], xs[-1], len(xs)) if not uniform else xs
+    gy = np.linspace(ys[0], ys[-1], len(ys)) if not uniform else ys
+    from ncadapt import fields as _f
+
+    field = _f.read(EXAMPLES / "nc" / "plate_probe.csv")
+    z = lambda x, y: float(field(np.array([[x, y, 0.0]]))[0, 2])  # noqa: E731
+    hmap += "".join(f'  <point X="{i}" Y="{j}">{z(x, y):.4f}</point>\n' for i, x in enumerate(gx) for j, y in enumerate(gy))
+    hmap += "</heightmap>\n"
+    candle = [f"{gx[0]};{gy[0]};{gx[-1] - gx[0]};{gy[-1] - gy[0]}", f"{len(gx)};{len(gy)};-1;1", "0;10;10"]
+    candle += [";".join(f"{z(x, y):.4f}" for x in gx) for y in gy]
+    log = ["<Idle|MPos:-100.000,-50.000,-15.000|FS:0,0|WCO:-100.000,-50.000,-20.000>"]
+    for j, y in enumerate(gy):
+        for x in (gx if j % 2 == 0 else gx[::-1]):
+            for dz in (-0.05, 0.0):
+                log += [">>> G38.2 Z-2 F100", f"[PRB:{x - 100:.3f},{y - 50:.3f},{z(x, y) - 20 + dz:.3f}:1]", "ok"]
+    fanuc = [f"X{x:10.4f} Y{y:10.4f} Z{z(x, y):10.4f}" for y in gy for x in gx]
+    return {"plate.hmap": hmap.encode(), "plate.map": ("\r\n".join(candle) + "\r\n").encode(),
+            "plate_grbl.log": ("\n".join(log) + "\n").encode(), "plate_fanuc.txt": ("\n".join(fanuc) + "\n").encode()}
+
+
+def _plate_step() -> bytes:
+    """A STEP file of one planar face, z = 5 over [0, 50] x [0, 30], written by OpenCASCADE."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+
+    face = BRepBuilderAPI_MakeFace(gp_Pln(gp_Pnt(0, 0, 5), gp_Dir(0, 0, 1)), 0.0, 50.0, 0.0, 30.0).Face()
+    with tempfile.TemporaryDirectory() as d:
+        w = STEPControl_Writer()
+        w.Transfer(face, STEPControl_AsIs)
+        w.Write(str(Path(d) / "f.step"))
+        return (Path(d) / "f.step").read_bytes()
+
+
+def _probe_log() -> bytes:
+    """LinuxCNC's log of the plan's points: ball centres 1.5 mm above, with a smooth deviation."""
+    from ncadapt import probing
+
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "plan.csv").write_bytes(seed("plan.csv"))
+        plan = probing.read_plan(Path(d) / "plan.csv")
+    c = plan.nominal + (1.5 + 0.01 * np.sin(plan.nominal[:, 0] / 7))[:, None] * plan.normal
+    return "".join(" ".join(f"{v:f}" for v in (*q, 0, 0, 0, 0, 0, 0)) + "\n" for q in c).encode()
+
+
 def _shaft_coarse() -> bytes:
     """The shaft example planned every 5 mm instead of 1 (a fifth of the stations: faster)."""
     text = _example("turning", "shaft_d20_l430.toml")
@@ -145,12 +201,19 @@ SEEDS: dict[str, bytes] = {
     "gauge.csv": b't,thickness,note\n0.00,1.52,"a, b"\n0.05,,\n0.10,1.51,\n0.15,nan,\n0.20,1.495,x\n'
                  b"0.25,1.503,\n0.30,1.498,\n0.35,1.501,\n",
     **_measurements(),
+    **_height_maps(),
+    "points.csv": b"x,y,z\n10,10,5\n20,10,5\n30,20,5\n",
 }
 
 # seeds written by the command itself, made on first use
 _LAZY = {
     "plan.json": lambda: _cli_output(["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
                                       "--delta-a", "0.03", "--delta-b", "0.02", "--json", "plan.json"], "plan.json", {}),
+    "plate.step": _plate_step,
+    "plan.csv": lambda: _cli_output(["probe", "points", "--nominal", "plate.step", "--n", "12", "--stylus-radius",
+                                     "1.5", "--approach", "3", "--overtravel", "1", "--feed", "100", "-o", "i.ngc",
+                                     "--plan", "plan.csv"], "plan.csv", {"plate.step": seed("plate.step")}),
+    "probe-log.txt": _probe_log,
     "lathe.ngc": lambda: _cli_output(["turning", "plan", "shaft.toml", "--mode", "path", "-o", "lathe.ngc"],
                                      "lathe.ngc", {"shaft.toml": SEEDS["shaft.toml"]}),
 }
@@ -209,6 +272,25 @@ MUTATION_TARGETS = [
            extras=_CORRECT_EXTRAS),
     Target("correct-field", ("correct", "plate.ngc", "--field", "plate_probe.csv", "-o", "o.ngc", "--json", "o.json"),
            ("plate.ngc", "plate_probe.csv"), ("o.ngc", "o.json"), "plate_probe.csv", extras=_CORRECT_EXTRAS),
+    Target("correct-height-map", ("correct", "plate.ngc", "--field", "@", "-o", "o.ngc", "--json", "o.json"),
+           ("plate.ngc", "@"), ("o.ngc", "o.json"), "@", seeds=("plate.hmap", "plate.map", "plate_grbl.log", "plate_fanuc.txt"),
+           extras=_CORRECT_EXTRAS),
+    Target("probe-grid-program", ("probe", "grid", "--program", "@", "--margin", "1", "--step", "5", "--safe-z", "5",
+                                  "--depth", "-2", "--feed", "100", "-o", "g.ngc", "--json", "g.json"), ("@",),
+           ("g.ngc", "g.json"), "@", seeds=("plate.ngc", "pocket1_finish.ngc"),
+           extras=((), ("--dialect", "grbl"), ("--dialect", "fanuc", "--fast-feed", "300"), ("--dialect", "sinumerik"))),
+    Target("probe-points-step", ("probe", "points", "--nominal", "plate.step", "--n", "9", "--stylus-radius", "1",
+                                 "--approach", "2", "--overtravel", "1", "--feed", "100", "-o", "p.ngc", "--plan",
+                                 "p.csv", "--json", "p.json"), ("plate.step",), ("p.ngc", "p.csv", "p.json"),
+           "plate.step", extras=((), ("--adaptive",), ("--dialect", "grbl")), scale=0.2),
+    Target("probe-points-file", ("probe", "points", "--nominal", "plate.step", "--points", "points.csv",
+                                 "--stylus-radius", "1", "--approach", "2", "--overtravel", "1", "--feed", "100", "-o",
+                                 "p.ngc", "--plan", "p.csv"), ("plate.step", "points.csv"), ("p.ngc", "p.csv"),
+           "points.csv", extras=((), ("--dialect", "fanuc"))),
+    Target("analyze-plan", ("analyze", "plan.csv", "--json", "a.json"), ("plan.csv", "probe-log.txt"), ("a.json",),
+           "plan.csv"),
+    Target("analyze-plan-log", ("analyze", "plan.csv", "--json", "a.json"), ("plan.csv", "probe-log.txt"), ("a.json",),
+           "probe-log.txt"),
     Target("inspect", ("inspect", "@", "--json", "i.json"), ("@",), ("i.json",), "@", seeds=_PROGRAMS),
     Target("analyze", ("analyze", "@", "--json", "a.json"), ("@",), ("a.json",), "@", seeds=_MEASUREMENTS,
            extras=((), ("--weights", "knn"), ("--threshold", "15"), ("--probe-radius", "0.5"))),
@@ -270,6 +352,18 @@ OPTION_TARGETS = [
            ("plate.ngc", "plate_probe.csv"), ("o.ngc", "o.json"),
            options=(("--max-segment", _F), ("--chord-tol", _F), ("--limit", _F), ("--clearance", _F)),
            extras=_CORRECT_EXTRAS),
+    Target("probe-grid", ("probe", "grid", "--extent", "0,40,0,30", "-o", "g.ngc", "--json", "g.json"), (),
+           ("g.ngc", "g.json"),
+           options=(("--step", _F), ("--safe-z", _F), ("--depth", _F), ("--feed", _F), ("--fast-feed", _F),
+                    ("--extent", "extent")),
+           extras=((), ("--dialect", "grbl"), ("--dialect", "fanuc"), ("--dialect", "sinumerik"))),
+    Target("probe-grid-n", ("probe", "grid", "--program", "plate.ngc", "-o", "g.ngc"), ("plate.ngc",), ("g.ngc",),
+           options=(("--nx", "int_small"), ("--ny", "int_small"), ("--margin", _F))),
+    Target("probe-points", ("probe", "points", "--nominal", "plate.step", "-o", "p.ngc", "--plan", "p.csv"),
+           ("plate.step",), ("p.ngc", "p.csv"),
+           options=(("--n", "int_small"), ("--stylus-radius", _F), ("--approach", _F), ("--overtravel", _F),
+                    ("--feed", _F), ("--safe-z", _F), ("--edge-margin", _F), ("--face", "int_small")),
+           extras=((), ("--adaptive",)), scale=0.3),
     Target("correct-shift", ("correct", "plate.ngc", "-o", "o.ngc", "--json", "o.json"), ("plate.ngc",),
            ("o.ngc", "o.json"), options=(("--shift", "shift"), ("--limit", _F), ("--max-segment", _F)),
            extras=((), ("--rapids",))),
@@ -336,6 +430,10 @@ _REQUIRED = {"bore-plan": {"--diameter": "40", "--t0": "0.5", "--allowance": "0.
              "waffle-correct": {"--tool-radius": "5", "--diameter": "2000", "--target": "2"},
              "skin-loop": {"--target": "1.5", "--depth": "0.2"},
              "correct-shift": {"--shift": "0,0,0.01"},
+             "probe-grid": {"--step": "10", "--safe-z": "5", "--depth": "-2", "--feed": "100"},
+             "probe-grid-n": {"--nx": "3", "--ny": "3", "--safe-z": "5", "--depth": "-2", "--feed": "100"},
+             "probe-points": {"--n": "9", "--stylus-radius": "1", "--approach": "2", "--overtravel": "1",
+                              "--feed": "100"},
              "bore-simulate": {"--parts": "5"},
              "waffle-cells": {"--target": "2", "--band": "1.9,2.1"},
              "bore-probe-program": {"--diameter": "40"}}  # the default 1000 parts take seconds

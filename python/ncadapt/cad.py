@@ -127,3 +127,191 @@ def read_surface_points(path: str | os.PathLike, u, v) -> np.ndarray:
         q = s.Value(float(a), float(b))
         out.append((q.X(), q.Y(), q.Z()))
     return np.array(out)
+
+
+# ------------------------------------------------------------------------ reading a STEP face
+#: Longest time OpenCASCADE may take to read a CAD file, s.
+READ_TIMEOUT = 300.0
+
+
+def _read_child(path: str, kind: str, out: str, msg: str) -> None:
+    """In a child process: read the file with OpenCASCADE and write its shape as a BRep file (or
+    a message); a crash of the translator on a malformed file ends only the child."""
+    from OCP.BRepTools import BRepTools
+    from OCP.IFSelect import IFSelect_RetDone
+
+    if kind == "step":
+        from OCP.STEPControl import STEPControl_Reader as Reader
+    else:
+        from OCP.IGESControl import IGESControl_Reader as Reader
+    try:
+        with _quiet():
+            r = Reader()
+            if r.ReadFile(path) != IFSelect_RetDone:
+                Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE could not read it)")
+                return
+            r.TransferRoots()
+            shape = r.OneShape()
+            if shape is None or shape.IsNull() or not faces(shape):
+                Path(msg).write_text("no face in the file")
+                return
+            BRepTools.Write_s(shape, out)
+    except Exception as e:  # noqa: BLE001 - OpenCASCADE's own failures: the file is not readable
+        Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE: {type(e).__name__})")
+
+
+def read_shape(path: str | os.PathLike):
+    """The shape of a STEP (``.step``/``.stp``) or IGES file, read by OpenCASCADE; an unreadable
+    file or one without a face is an :class:`InputError` naming it.
+
+    The translator runs in a child process (forked): on some malformed files it crashes the
+    process, which then ends the child only and becomes an input error here. The shape comes back
+    as an OpenCASCADE BRep file, which is read back exactly."""
+    import multiprocessing
+    import tempfile
+
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.TopoDS import TopoDS_Shape
+
+    p = Path(path)
+    kind = FORMATS.get(p.suffix.lower())
+    if kind is None:
+        raise InputError(f"unknown CAD format {p.suffix!r}; use .step, .stp, .igs or .iges", str(p))
+    try:
+        with open(p, "rb"):
+            pass
+    except OSError as e:
+        raise InputError(f"cannot read: {e.strerror}", str(p)) from None
+    with tempfile.TemporaryDirectory(prefix="ncadapt-cad-") as d:
+        out, msg = Path(d) / "shape.brep", Path(d) / "message.txt"
+        proc = multiprocessing.get_context("fork").Process(target=_read_child, args=(str(p), kind, str(out), str(msg)))
+        proc.start()
+        proc.join(READ_TIMEOUT)
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
+            raise InputError(f"OpenCASCADE did not finish reading the file in {READ_TIMEOUT:g} s", str(p))
+        if proc.exitcode != 0:
+            raise InputError(f"not a readable {kind.upper()} file (OpenCASCADE's translator crashed on it)", str(p))
+        if msg.exists():
+            raise InputError(msg.read_text(), str(p))
+        shape = TopoDS_Shape()
+        if not out.exists() or not BRepTools.Read_s(shape, str(out), BRep_Builder()):
+            raise InputError(f"not a readable {kind.upper()} file (no shape came back from OpenCASCADE)", str(p))
+    return shape
+
+
+def faces(shape) -> list:
+    """The faces of a shape, in OpenCASCADE's exploration order (face 1 is the first)."""
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out = []
+    ex = TopExp_Explorer(shape, TopAbs_FACE)
+    while ex.More():
+        out.append(TopoDS.Face(ex.Current()))
+        ex.Next()
+    return out
+
+
+def face_uv_bounds(face) -> tuple[float, float, float, float]:
+    """(umin, umax, vmin, vmax) of a face's parameters."""
+    from OCP.BRepTools import BRepTools
+
+    return tuple(float(v) for v in BRepTools.UVBounds_s(face))
+
+
+def face_evaluate(face, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (n, 3), unit normals (n, 3) pointing out of the face's material side (the surface
+    normal, reversed for a reversed face) and the largest absolute principal curvature (n,), 1/mm,
+    of a face at parameters (u, v)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.GeomLProp import GeomLProp_SLProps
+    from OCP.TopAbs import TopAbs_REVERSED
+
+    s = BRep_Tool.Surface_s(face)
+    sign = -1.0 if face.Orientation() == TopAbs_REVERSED else 1.0
+    uu, vv = np.ravel(u).astype(float), np.ravel(v).astype(float)
+    pts = np.empty((len(uu), 3))
+    nrm = np.full((len(uu), 3), np.nan)
+    kap = np.zeros(len(uu))
+    props = GeomLProp_SLProps(s, 2, 1e-9)
+    for k, (a, b) in enumerate(zip(uu, vv)):
+        props.SetParameters(float(a), float(b))
+        q = props.Value()
+        pts[k] = (q.X(), q.Y(), q.Z())
+        if props.IsNormalDefined():
+            d = props.Normal()
+            nrm[k] = (sign * d.X(), sign * d.Y(), sign * d.Z())
+        if props.IsCurvatureDefined():
+            kap[k] = max(abs(props.MaxCurvature()), abs(props.MinCurvature()))
+    return pts, nrm, kap
+
+
+def face_inside(face, u, v, tol: float = 1e-7) -> np.ndarray:
+    """Whether each (u, v) lies strictly inside the face (its trimming wires; on an edge: no)."""
+    from OCP.BRepClass import BRepClass_FaceClassifier
+    from OCP.gp import gp_Pnt2d
+    from OCP.TopAbs import TopAbs_IN
+
+    out = np.zeros(np.size(u), dtype=bool)
+    for k, (a, b) in enumerate(zip(np.ravel(u), np.ravel(v))):
+        out[k] = BRepClass_FaceClassifier(face, gp_Pnt2d(float(a), float(b)), tol).State() == TopAbs_IN
+    return out
+
+
+def face_edge_points(face, per_edge: int = 2000) -> np.ndarray:
+    """Points (m, 3) along every edge of a face, ``per_edge`` on each, evenly in the parameter."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out = []
+    ex = TopExp_Explorer(face, TopAbs_EDGE)
+    while ex.More():
+        e = TopoDS.Edge(ex.Current())
+        ex.Next()
+        if BRep_Tool.Degenerated_s(e):
+            continue
+        c = BRepAdaptor_Curve(e)
+        for t in np.linspace(c.FirstParameter(), c.LastParameter(), per_edge):
+            q = c.Value(float(t))
+            out.append((q.X(), q.Y(), q.Z()))
+    return np.asarray(out).reshape(-1, 3)
+
+
+def face_project(face, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nearest points (n, 3) of a face's surface to ``points``, the face's outward normals
+    there (n, 3) and the distances (n,), mm."""
+    from OCP.BRep import BRep_Tool
+    from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
+    from OCP.gp import gp_Pnt
+
+    s = BRep_Tool.Surface_s(face)
+    q = np.asarray(points, float).reshape(-1, 3)
+    uv = np.zeros((len(q), 2))
+    dist = np.full(len(q), np.inf)
+    for k, (x, y, z) in enumerate(q):
+        proj = GeomAPI_ProjectPointOnSurf(gp_Pnt(float(x), float(y), float(z)), s)
+        if proj.NbPoints() > 0:
+            a, b = proj.LowerDistanceParameters()
+            uv[k] = (a, b)
+            dist[k] = proj.LowerDistance()
+    p, n, _ = face_evaluate(face, uv[:, 0], uv[:, 1])
+    inside = face_inside(face, uv[:, 0], uv[:, 1])
+    dist[~inside] = np.inf
+    return p, n, dist
+
+
+def face_top(face) -> float:
+    """An upper bound of a face's Z, mm (OpenCASCADE's bounding box, which may be a little above)."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    BRepBndLib.Add_s(face, box)
+    return float(box.CornerMax().Z())

@@ -495,8 +495,10 @@ def read_probe_log(path, method: str = "linear", outside: str = "error") -> Fiel
 def read(path, method: str = "linear", outside: str = "error") -> Field:
     """Read a field, choosing the reader by extension and header.
 
-    ``.probe`` → bCNC; ``.csv`` with ``dx`` → scattered, with ``dz`` only → grid; ``.txt``/``.log``
-    or a file of numbers → LinuxCNC probe log.
+    ``.probe`` → bCNC; ``.csv`` with ``dx`` → scattered, with ``dz`` only → grid; ``.hmap`` →
+    OpenCNCPilot, ``.map`` → Candle; ``.txt``/``.log`` or a file of numbers → grbl ``[PRB:…]``
+    reports when it holds any, Fanuc ``DPRNT`` lines when it starts ``X…``, else LinuxCNC probe
+    log (:mod:`ncadapt.heightmaps`).
     """
     path = Path(path)
     _check_outside(outside)
@@ -509,9 +511,20 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
         if "dx" in names:
             return read_scattered_csv(path, outside)
         return read_grid_csv(path, method, outside)
+    if ext in (".hmap", ".map"):  # OpenCNCPilot, Candle (ncadapt.heightmaps)
+        from . import heightmaps
+
+        return (heightmaps.read_hmap if ext == ".hmap" else heightmaps.read_candle_map)(path, method, outside)
     if ext in (".txt", ".log", ".xyz", ""):
+        from . import heightmaps
+
+        text = read_text(path)
+        if heightmaps.is_grbl_log(text):  # grbl [PRB:…] reports (a sender's console log)
+            return heightmaps.read_grbl_log(path, method, outside)
+        if heightmaps.is_worded_log(text):  # Fanuc DPRNT lines X… Y… Z…
+            return heightmaps.read_worded_log(path, method, outside)
         return read_probe_log(path, method, outside)
     raise InputError(
-        f"unknown field format {ext!r}; expected .csv (x,y,dz or x,y,z,dx,dy,dz), .probe (bCNC) "
-        "or a LinuxCNC probe log (.txt)", str(path))
+        f"unknown field format {ext!r}; expected .csv (x,y,dz or x,y,z,dx,dy,dz), .probe (bCNC), .hmap "
+        "(OpenCNCPilot), .map (Candle), or a LinuxCNC probe log or grbl [PRB:…] log (.txt, .log)", str(path))
 

@@ -15,6 +15,7 @@ from ._correct import correct
 from ._demo import demo
 from ._freeform import analyze, compensate
 from ._inspect import inspect
+from ._probe import probe
 from ._skin import skin
 from ._turning import turning
 from ._waffle import waffle
@@ -61,3 +62,4 @@ main.add_command(bore)
 main.add_command(skin)
 main.add_command(waffle)
 main.add_command(turning)
+main.add_command(probe)

@@ -297,7 +297,8 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
 def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
     """Read measurements, choosing the reader from the file's contents. ``units`` (mm, inch …):
     the length unit of a file that does not declare one (CSV, XYZIJK; DMIS and QIF without a
-    units statement); a file that declares one must agree. Results are in mm."""
+    units statement); a file that declares one must agree. Results are in mm. An ncadapt probe plan
+    (:func:`ncadapt.probing.plan_text`) is read with the probe log it names."""
     if units is not None and units not in UNITS_MM:
         raise ValueError(f"units must be one of {', '.join(UNITS_MM)}, got {units!r}")
     p = Path(path)
@@ -305,6 +306,12 @@ def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measureme
         raise InputError("no such file", str(p))
     data = p.read_bytes()
     head = data[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
+    from ..probing import is_plan, read_log_with_plan
+
+    if is_plan(head):  # an ncadapt probe plan: its nominal points with the probe log it names
+        if units not in (None, "mm"):
+            raise InputError(f"a probe plan and its log are in mm; --units {units} disagrees", str(p), 1)
+        return read_log_with_plan(p, probe_radius=probe_radius)
     if head.startswith("<"):
         return read_qif(p, probe_radius, units)
     # DMIS: a point feature anywhere (a long header may come first), or a DMIS header statement
