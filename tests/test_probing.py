@@ -456,6 +456,13 @@ def test_plan_pairs_with_the_log(tmp_path):
     assert m.ids[0] == "P1"
     r = run(["analyze", plan, "--json", tmp_path / "a.json"])
     assert r.exit_code == 0, r.output
+    # the log is an input of analyze and compensate: no output may replace it
+    log = (tmp_path / "probe-log.txt").read_bytes()
+    for args in (["analyze", plan, "--json", tmp_path / "probe-log.txt"],
+                 ["compensate", plan, "--points-out", tmp_path / "probe-log.txt"]):
+        r = run(args)
+        assert r.exit_code == 2 and "probe log" in r.output, r.output
+        assert (tmp_path / "probe-log.txt").read_bytes() == log
     # a log that stopped early (a probe did not touch) is refused, naming the point
     (tmp_path / "probe-log.txt").write_text("".join(" ".join(f"{v:f}" for v in q) + "\n" for q in c[:7]))
     with pytest.raises(InputError, match=r"the log has 7 probed point\(s\), the plan 20: the probing stopped before "

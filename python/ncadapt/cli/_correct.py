@@ -19,7 +19,8 @@ def _shift(ctx, param, value):
 @click.command()
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--field", "field_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Correction field: grid CSV (x,y,dz), scattered CSV (x,y,z,dx,dy,dz), bCNC .probe or LinuxCNC probe log.")
+              help="Correction field: grid CSV (x,y,dz), scattered CSV (x,y,z,dx,dy,dz), bCNC .probe, LinuxCNC "
+                   "probe log, grbl [PRB:] log, OpenCNCPilot .hmap, Candle .map or a Fanuc DPRNT log.")
 @click.option("--shift", callback=_shift, metavar="DX,DY,DZ", help="A constant displacement in mm instead of a field.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Corrected program to write.")
 @click.option("--max-segment", type=FiniteRange(*constants.MAX_SEGMENT_RANGE), default=constants.MAX_SEGMENT, show_default=True, help="Longest corrected piece, mm.")

@@ -78,7 +78,10 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     from .. import measure
     from ..processes import freeform as pf
 
-    check_outputs({"measurements": measurements}, {"--json": json_path, "--report": report_path})
+    from ..probing import companion_inputs
+
+    check_outputs({"measurements": measurements, **companion_inputs(measurements)},
+                  {"--json": json_path, "--report": report_path})
     with progress() as say:
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius, units=units)
@@ -149,7 +152,9 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
 
     if (program is None) != (output is None):
         raise click.UsageError("--program and -o go together")
-    check_outputs({"measurements": measurements, "input program": program},
+    from ..probing import companion_inputs
+
+    check_outputs({"measurements": measurements, "input program": program, **companion_inputs(measurements)},
                   {"-o": output, "--surface": surface_path, "--points-out": points_out, "--json": json_path,
                    "--report": report_path})
     if program is not None and tool_radius is None:
