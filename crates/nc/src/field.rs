@@ -41,6 +41,22 @@ pub enum Field {
     Grid(Grid),
 }
 
+/// `u.floor()` without the library call: the same value for every finite u (-0.0 gives 0.0,
+/// which makes the same cell and fraction).
+#[inline]
+fn floor(u: f64) -> f64 {
+    if u.abs() < 4.0e15 {
+        let t = u as i64 as f64;
+        if t > u {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        u.floor()
+    }
+}
+
 /// Cell index and fraction of `x` along a grid (`fields._cell`): the edge cells continue outside.
 #[inline]
 fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
@@ -50,7 +66,7 @@ fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
         Some(step) => {
             let u = (x - grid[0]) / step;
             // np.clip(np.floor(u), 0, n - 2).astype(np.intp), then u - i in float64
-            let f = u.floor();
+            let f = floor(u);
             let f = if f < 0.0 { 0.0 } else if f > top { top } else { f };
             let i = f as usize;
             (i, u - i as f64)
