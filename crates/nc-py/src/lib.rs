@@ -500,16 +500,32 @@ fn correct_native<'py>(
         clearance,
         shift_norm,
     };
-    let mut say = |a: usize, b: usize| {
-        if let Some(p) = &progress {
-            Python::with_gil(|py| {
-                // a failing progress display does not stop the correction
-                let _ = p.call1(py, (a, b));
-            });
-        }
+    // between pieces: the progress display, and Python's signal handlers (SIGTERM, Ctrl-C), which
+    // run only when the main thread asks for them; an exception they raise stops the run
+    let mut raised: Option<PyErr> = None;
+    let mut say = |a: usize, b: usize| -> bool {
+        Python::with_gil(|py| {
+            if let Some(p) = &progress {
+                if let Err(e) = p.call1(py, (a, b)) {
+                    raised = Some(e);
+                    return false;
+                }
+            }
+            match py.check_signals() {
+                Ok(()) => true,
+                Err(e) => {
+                    raised = Some(e);
+                    false
+                }
+            }
+        })
     };
     let r = py.allow_threads(|| pipeline::correct(&|| src.open(), &field, &opts, &out, &mut say)).map_err(to_py)?;
-    let Outcome::Done(rep) = r else { return Ok(None) };
+    let rep = match r {
+        Outcome::Done(rep) => rep,
+        Outcome::Refused => return Ok(None),
+        Outcome::Stopped => return Err(raised.unwrap_or_else(|| PyValueError::new_err("the correction was stopped"))),
+    };
     let d = PyDict::new(py);
     d.set_item("stats", stats_dict(py, &rep.stats)?)?;
     d.set_item("n_points", rep.n_points)?;

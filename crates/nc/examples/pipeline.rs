@@ -55,10 +55,10 @@ fn main() {
         let open = || -> Result<nc::stream::Reader, nc::NcError> {
             Ok(Box::new(std::io::BufReader::with_capacity(1 << 20, std::fs::File::open(&prog).map_err(|e| nc::NcError::Usage(e.to_string()))?)))
         };
-        let r = nc::pipeline::correct(&open, &field, &opts, &out, &mut |_, _| {}).expect("correct");
+        let r = nc::pipeline::correct(&open, &field, &opts, &out, &mut |_, _| true).expect("correct");
         match r {
             nc::pipeline::Outcome::Done(rep) => println!("{:.3} s: {} points, max {:.4}", t.elapsed().as_secs_f64(), rep.n_points, rep.max),
-            nc::pipeline::Outcome::Refused => println!("refused"),
+            nc::pipeline::Outcome::Refused | nc::pipeline::Outcome::Stopped => println!("refused"),
         }
     }
 }

@@ -58,7 +58,7 @@ fn floor(u: f64) -> f64 {
 }
 
 /// Cell index and fraction of `x` along a grid (`fields._cell`): the edge cells continue outside.
-#[inline]
+#[inline(always)]
 fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
     let n = grid.len();
     let top = (n - 2) as f64;
@@ -83,7 +83,7 @@ fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
 impl Grid {
     /// The displacement's Z at (x, y), or None for a point outside the domain when outside
     /// points are refused.
-    #[inline]
+    #[inline(always)]
     pub fn dz(&self, x: f64, y: f64) -> Option<f64> {
         let [x0, x1, y0, y1] = self.bounds;
         let (mut x, mut y) = (x, y);
@@ -152,16 +152,19 @@ impl Field {
                 true
             }
             Field::Grid(g) => {
-                for p in xyz.chunks_exact(3) {
-                    if !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite()) {
-                        return false;
-                    }
+                out.resize(xyz.len(), 0.0);
+                let mut ok = true;
+                for (p, d) in xyz.chunks_exact(3).zip(out.chunks_exact_mut(3)) {
+                    ok &= p[0].is_finite() && p[1].is_finite() && p[2].is_finite();
                     match g.dz(p[0], p[1]) {
-                        Some(dz) if dz.is_finite() => out.extend_from_slice(&[0.0, 0.0, dz]),
-                        _ => return false,
+                        Some(dz) => {
+                            ok &= dz.is_finite();
+                            d[2] = dz;
+                        }
+                        None => return false,
                     }
                 }
-                true
+                ok
             }
         }
     }

@@ -1,6 +1,6 @@
-//! A whole correction with a native field, in three threads: one reads, lexes and interprets
+//! A whole correction with a native field, in four threads: one reads, lexes and interprets
 //! the program piece by piece, one samples each piece and evaluates the field there (with the
-//! figures: points, sum and largest displacement, warnings), one emits and writes. At most a few
+//! figures: points, sum and largest displacement, warnings), one emits, one writes. At most a few
 //! pieces are held at a time, so memory does not grow with the program.
 //!
 //! The number style every piece is written in is the whole program's. It is taken from the
@@ -13,7 +13,7 @@
 //! is not finite): the caller then runs the evaluation that reports it.
 
 use std::io::Write;
-use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender};
 
 use crate::emit::{EmitState, EmitStats, Emitter};
 use crate::error::NcError;
@@ -64,6 +64,8 @@ pub enum Outcome {
     Done(Report),
     /// A check refuses the program; nothing useful was written.
     Refused,
+    /// The progress callback asked to stop (a signal, say).
+    Stopped,
 }
 
 /// A piece sampled and evaluated, for the emitting thread.
@@ -166,22 +168,46 @@ fn read_pieces(reader: Reader, piece_bytes: usize, style: Option<(NumberStyle, b
     Some(ReadEnd { assumed: assumed.unwrap_or(whole), whole, lines_read: stream.lines_read(), interp: stream.interp })
 }
 
-/// Emit jobs from `rx` into `out`, sending the buffers back on `back`.
-fn emit_pieces(rx: Receiver<Job>, back: Sender<(Samples, Vec<f64>)>, out: &std::fs::File) -> Result<EmitStats, NcError> {
+/// Emit jobs from `rx`, handing the output to the writing thread on `write` (and taking its
+/// buffers back from `written`); the sample buffers go back on `back`.
+fn emit_pieces(rx: Receiver<Job>, back: Sender<(Samples, Vec<f64>)>, write: SyncSender<Vec<u8>>, written: Receiver<Vec<u8>>) -> Result<EmitStats, NcError> {
     let mut state: Option<EmitState> = None;
-    let mut buf: Vec<u8> = Vec::new();
-    let mut w = out;
+    let mut made = 0;
     for job in rx {
         let p = &job.piece;
+        // at most three output buffers: one filled here, two with the writer
+        let mut buf = match written.try_recv() {
+            Ok(b) => b,
+            Err(_) if made < 3 => {
+                made += 1;
+                Vec::with_capacity(p.src.len() * 6)
+            }
+            Err(_) => match written.recv() {
+                Ok(b) => b,
+                Err(_) => break,
+            },
+        };
         buf.clear();
         let st = state.take().unwrap_or_else(|| EmitState::new(&p.interp));
         let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);
         em.lines(0..p.lexed.lines.len(), &job.samples, &job.disp, &mut buf)?;
         state = Some(em.into_state());
-        w.write_all(&buf).map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
+        if write.send(buf).is_err() {
+            break;
+        }
         let _ = back.send((job.samples, job.disp));
     }
     Ok(state.map(|s| s.stats).unwrap_or_default())
+}
+
+/// Write the buffers from `rx` to `out`, handing each back on `back`.
+fn write_pieces(rx: Receiver<Vec<u8>>, back: Sender<Vec<u8>>, out: &std::fs::File) -> Result<(), NcError> {
+    let mut w = out;
+    for buf in rx {
+        w.write_all(&buf).map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
+        let _ = back.send(buf);
+    }
+    Ok(())
 }
 
 /// One pass. `Ok(Err(style))`: the program's style differs from the one assumed; run again
@@ -192,7 +218,7 @@ fn pass(
     opts: &Options,
     style: Option<(NumberStyle, bool)>,
     out: &std::fs::File,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Result<Outcome, (NumberStyle, bool)>, NcError> {
     let reader = open()?;
     let bounds = field.bounds();
@@ -201,12 +227,17 @@ fn pass(
         let (job_tx, job_rx) = sync_channel::<Job>(2);
         let (back_tx, back_rx) = channel::<(Samples, Vec<f64>)>();
         let piece_bytes = opts.piece_bytes;
+        let (write_tx, write_rx) = sync_channel::<Vec<u8>>(2);
+        let (written_tx, written_rx) = channel::<Vec<u8>>();
         let reading = scope.spawn(move || read_pieces(reader, piece_bytes, style, piece_tx));
-        let emitting = scope.spawn(move || emit_pieces(job_rx, back_tx, out));
+        let emitting = scope.spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx));
+        let writing = scope.spawn(move || write_pieces(write_rx, written_tx, out));
         let mut report = Report::default();
         let mut norms: Vec<f64> = Vec::new();
         let mut refused = false;
         let mut failed: Option<NcError> = None;
+        let mut made = 0;
+        let mut stopped = false;
         for r in piece_rx.iter() {
             let piece = match r {
                 Ok(p) => p,
@@ -215,7 +246,15 @@ fn pass(
                     break;
                 }
             };
-            let (mut samples, mut disp) = back_rx.try_recv().unwrap_or_default();
+            // at most four sets of buffers: one here, two queued, one being emitted
+            let (mut samples, mut disp) = match back_rx.try_recv() {
+                Ok(b) => b,
+                Err(_) if made < 4 => {
+                    made += 1;
+                    Default::default()
+                }
+                Err(_) => back_rx.recv().unwrap_or_default(),
+            };
             if let Err(e) = sample_range(&piece.interp, &opts.sample, 0..piece.interp.records.len(), &mut samples) {
                 failed = Some(e);
                 break;
@@ -244,19 +283,27 @@ fn pass(
             if job_tx.send(Job { piece, samples, disp }).is_err() {
                 break;
             }
-            progress(a, b);
+            if !progress(a, b) {
+                stopped = true;
+                break;
+            }
         }
         drop(piece_rx);
         drop(job_tx);
         let read_end = reading.join().expect("the reading thread panicked");
         let emitted = emitting.join().expect("the emitting thread panicked");
+        let wrote = writing.join().expect("the writing thread panicked");
         if let Some(e) = failed {
             return Err(e);
+        }
+        if stopped {
+            return Ok(Ok(Outcome::Stopped));
         }
         if refused {
             return Ok(Ok(Outcome::Refused));
         }
         let stats = emitted?;
+        wrote?;
         let Some(end) = read_end else { return Err(NcError::Usage("the reading thread stopped".into())) };
         if !opts.keep_unsupported && !end.interp.unsupported.is_empty() {
             return Ok(Ok(Outcome::Refused));
@@ -275,18 +322,20 @@ fn pass(
 
 /// Correct the program `open` reads with `field`, writing the output to `out` (from its start;
 /// it is truncated first when a second pass is needed). `progress(first, end)` is called with
-/// the 0-based line range of each piece handed to the emitter.
+/// the 0-based line range of each piece handed to the emitter; when it returns false the run
+/// stops ([`Outcome::Stopped`]).
 pub fn correct(
     open: &dyn Fn() -> Result<Reader, NcError>,
     field: &Field,
     opts: &Options,
     out: &std::fs::File,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Outcome, NcError> {
     field.check().map_err(NcError::Usage)?;
     match pass(open, field, opts, None, out, progress)? {
         Ok(o) => Ok(o),
         Err(style) => {
+            // (a stop asked for during the first pass has ended it already)
             use std::io::Seek;
             let mut f = out;
             f.set_len(0).and_then(|_| f.seek(std::io::SeekFrom::Start(0))).map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
