@@ -77,6 +77,7 @@ impl Format {
     /// [`Format::number`] with `D` decimals: rounded half away from zero, the fraction's
     /// trailing zeros dropped unless the program writes them, the leading zero and a bare point
     /// as the program writes them. The text is written straight into `out`.
+    #[inline(always)]
     fn number_dec<const D: usize>(&self, v: f64, out: &mut Vec<u8>) -> f64 {
         const POW10: [u64; 10] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
         let scale = POW10[D];
@@ -88,16 +89,18 @@ impl Format {
             return t.parse().unwrap_or(v);
         }
         // round half away from zero with one conversion (f64::round is a library call)
-        let m = if scaled >= 0.0 { (scaled + 0.5) as i64 } else { (scaled - 0.5) as i64 };
+        // SAFETY: |scaled| < 9e15 (checked above) fits an i64
+        let m = unsafe { if scaled >= 0.0 { (scaled + 0.5).to_int_unchecked::<i64>() } else { (scaled - 0.5).to_int_unchecked::<i64>() } };
         let a = m.unsigned_abs();
         let (q, mut r) = (a / scale, a % scale);
-        // the fraction's digits, and how many are written
+        // the fraction's D digits, and how many of them are written
         let mut frac = [b'0'; 10];
         let mut k = D;
         while k >= 2 {
             let d = (r % 100) as usize;
             r /= 100;
-            frac[k - 2..k].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
+            frac[k - 2] = DIGIT_PAIRS[2 * d];
+            frac[k - 1] = DIGIT_PAIRS[2 * d + 1];
             k -= 2;
         }
         if k == 1 {
@@ -109,49 +112,47 @@ impl Format {
                 digits -= 1;
             }
         }
-        // the whole part: omitted for ".5" when the program writes so
-        let whole = !(self.style.no_leading_zero && q == 0 && digits > 0);
-        let mut nq = 1;
-        while nq < 16 && q >= POW10_U64[nq] {
-            nq += 1;
-        }
-        // sign, whole digits, point, fraction (or "0" after a bare point unless written "5.")
-        out.reserve(24 + D);
-        let len = out.len();
-        let spare = &mut out.spare_capacity_mut()[..24 + D];
-        let mut i = 0;
-        if m < 0 {
-            spare[0].write(b'-');
-            i = 1;
-        }
-        if whole {
+        // the text is put together in 32 bytes and copied at once: sign, whole digits (omitted
+        // for ".5" when the program writes so), point, fraction (or "0" after a bare point unless
+        // the program writes "5.")
+        let mut b = [0u8; 32];
+        let mut i = (m < 0) as usize;
+        b[0] = b'-';
+        if !(self.style.no_leading_zero && q == 0 && digits > 0) {
+            let mut nq = 1;
+            while nq < 16 && q >= POW10_U64[nq] {
+                nq += 1;
+            }
             let mut x = q;
             let mut j = i + nq;
             while j >= i + 2 {
                 let d = (x % 100) as usize;
                 x /= 100;
-                spare[j - 2].write(DIGIT_PAIRS[2 * d]);
-                spare[j - 1].write(DIGIT_PAIRS[2 * d + 1]);
+                b[j - 2] = DIGIT_PAIRS[2 * d];
+                b[j - 1] = DIGIT_PAIRS[2 * d + 1];
                 j -= 2;
             }
             if j > i {
-                spare[i].write(b'0' + x as u8);
+                b[i] = b'0' + x as u8;
             }
             i += nq;
         }
-        spare[i].write(b'.');
+        b[i] = b'.';
         i += 1;
+        // (at most 1 + 16 + 1 bytes so far: the ten below fit)
+        b[i..i + 10].copy_from_slice(&frac);
         if digits > 0 {
-            for (s, &c) in spare[i..i + digits].iter_mut().zip(&frac[..digits]) {
-                s.write(c);
-            }
             i += digits;
         } else if !self.style.bare_point {
-            spare[i].write(b'0');
-            i += 1;
+            i += 1; // frac[0] is '0'
         }
-        // SAFETY: the first `i` bytes of the spare capacity were written above
-        unsafe { out.set_len(len + i) };
+        out.reserve(b.len());
+        let len = out.len();
+        // SAFETY: `reserve` made room for the 32 bytes copied; the first `i` are the text
+        unsafe {
+            std::ptr::copy_nonoverlapping(b.as_ptr(), out.as_mut_ptr().add(len), b.len());
+            out.set_len(len + i);
+        }
         m as f64 / scale as f64
     }
 }
@@ -204,8 +205,21 @@ fn is_stop_m(w: &Word) -> bool {
     w.letter == b'M' && matches!(round(w.value) as i32, 0 | 1 | 2 | 30 | 60)
 }
 
+#[inline]
 fn axis_index(letter: u8) -> Option<usize> {
-    AXES.iter().position(|&a| a == letter)
+    // the index in AXES ("XYZABCUVW")
+    match letter {
+        b'X' => Some(0),
+        b'Y' => Some(1),
+        b'Z' => Some(2),
+        b'A' => Some(3),
+        b'B' => Some(4),
+        b'C' => Some(5),
+        b'U' => Some(6),
+        b'V' => Some(7),
+        b'W' => Some(8),
+        _ => None,
+    }
 }
 
 /// What the emitter carries from one run of lines to the next: the position the output's
@@ -470,15 +484,16 @@ impl<'a> Emitter<'a> {
         let uniform = disp.chunks_exact(3).all(|d| (0..3).all(|k| (d[k] - d0[k]).abs() <= 1e-9));
         let half_mm = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
         let target_at = |k: usize, t: f64| -> [f64; NAXES] {
-            let mut p = [0.0; NAXES];
-            for a in 0..NAXES {
-                p[a] = if a < 3 {
-                    xyz[3 * k + a] + disp[3 * k + a]
-                } else if rec.named & (1 << a) != 0 {
-                    if t == 1.0 { rec.end[a] } else { start[a] + t * (rec.end[a] - start[a]) }
-                } else {
-                    epos0[a]
-                };
+            // XYZ corrected, the axes the block names interpolated, the others where they are
+            let mut p = epos0;
+            for a in 0..3 {
+                p[a] = xyz[3 * k + a] + disp[3 * k + a];
+            }
+            let mut named = rec.named >> 3;
+            while named != 0 {
+                let a = 3 + named.trailing_zeros() as usize;
+                p[a] = if t == 1.0 { rec.end[a] } else { start[a] + t * (rec.end[a] - start[a]) };
+                named &= named - 1;
             }
             p
         };

@@ -46,7 +46,8 @@ pub enum Field {
 #[inline]
 fn floor(u: f64) -> f64 {
     if u.abs() < 4.0e15 {
-        let t = u as i64 as f64;
+        // SAFETY: |u| < 4e15 fits an i64
+        let t = unsafe { u.to_int_unchecked::<i64>() } as f64;
         if t > u {
             t - 1.0
         } else {
@@ -68,7 +69,8 @@ fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
             // np.clip(np.floor(u), 0, n - 2).astype(np.intp), then u - i in float64
             let f = floor(u);
             let f = if f < 0.0 { 0.0 } else if f > top { top } else { f };
-            let i = f as usize;
+            // SAFETY: 0 <= f <= n - 2 (a NaN, from a NaN point, takes cell 0: its value is NaN)
+            let i = if f >= 0.0 { unsafe { f.to_int_unchecked::<u64>() as usize } } else { 0 };
             (i, u - i as f64)
         }
         None => {

@@ -200,7 +200,8 @@ fn number(s: &[u8], mut i: usize) -> Option<(f64, i8, usize, bool, bool, bool)> 
 pub fn round(x: f64) -> f64 {
     if x.abs() < 4.0e15 {
         // the whole part is exact, and so is the difference
-        let t = x as i64 as f64;
+        // SAFETY: |x| < 4e15 fits an i64
+        let t = unsafe { x.to_int_unchecked::<i64>() } as f64;
         let d = x - t;
         if d >= 0.5 {
             t + 1.0

@@ -258,15 +258,25 @@ impl<'a> GridLines<'a> {
         GridLines { v, first: if n > 0 { v[0] } else { 0.0 }, per_mm: if per_mm.is_finite() { per_mm } else { 0.0 } }
     }
 
-    /// `v.partition_point(|&g| g <= x)` (`or_equal`) or `v.partition_point(|&g| g < x)`: from
+    /// `v.partition_point(|&g| g <= x)` (`OR_EQUAL`) or `v.partition_point(|&g| g < x)`: from
     /// the guess, walked to the exact place; a binary search when the guess is far off.
-    #[inline]
-    fn partition(&self, x: f64, or_equal: bool) -> usize {
+    #[inline(always)]
+    fn partition<const OR_EQUAL: bool>(&self, x: f64) -> usize {
         let v = self.v;
         let n = v.len();
-        let before = |g: f64| if or_equal { g <= x } else { g < x };
+        let before = |g: f64| if OR_EQUAL { g <= x } else { g < x };
         let k = (x - self.first) * self.per_mm;
-        let mut i = if k >= 0.0 { if k < n as f64 { k as usize } else { n } } else { 0 };
+        let mut i = if k >= 0.0 {
+            if k < n as f64 {
+                // SAFETY: 0 <= k < n (a slice's length fits in u32 here: grids are small), so its
+                // whole part is a valid index
+                unsafe { k.to_int_unchecked::<u64>() as usize }
+            } else {
+                n
+            }
+        } else {
+            0
+        };
         let mut steps = 0;
         while i > 0 && !before(v[i - 1]) {
             i -= 1;
@@ -293,8 +303,8 @@ fn crossings(lines: &GridLines, a: f64, b: f64, out: &mut Vec<f64>) {
         return;
     }
     let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-    let i0 = lines.partition(lo, true);
-    let i1 = lines.partition(hi, false).max(i0);
+    let i0 = lines.partition::<true>(lo);
+    let i1 = lines.partition::<false>(hi).max(i0);
     for &v in &lines.v[i0..i1] {
         let u = (v - a) / (b - a);
         if u > 1e-12 && u < 1.0 - 1e-12 {
@@ -346,8 +356,8 @@ mod tests {
             }
             xs.extend([f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300]);
             for x in xs {
-                assert_eq!(g.partition(x, true), v.partition_point(|&a| a <= x), "{x} in {v:?}");
-                assert_eq!(g.partition(x, false), v.partition_point(|&a| a < x), "{x} in {v:?}");
+                assert_eq!(g.partition::<true>(x), v.partition_point(|&a| a <= x), "{x} in {v:?}");
+                assert_eq!(g.partition::<false>(x), v.partition_point(|&a| a < x), "{x} in {v:?}");
             }
         }
     }
