@@ -268,9 +268,9 @@ impl<'a> GridLines<'a> {
         let k = (x - self.first) * self.per_mm;
         let mut i = if k >= 0.0 {
             if k < n as f64 {
-                // SAFETY: 0 <= k < n (a slice's length fits in u32 here: grids are small), so its
-                // whole part is a valid index
-                unsafe { k.to_int_unchecked::<u64>() as usize }
+                // SAFETY: 0 <= k < n, so its whole part is a valid index; the line after it is
+                // where x falls on a uniform grid
+                (unsafe { k.to_int_unchecked::<u64>() as usize } + 1).min(n)
             } else {
                 n
             }
