@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import needs_rs274
 
 from ncadapt import InputError
 from ncadapt.cli import main
@@ -38,13 +40,20 @@ def test_plan_by_hand():
     assert p.applicable  # 10 µm ≤ 0.25 · 62 = 15.5 µm
     assert p.t_max == pytest.approx(0.5 * 0.25 * 0.016 / 0.062)  # 0.03226
     assert p.passes == 4 and p.depth_per_pass == pytest.approx(0.025)  # ⌈0.1 / 0.03226⌉ = ⌈3.1⌉
-    a1 = 0.030 * (0.025 + 0.060) / 0.5  # 5.1 µm
-    a2 = a1 * (0.025 + 2 * a1) / (0.025 + 0.060)  # the recurrence, not the paper's t0 closed form
-    a3 = a2 * (0.025 + 2 * a2) / (0.025 + 2 * a1)
+    c = 0.030 / 0.5  # compliance near A: the pre-finish deviation over its depth
+    a1 = c * (0.025 + 0.030 + 0.030)  # the paper's (6): real depth t + δA (left) + δK1 = 5.1 µm
+    a2 = c * (0.025 + (a1 - 0.030) + a1)  # real depth: t + what pass 1 left against its aim + δK2
+    a3 = c * (0.025 + (a2 - a1) + a2)
     assert p.predicted[:3] == pytest.approx([a1, a2, a3], rel=1e-12)
     assert p.predicted[0] == pytest.approx(0.0051, rel=1e-12)
-    b1 = 0.020 * (0.025 + 0.030 + 0.020) / 0.5
+    b1 = 0.020 * (0.025 + 0.020 + 0.030) / 0.5  # near B: the same shift δK1 = δA
     assert p.predicted_b[0] == pytest.approx(b1, rel=1e-12)
+    # the paper's (6)-(8), kept for reference; its closed form (9) is (7) with (6) substituted
+    pa = p.predicted_paper
+    assert pa[0] == pytest.approx(a1, rel=1e-12)
+    assert pa[1] == pytest.approx(a1 * (0.025 + 2 * a1) / (0.025 + 0.060), rel=1e-12)  # (7)
+    assert pa[1] == pytest.approx(0.030 * (0.025 + 2 * 0.030 * (0.025 + 0.060) / 0.5) / 0.5, rel=1e-12)  # (9)
+    assert pa[1] * 1000 == pytest.approx(2.112, abs=5e-4)  # the issue's 2.112 µm, both ways
     assert p.target_diameter == pytest.approx(40.008)
     assert not pb.plan(40, "H6", "H9", 0.5, 0.1, 0.030, 0.010).applicable  # 20 µm > 15.5 µm
     with pytest.raises(InputError, match="finer"):
@@ -145,7 +154,7 @@ def test_cli_plan_next_simulate(tmp_path):
     assert n["correction"] == pytest.approx(0.030, abs=1e-6) and n["block"] == "G10 L1 P1 R5.9700"
     # the plan saved by an editor that writes a byte-order mark reads the same; a broken one is located
     bom = tmp_path / "plan_bom.json"
-    bom.write_bytes(b"\xef\xbb\xbf" + (tmp_path / "plan.json").read_bytes())
+    bom.write_bytes(b"\xef\xbb\xbf" + (tmp_path / "plan2.json").read_bytes())
     res = run(main, ["bore", "next", "--plan", str(bom), "--measured", str(probe), "--pass", "0",
                      "--controller", "linuxcnc", "--tool-radius", "6"])
     assert res.exit_code == 0 and "G10 L1 P1 R5.9700" in res.output, res.output
@@ -158,3 +167,287 @@ def test_cli_plan_next_simulate(tmp_path):
     assert s["parts"] == 50 and 0 <= s["within_tolerance"] <= 1 and s["mean_passes"] == 4
     res = run(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1"])
     assert res.exit_code == 2 and "--delta-a" in res.output
+
+
+# ------------------------------------------------------------------ issue 20: bores
+def test_condition_3_is_two_sided():
+    """(3) bounds the taper either way: δA 0, δB 50 µm is |−50| > 0.25·62 = 15.5 µm."""
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.0, 0.05)
+    assert p.form_before == pytest.approx(0.05) and not p.applicable
+    assert any("condition (3) does not hold" in w for w in p.warnings)
+    r = CliRunner().invoke(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
+                                  "--delta-a", "0", "--delta-b", "0.05"])
+    assert r.exit_code == 0 and "|δA − δB| = 50.0 µm ≤ 15.5 µm: NO" in r.stdout, r.output
+
+
+@pytest.mark.parametrize("k,limit_um", [(0.25, 2.0), (0.2, 1.6), (0.5, 4.0)])
+def test_condition_4_follows_k(k, limit_um):
+    """(4) is the paper's (2) on the radius: (k/2)·IT6 — 0.125·16 = 2.0 µm, 0.1·16 = 1.6 µm."""
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02, k=k)
+    assert p.form_limit * 1000 == pytest.approx(limit_um, rel=1e-12)
+
+
+def _noise_free(monkeypatch):
+    for name in ("SETTING_SIGMA", "PASS_SIGMA", "PROBE_SIGMA", "STIFFNESS_SIGMA"):
+        monkeypatch.setattr(sb, name, 0.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+def test_plan_agrees_with_the_noise_free_testbed(monkeypatch, seed):
+    """The testbed cuts with its own model (compliance × real depth at every point of the bore,
+    the tool set δK into the body on the aim); its deflection measured near A after each pass is
+    the plan's prediction to 0.1 µm (the paper's (8) is not, from pass 2 on)."""
+    _noise_free(monkeypatch)
+    seen = []
+    real = pb.next_correction
+
+    def spy(p, meas, pass_done, **kw):
+        c = real(p, meas, pass_done, **kw)
+        seen.append((p, pass_done, c.deviations[0]))
+        return c
+
+    monkeypatch.setattr(pb, "next_correction", spy)
+    res = sb.run_part(np.random.default_rng(seed))
+    assert res.applicable and res.passes == 4
+    p = seen[0][0]
+    measured = [d for _, n, d in seen if n >= 1]
+    assert len(measured) == 3
+    np.testing.assert_allclose(measured, p.predicted[:3], atol=1e-4)
+    assert max(abs(np.array(measured) - p.predicted_paper[:3])) > 1e-4  # the paper's (8) drifts off
+    assert res.ok
+
+
+def test_finished_bore_is_judged(tmp_path):
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
+    good = pb.read_probe(_probe_csv(tmp_path, (40.008, 40.0085, 40.0088)))
+    f = pb.judge(p, good)
+    assert f.inside and f.form == pytest.approx(0.0004, abs=1e-6) and f.form_ok and f.ok
+    bad = pb.read_probe(_probe_csv(tmp_path, (40.004, 40.008, 40.0125), name="bad.csv"))
+    f = pb.judge(p, bad)
+    assert f.inside and not f.form_ok  # 4.25 µm > 2.0 µm
+    out = pb.read_probe(_probe_csv(tmp_path, (40.017, 40.017, 40.017), name="out.csv"))
+    assert not pb.judge(p, out).inside  # H6 on Ø40: 40.000 … 40.016
+
+
+def test_plan_validation():
+    with pytest.raises(InputError, match="shaft class"):
+        pb.plan(40, "h6", "H9", 0.5, 0.1, 0.03, 0.02)
+    with pytest.raises(InputError, match="outside Ø40 H6"):
+        pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02, target_diameter=50)
+    with pytest.raises(InputError, match="does not converge"):  # the issue's δA 0.3 mm, z 0.1 mm
+        pb.plan(40, "H6", "H9", 0.5, 0.1, 0.3, 0.28)
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, -0.005, -0.01)
+    assert any("negative" in w for w in p.warnings)
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.09, 0.08)
+    assert any("larger than IT(H9)" in w for w in p.warnings)
+
+
+def _cli(*args):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_pass_state_is_recorded_in_the_plan(tmp_path):
+    """`bore next` reads the correction each pass was made with from the plan and records the new
+    pass: forgetting --applied no longer turns the correction around; a wrong one is refused."""
+    plan = tmp_path / "plan.json"
+    r = _cli("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--delta-a", "0.03",
+             "--delta-b", "0.02", "--json", str(plan))
+    assert r.exit_code == 0, r.output
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
+    aim0 = p.nominal_diameter_after(0)
+    m0 = _probe_csv(tmp_path, (aim0 - 0.060, aim0 - 0.050, aim0 - 0.040), name="m0.csv")
+    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m0), "--controller", "linuxcnc",
+             "--tool-radius", "6")
+    assert r.exit_code == 0 and "G10 L1 P1 R5.9700" in r.stdout, r.output
+    d = json.loads(plan.read_text())
+    assert [h["pass"] for h in d["history"]] == [0] and d["history"][0]["correction"] == pytest.approx(0.030, abs=1e-6)
+    # after pass 1 (made 30 µm into the body) the bore near A is 1 µm under its aim: deflection 31 µm
+    aim1 = p.nominal_diameter_after(1)
+    m1 = _probe_csv(tmp_path, (aim1 - 0.002,), zs=(55,), name="m1.csv")  # plane A only
+    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m1), "--applied", "0.01")
+    assert r.exit_code == 2 and "--applied" in r.output and "0.03" in r.output, r.output
+    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m1), "--controller", "linuxcnc",
+             "--tool-radius", "6")
+    assert r.exit_code == 0, r.output
+    # the block sets nominal − δK2 = 6 − 0.031, not (6 − 0.030) − 0.031
+    assert "G10 L1 P1 R5.9690" in r.stdout and "+31.0 µm" in r.stdout, r.output
+    d = json.loads(plan.read_text())
+    assert d["history"][1]["applied"] == pytest.approx(0.030, abs=1e-6)
+    assert d["history"][1]["correction"] == pytest.approx(0.031, abs=1e-6)
+    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m1), "--pass", "1")
+    assert r.exit_code == 2 and "records passes 0 … 1 already" in r.output
+
+
+def test_finished_bore_from_the_cli_with_a_report(tmp_path):
+    plan = tmp_path / "plan.json"
+    assert _cli("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--delta-a", "0.03",
+                "--delta-b", "0.02", "--json", str(plan)).exit_code == 0
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
+    for n in range(p.passes):
+        aim = p.nominal_diameter_after(n)
+        f = _probe_csv(tmp_path, (aim - 0.004, aim - 0.003, aim - 0.002), name=f"m{n}.csv")
+        r = _cli("bore", "next", "--plan", str(plan), "--measured", str(f))
+        assert r.exit_code == 0, r.output
+    fin = _probe_csv(tmp_path, (40.008, 40.0085, 40.0088), name="fin.csv")
+    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(fin), "--report", str(tmp_path / "r.html"),
+             "--json", str(tmp_path / "f.json"))
+    assert r.exit_code == 0 and "the bore is GOOD" in r.stdout, r.output
+    f = json.loads((tmp_path / "f.json").read_text())
+    assert f["inside"] and f["form_ok"] and f["form"] == pytest.approx(0.0004, abs=1e-6)
+    html = (tmp_path / "r.html").read_text()
+    assert "Diameters per plane per pass" in html and "40.0088" in html
+    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(fin))
+    assert r.exit_code == 2 and "finished bore" in r.output
+
+
+def test_probe_files_as_measured(tmp_path):
+    """x,y,z with ±0.01 mm z scatter: three planes, not one-point planes; a semicolon CSV; one plane."""
+    rng = np.random.default_rng(1)
+    phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    rows = ["x,y,z"]
+    for d, z in ((39.9, 55), (39.95, 30), (39.92, 5)):
+        rows += [f"{d / 2 * math.cos(f):.6f},{d / 2 * math.sin(f):.6f},{z + rng.uniform(-0.01, 0.01):.4f}"
+                 for f in phi]
+    f = tmp_path / "xyz.csv"
+    f.write_text("\n".join(rows) + "\n")
+    m = pb.read_probe(f)
+    assert len(m.circles) == 3 and m.diameters == pytest.approx([39.9, 39.95, 39.92], abs=1e-6)
+    g = tmp_path / "semi.csv"
+    g.write_text(f.read_text().replace(",", ";"))
+    assert pb.read_probe(g).diameters == pytest.approx(m.diameters, abs=1e-12)
+    one = _probe_csv(tmp_path, (39.9,), zs=(55,), name="one.csv")
+    assert len(pb.read_probe(one).circles) == 1
+    p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
+    with pytest.raises(InputError, match="three planes"):
+        pb.next_correction(p, pb.read_probe(one), 0)
+    with pytest.raises(InputError, match="near faces A and B"):
+        pb.plan_from_measurement(40, pb.read_probe(one), t0=0.5, allowance=0.1)
+
+
+def test_offset_blocks_for_real_controllers():
+    assert pb.offset_block(0.0031, controller="fanuc-geometry", tool=3, radius=6.0) == "G10 L12 P3 R5.9969"
+    assert pb.offset_block(0.0031, controller="sinumerik", tool=3) == "$TC_DP15[3,1]=-0.0031"
+    # a lathe's X wear on the diameter, incremented by the change since the last correction
+    assert pb.offset_block(0.0031, controller="fanuc-lathe", tool=3, previous=0.0021) == "G10 P3 U0.0020"
+    with pytest.raises(InputError, match="nominal radius"):
+        pb.offset_block(0.001, controller="fanuc-geometry")
+
+
+@pytest.mark.parametrize("args,says", [
+    (("--delta-a", "-1e300", "--delta-b", "0.02"), "--delta-a"),
+    (("--delta-a", "0.03", "--delta-b", "0.02", "--k", "5e-324"), "--k"),
+    (("--delta-a", "0.03", "--delta-b", "0.02", "--t0", "5e-324"), "--t0"),
+])
+def test_fuzz_findings_plan_options(args, says):
+    base = ["bore", "plan", "--diameter", "40", "--allowance", "0.1"]
+    if "--t0" not in args:
+        base += ["--t0", "0.5"]
+    r = CliRunner().invoke(main, base + list(args))
+    assert r.exit_code == 2 and says in r.output and "Traceback" not in r.output, r.output
+
+
+@pytest.mark.parametrize("text,says", [
+    ("0", "expected a JSON object, got int"),
+    ("[]", "expected a JSON object, got list"),
+    ('{"diameter": NaN, "final": "H6", "prefinish": "H9", "t0": 0.5, "allowance": 0.1, "delta_a": 0.03, '
+     '"delta_b": 0.02, "k": 0.25}', "'diameter' must be a finite number"),
+    ('{"diameter": ' + "1" * 5000 + "}", "not a plan (JSON)"),
+    ('{"diameter": 40, "final": 6, "prefinish": "H9", "t0": 0.5, "allowance": 0.1, "delta_a": 0.03, '
+     '"delta_b": 0.02, "k": 0.25}', "'final' must be a class"),
+])
+def test_fuzz_findings_plan_file(tmp_path, text, says):
+    plan = tmp_path / "plan.json"
+    plan.write_text(text)
+    probe = _probe_csv(tmp_path, (39.75, 39.76, 39.77))
+    r = CliRunner().invoke(main, ["bore", "next", "--plan", str(plan), "--measured", str(probe)])
+    assert r.exit_code == 2 and f"{plan}" in r.output and says in r.output, r.output
+
+
+def test_fuzz_finding_simulate_t0():
+    r = CliRunner().invoke(main, ["bore", "simulate", "--parts", "5", "--t0", "3"])
+    assert r.exit_code == 2 and "smaller --t0" in r.output and "Traceback" not in r.output, r.output
+
+
+# ------------------------------------------------------------------ real probe results (issue 20, bores 11)
+def _expect_planes(m, diameters, centres=None):
+    assert m.diameters == pytest.approx(list(diameters), abs=1e-9)
+    if centres:
+        assert [c.centre for c in m.circles] == [pytest.approx(c, abs=1e-9) for c in centres]
+
+
+def test_measurement_formats(tmp_path):
+    """The same bore — Ø39.80 near A (z 55), 39.81 mid, 39.82 near B — as a circle table, DMIS
+    FEAT/CIRCLE actuals, a PC-DMIS report and a LinuxCNC probe log: the same planes, A first."""
+    t = tmp_path / "table.csv"
+    t.write_text("plane;z;diameter;x;y\nB;5;39.82;0.01;0\nM;30;39.81;0;0\nA;55;39.80;0;0.002\n")
+    _expect_planes(pb.read_measurement(t), (39.80, 39.81, 39.82), [(0, 0.002), (0, 0), (0.01, 0)])
+    d = tmp_path / "bore.dms"
+    d.write_text("DMISMN/'bore',05.0\nF(CA)=FEAT/CIRCLE,INNER,CART,0,0,55,0,0,1,40.0\n"
+                 "FA(CA)=FEAT/CIRCLE,INNER,CART,0,0.002,55,0,0,1,39.80\n"
+                 "FA(CM)=FEAT/CIRCLE,INNER,CART,0,0,30,0,0,1,$\n39.81\n"
+                 "FA(CB)=FEAT/CIRCLE,INNER,CART,0.01,0,5,0,0,-1,39.82\nENDFIL\n")
+    _expect_planes(pb.read_measurement(d), (39.80, 39.81, 39.82), [(0, 0.002), (0, 0), (0.01, 0)])
+    r = tmp_path / "report.txt"
+    blocks = []
+    for name, z, dia in (("CIR_A", 55, 39.80), ("CIR_M", 30, 39.81), ("CIR_B", 5, 39.82)):
+        blocks.append(f"DIM LOC{name[-1]}= LOCATION OF CIRCLE {name}  UNITS=MM ,$\n"
+                      "AX    NOMINAL       +TOL       -TOL       MEAS        DEV     OUTTOL\n"
+                      f"X       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
+                      f"Y       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
+                      f"Z      {z:.4f}     0.0100     0.0100    {z:.4f}     0.0000     0.0000 ----#----\n"
+                      f"D      40.0000     0.0160     0.0000    {dia:.4f}    -0.1900     0.1900 #--------\n")
+    r.write_text("PART NAME  : bore\n" + "\n".join(blocks))
+    _expect_planes(pb.read_measurement(r), (39.80, 39.81, 39.82))
+    phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    lines = [f"{d / 2 * math.cos(f):.6f} {d / 2 * math.sin(f):.6f} {z + 0.003 * math.sin(3 * f):.6f} 0 0 0 0 0 0"
+             for d, z in ((39.80, 55), (39.81, 30), (39.82, 5)) for f in phi]
+    log = tmp_path / "bore_probe.txt"
+    log.write_text("\n".join(lines) + "\n")
+    m = pb.read_measurement(log)
+    assert m.diameters == pytest.approx([39.80, 39.81, 39.82], abs=2e-6)
+    bad = tmp_path / "bad.dms"
+    bad.write_text("FA(C1)=FEAT/CIRCLE,OUTER,CART,0,0,55,0,0,1,39.80\n")
+    with pytest.raises(InputError, match="OUTER") as e:
+        pb.read_measurement(bad)
+    assert e.value.line == 1
+    bad.write_text(r.read_text().replace("39.8000", "nan"))
+    with pytest.raises(InputError, match="MEAS must be a finite number"):
+        pb.read_measurement(bad)
+
+
+def test_a_plan_from_a_dmis_report_through_the_cli(tmp_path):
+    d = tmp_path / "bore.dms"
+    aim0 = 40.008 - 0.2
+    d.write_text("".join(f"FA(C{z})=FEAT/CIRCLE,INNER,CART,0,0,{z},0,0,1,{aim0 - 2 * dev:.4f}\n"
+                         for z, dev in ((55, 0.03), (30, 0.025), (5, 0.02))))
+    r = CliRunner().invoke(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
+                                  "--measured", str(d), "--json", "-"])
+    assert r.exit_code == 0, r.output
+    p = json.loads(r.stdout)
+    assert p["delta_a"] == pytest.approx(0.03, abs=1e-9) and p["delta_b"] == pytest.approx(0.02, abs=1e-9)
+
+
+@pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc"])
+def test_probing_program(tmp_path, dialect):
+    out = tmp_path / "probe.ngc"
+    r = CliRunner().invoke(main, ["bore", "probe-program", "--diameter", "40", "--planes", "55,30,5", "--dialect",
+                                  dialect, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    text = out.read_text()
+    touch = "G38.2" if dialect == "linuxcnc" else "G31"
+    moves = re.findall(touch + r" X(-?[\d.]+) Y(-?[\d.]+)", text)
+    assert len(moves) == 24
+    radii = [math.hypot(float(x), float(y)) for x, y in moves]
+    assert radii == pytest.approx([21.0] * 24, abs=2e-3)  # 1 mm past the nominal wall
+    assert text.index("Z60.000") < text.index("Z55.000")  # the safe height above the highest plane
+    if dialect == "fanuc":
+        assert text.count("DPRNT[*#5061[44]*#5062[44]*#5063[44]]") == 24 and "POPEN" in text and "PCLOS" in text
+
+
+@needs_rs274
+def test_probing_program_runs_in_rs274(tmp_path):
+    from rs274 import canonical
+
+    out = tmp_path / "probe.ngc"
+    out.write_text(pb.probing_program(40, [55, 30, 5]))
+    assert canonical(out).error is None

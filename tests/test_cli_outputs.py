@@ -211,3 +211,9 @@ def test_a_bad_number_is_a_usage_error_naming_the_option(prog, tmp_path, value):
 def test_a_non_finite_shift_is_a_usage_error(prog, tmp_path):
     r = run("correct", prog, "--shift", "0,0,nan", "-o", tmp_path / "o.ngc")
     assert r.exit_code == 2 and "--shift" in r.stderr and "finite" in r.stderr, r.output
+
+
+def test_a_shift_beyond_any_machine_is_a_usage_error(prog, tmp_path):
+    r = run("correct", prog, "--shift", "6e106,0,0", "-o", tmp_path / "o.ngc")
+    assert r.exit_code == 2 and "--shift" in r.stderr and "within ±1e+06 mm" in r.stderr, r.output
+    assert not (tmp_path / "o.ngc").exists()

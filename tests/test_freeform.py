@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from ncadapt import InputError, cad, measure, nc
+from ncadapt import InputError, RefusedError, cad, measure, nc
 from ncadapt.cli import main
 from ncadapt.processes import freeform as pf
 from ncadapt.sim import freeform as ff
@@ -48,6 +49,8 @@ def test_csv_deviation_sign_and_probe_radius(tmp_path):
     (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.9,1,0,1.1"), 3, "not a unit vector"),
     (lambda r: r.__setitem__(3, r[3].replace("P3", "P0")), 5, "duplicate id"),
     (lambda r: r.__setitem__(0, r[0] + ",7"), 2, "fields"),
+    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.8,1,0,1.7e308"), 3, "beyond ±1e\\+06 mm"),
+    (lambda r: r.__setitem__(2, "P2,0,2e6,0.9,0,0,1,0,1,0.9"), 4, "nominal point 2e\\+06 mm"),
 ])
 def test_csv_errors_name_the_line(tmp_path, bad, line, what):
     rows = _rows()
@@ -161,7 +164,11 @@ def test_compensation_closes_the_loop(bench):
     assert a.moran.systematic
     d = pf.decompose(m)
     c = pf.compensate(part, m, d.systematic)
-    out = prog.correct(c.field(4.0))
+    # the program's tool centres along the part's edge lie up to a tool radius beyond the hull of
+    # the tips over the part: held at the edge value
+    with pytest.raises(RefusedError, match="outside the field's domain"):
+        prog.correct(c.field(4.0))
+    out = prog.correct(c.field(4.0, "clamp"))
     second = ff.machine(out, part, err, 4.0)
     before = np.einsum("ij,ij->i", ff.measure(first, p, n) - p, n)
     after = np.einsum("ij,ij->i", ff.measure(second, p, n) - p, n)
@@ -223,6 +230,34 @@ def test_a_wall_seen_from_x_gives_the_same_compensation(bench):
     np.testing.assert_allclose(c1.surface.grid, c0.surface.grid @ perm.T, atol=1e-12)
     np.testing.assert_allclose(c1.compensated.grid, c0.compensated.grid @ perm.T, atol=1e-12)
     np.testing.assert_allclose(c1.points_compensated, c0.points_compensated @ perm.T, atol=1e-12)
+    # the NC field of the wall is the upright part's field turned (a tool of radius 0: the tips are
+    # the surface points)
+    q = c0.surface.grid.reshape(-1, 3)[::7]
+    np.testing.assert_allclose(c1.field(0.0, "clamp")(q @ perm.T), c0.field(0.0, "clamp")(q) @ perm.T, atol=1e-9)
+
+
+def test_a_wall_is_compensated_end_to_end(tmp_path):
+    # a flat wall x = 0 facing +x, measured over y 0..80, z -40..0 with dF = 20 sin(y / 9) µm and
+    # 2 µm noise; a ball-end R4 finishing program touches it: centre (4, y, z), tip (4, y, z - 4)
+    rng = np.random.default_rng(3)
+    yz = np.array([(y, z) for y in np.arange(0, 81, 2.5) for z in np.arange(-40, 0.1, 2.5)])
+    df = 0.02 * np.sin(yz[:, 0] / 9)
+    rows = ["x,y,z,i,j,k,dev"] + [f"0,{y},{z},1,0,0,{d:.6f}" for (y, z), d in zip(yz, df + rng.normal(0, 0.002, len(yz)))]
+    (tmp_path / "wall.csv").write_text("\n".join(rows) + "\n")
+    lines = ["G21 G90 G17", "G0 X20 Y0 Z0", "G0 X4 Y0 Z-10"]
+    for i, z in enumerate(np.arange(-10, -35, -5.0)):
+        lines += [f"G1 Z{z:g} F500", f"G1 Y{80 if i % 2 == 0 else 0} F500"]
+    lines += ["G0 X20", "M2"]
+    (tmp_path / "wall.ngc").write_text("\n".join(lines) + "\n")
+    r = CliRunner().invoke(main, ["compensate", str(tmp_path / "wall.csv"), "--program", str(tmp_path / "wall.ngc"),
+                                  "-o", str(tmp_path / "c.ngc"), "--tool-radius", "4"])
+    assert r.exit_code == 0, r.output
+    # every cutting point moved along x only, by −dF at its contact point (y, z + 4 - 4) = (y, z)
+    moves = [(float(m.group(1)), float(m.group(2))) for m in
+             re.finditer(r"X(-?[\d.]+) Y(-?[\d.]+)", (tmp_path / "c.ngc").read_text())]
+    got = np.array([(x - 4, y) for x, y in moves if 3.9 < x < 4.1])
+    assert len(got) > 100
+    np.testing.assert_allclose(got[:, 0], -0.02 * np.sin(got[:, 1] / 9), atol=0.004)
 
 
 def test_a_tilted_part_is_analysed_in_its_own_plane(bench):
@@ -266,10 +301,15 @@ def test_analyze_and_compensate_cli(tmp_path, bench):
     assert set(a["moran"]) >= {"I", "expected", "variance_normality", "variance_randomization", "z_normality",
                                "z_randomization", "p_value", "systematic", "weights"}
     assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None}
-    r = CliRunner().invoke(main, [
-        "compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
-        "--tool-radius", "4", "--extent", "0,80,0,60", "--surface", str(tmp_path / "c.step"),
-        "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"])
+    args = ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
+            "--tool-radius", "4", "--extent", "0,80,0,60", "--extrapolate-nominal", "--surface", str(tmp_path / "c.step"),
+            "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"]
+    # the program plunges at X0 Y0, a tool radius beyond the tips of the compensated surface: by
+    # default refused, nothing written
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 1 and "outside the field's domain" in r.output, r.output
+    assert not any((tmp_path / f).exists() for f in ("c.ngc", "c.step", "pts.csv", "c.json"))
+    r = CliRunner().invoke(main, args + ["--outside", "clamp"])
     assert r.exit_code == 0, r.output
     j = json.loads((tmp_path / "c.json").read_text())
     assert {"n_points", "moran", "deviation", "systematic", "random"} <= set(j)
@@ -336,3 +376,237 @@ def test_a_repeated_point_names_both_lines(tmp_path):
     with pytest.raises(InputError) as e:
         measure.read(_csv(tmp_path, rows, "x,y,z,i,j,k,dev"))
     assert e.value.line == 6 and "repeats the point at line 3" in e.value.message and e.value.path
+
+
+def test_the_surface_grid_and_its_extent_are_checked():
+    # a 9 x 5 grid of points 10 mm apart
+    pts = np.array([(x, y, 0.0) for x in range(0, 81, 10) for y in range(0, 41, 10)])
+    s = pf.fit_height_surface(pts, extent=(-10, 90, -10, 50))
+    assert (s.u[0], s.u[-1], len(s.u), s.v[0], s.v[-1], len(s.v)) == (-10, 90, 11, -10, 50, 7)
+    with pytest.raises(InputError, match="100,000,000,002 x 7 nodes, more than 4,000,000; give a smaller extent"):
+        pf.fit_height_surface(pts, extent=(-10, 1e12, -10, 50))
+    with pytest.raises(InputError, match="narrower than the point spacing 10 mm"):
+        pf.fit_height_surface(pts, extent=(0, 80, -1e-194, 0))
+    with pytest.raises(InputError, match="cover 0 nodes"):
+        pf.fit_height_surface(pts, extent=(1000, 1100, 1000, 1100))
+    # a single scan line, along an axis or diagonal, or two lines closer than half the spacing
+    k = np.arange(40.0)
+    for line in (np.column_stack([k, 0 * k, 0 * k]), np.column_stack([k, k, 0 * k]),
+                 np.column_stack([k, 0.3 * (k % 2), 0 * k])):
+        with pytest.raises(InputError, match="40 measured points lie along one line"):
+            pf.fit_height_surface(line)
+    # two scan lines 5 mm apart, points 1 mm apart along them: an area
+    two = np.column_stack([np.r_[k, k], np.r_[0 * k, 0 * k + 5], np.zeros(80)])
+    assert pf.fit_height_surface(two).grid.shape[:2] == (40, 6)
+
+
+def test_extreme_moran_and_filter_options_give_finite_results_or_located_errors(tmp_path):
+    from ncadapt import stats
+
+    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,{0.01 + 0.0004 * x - 0.0003 * y + 0.002 * np.sin(1.7 * k):.5f}"
+                                  for k, (x, y) in enumerate((x, y) for y in range(0, 41, 10) for x in range(0, 81, 10))]
+    m = tmp_path / "m.csv"
+    m.write_text("\n".join(rows) + "\n")
+    meas = measure.read(m)
+    # a huge K is the nearest-neighbour limit: on this exact grid, the 2 to 4 nearest points
+    from scipy.spatial.distance import cdist
+
+    d = cdist(meas.nominal, meas.nominal)
+    np.fill_diagonal(d, np.inf)
+    ref = stats.moran_matrix((d <= d.min(axis=1, keepdims=True) + 1e-9).astype(float), meas.deviation)
+    r = CliRunner().invoke(main, ["analyze", str(m), "--power", "1e20", "--json", str(tmp_path / "a.json")])
+    assert r.exit_code == 0, r.output
+    got = json.loads((tmp_path / "a.json").read_text())["moran"]
+    assert got["I"] == pytest.approx(ref.I, rel=1e-9)
+    for args, code, said in (
+        (["analyze", str(m), "--weights", "knn", "--neighbors", "45"], 2, "need more than 45 points; there are 45"),
+        (["analyze", str(m), "--probe-radius", "1e9"], 2, "--probe-radius"),
+        (["compensate", str(m), "--sigma-s", "1e-300"], 2, "keeps every deviation as systematic"),
+        (["compensate", str(m), "--sigma-c", "1e163"], 0, ""),
+    ):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == code and said in r.output, (args, r.output)
+
+
+def test_qif_xml_errors_are_located_and_entities_not_expanded(tmp_path):
+    bad = tmp_path / "bad.qif"
+    bad.write_text('<?xml version="1.0"?>\n<QIFDocument>\n  <Features>\n  <Bad attr=1>\n</QIFDocument>\n')
+    with pytest.raises(InputError) as e:
+        measure.read(bad)
+    assert (e.value.line, e.value.col) == (4, 13) and "line 4" not in e.value.message
+    secret = tmp_path / "secret.txt"
+    secret.write_text("1 2 3")
+    xxe = tmp_path / "xxe.qif"
+    xxe.write_text(f'<?xml version="1.0"?>\n<!DOCTYPE q [<!ENTITY e SYSTEM "file://{secret}">]>\n<QIFDocument><Features>'
+                   '<FeatureNominals><PointFeatureNominal id="1"><Location>&e;</Location><Normal>0 0 1</Normal>'
+                   '</PointFeatureNominal></FeatureNominals></Features></QIFDocument>\n')
+    with pytest.raises(InputError, match="Location needs 3 numbers, got 0"):
+        measure.read(xxe)
+
+
+# --------------------------------------------------------------------------------- the gate
+# Rates over 200 seeds (binomial standard error at 5 %: 1.5 %). The gate is Moran's I (one-sided,
+# by permutation up to 3,000 points) or the offset test, each at alpha / 2.
+GRID = np.array([(x, y, 0.0) for x in np.arange(0, 100, 5.0) for y in np.arange(0, 75, 5.0)])
+UP = np.tile([0.0, 0.0, 1.0], (len(GRID), 1))
+SEEDS = range(200)
+
+
+def _on_grid(e):
+    return measure.from_arrays(GRID, UP, deviation=e)
+
+
+def test_the_gate_false_alarm_rate_on_noise_is_at_most_alpha():
+    hits = sum(pf.analyze(_on_grid(np.random.default_rng(s).normal(0, 0.005, len(GRID)))).systematic for s in SEEDS)
+    assert hits <= 14, hits  # ≤ 7 % (nominal 5 %)
+
+
+def test_the_gate_sees_a_uniform_offset():
+    # the paper's uniform model (eq. 9: A_m = const): 3 sigma, and its own 20 µm with 5 µm noise
+    for a_m in (0.015, 0.020):
+        got = [pf.analyze(_on_grid(a_m + np.random.default_rng(s).normal(0, 0.005, len(GRID)))) for s in range(100)]
+        assert sum(g.systematic for g in got) >= 95
+        assert all("offset" in g.verdict.by for g in got)
+
+
+def test_the_gate_sees_the_demo_error(bench):
+    part, prog, err, first, clean, p, n = bench
+    hits = sum(pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=0.005, seed=s))).systematic
+               for s in SEEDS)
+    assert hits >= 190
+
+
+def test_a_checkerboard_is_not_a_systematic_pattern():
+    # ±10 µm alternating from point to point: negative autocorrelation, z ≪ 0, mean 0; no filter
+    # can extract it (the bilateral filter averages it away)
+    ij = np.round(GRID[:, 0] / 5) + np.round(GRID[:, 1] / 5)
+    e = 0.010 * np.where(ij % 2 == 0, 1.0, -1.0) + np.random.default_rng(0).normal(0, 0.001, len(GRID))
+    a = pf.analyze(_on_grid(e))
+    assert a.moran.z_randomization < -5 and not a.systematic and a.verdict.by == ()
+
+
+@pytest.mark.parametrize("method", ["bilateral", "spline"])
+def test_the_residual_check_passes_an_ideal_separation(method):
+    # a flat systematic error plus white noise: the random part is the noise, smoothed a little
+    passed = sum(pf.decompose(_on_grid(0.02 + np.random.default_rng(s).normal(0, 0.005, len(GRID))), method).noise.passed
+                 for s in SEEDS)
+    assert passed >= 180  # ≥ 90 %
+
+
+def test_auto_chooses_the_smoothest_passing_setting_or_says_none_passed(tmp_path):
+    # a smooth error (second-degree polynomial, the paper's eq. 7) with 5 µm noise: --auto finds a
+    # setting whose random part is the noise (its std within 30 % of 5 µm: a filter keeps a share of
+    # the noise in what it calls systematic) and whose systematic part is within 3 µm RMS of dF
+    u, v = GRID[:, 0] / 100 * 2 - 1, GRID[:, 1] / 75 * 2 - 1
+    df = 0.02 * (u * u - 0.5 * v + 0.8 * u * v)
+    for s in range(5):
+        e = df + np.random.default_rng(s).normal(0, 0.005, len(GRID))
+        for method in ("bilateral", "spline"):
+            d = pf.decompose(_on_grid(e), method, auto=True)
+            assert d.auto["passed"] and d.noise.passed
+            assert 0.0035 <= d.noise.std <= 0.0065, (method, d.noise.std)
+            assert np.sqrt(np.mean((d.systematic - df) ** 2)) < 0.003
+    # stripes two points wide: the spline's residual keeps them (lag-1 correlation), at every p
+    stripes = 0.02 * ((GRID[:, 0] // 5) % 2) + np.random.default_rng(0).normal(0, 0.001, len(GRID))
+    d = pf.decompose(_on_grid(stripes), "spline", auto=True)
+    assert d.auto == {"passed": False, "setting": {"p": pytest.approx(1 / (1 + 5.0**3 / 9))}} and not d.noise.passed
+    m = tmp_path / "stripes.csv"
+    m.write_text("x,y,z,i,j,k,dev\n" + "".join(f"{x},{y},0,0,0,1,{e:.6f}\n" for (x, y, _), e in zip(GRID, stripes)))
+    r = CliRunner().invoke(main, ["compensate", str(m), "--filter", "spline", "--auto", "--json", str(tmp_path / "c.json")])
+    assert r.exit_code == 0, r.output
+    assert "warning: --auto found no spline setting" in r.stdout
+    j = json.loads((tmp_path / "c.json").read_text())
+    # the columns alternate 0 / 20 µm: a mean of 10 µm, which the offset test sees
+    assert j["auto"]["passed"] is False and j["verdict"]["systematic"] is True and "offset" in j["verdict"]["by"]
+    assert set(j["offset"]) == {"mean", "t", "p_value"}
+
+
+def test_units_of_dmis_qif_and_unitless_files(tmp_path):
+    # the same four points written in inches: read back in mm (25.4 mm per inch, exact)
+    nom_in, meas_in = NOM / 25.4, MEAS / 25.4
+    dmis = ["DMISMN/'inch part',05.0", "UNITS/INCH,ANGDEC"]
+    for k in range(4):
+        dmis += [f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*nom_in[k], *NRM[k])))}",
+                 f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*meas_in[k], *NRM[k])))}"]
+    (tmp_path / "in.dmo").write_text("\n".join(dmis + ["ENDFIL"]) + "\n")
+    m = measure.read(tmp_path / "in.dmo")
+    np.testing.assert_allclose(m.nominal, NOM, atol=1e-12)
+    np.testing.assert_allclose(m.deviation, DEV, atol=1e-12)
+    with pytest.raises(InputError, match="UNITS/INCH disagrees with --units mm") as e:
+        measure.read(tmp_path / "in.dmo", units="mm")
+    assert e.value.line == 2
+    # a change of units mid-file applies to what follows it; polar points are refused
+    (tmp_path / "mixed.dmo").write_text("\n".join(dmis[:4] + ["UNITS/MM,ANGDEC"] + [
+        f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*NOM[k], *NRM[k])))}\n"
+        f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*MEAS[k], *NRM[k])))}" for k in (1, 2, 3)]) + "\n")
+    np.testing.assert_allclose(measure.read(tmp_path / "mixed.dmo").deviation, DEV, atol=1e-12)
+    (tmp_path / "pol.dmo").write_text("DMISMN/'p',05.0\nF(P1)=FEAT/POINT,POL,10,45,0,0,0,1\n")
+    with pytest.raises(InputError, match="only Cartesian"):
+        measure.read(tmp_path / "pol.dmo")
+    # QIF with FileUnits in inches
+    nominals = "".join(f'<PointFeatureNominal id="{10 + k}"><Location>{" ".join(map(_r, nom_in[k]))}</Location>'
+                       f'<Normal>{" ".join(map(str, NRM[k]))}</Normal></PointFeatureNominal>' for k in range(4))
+    meas = "".join(f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{10 + k}</FeatureItemId>'
+                   f'<Location>{" ".join(map(_r, meas_in[k]))}</Location></PointFeatureMeasurement>' for k in range(4))
+    (tmp_path / "in.qif").write_text(
+        '<?xml version="1.0"?>\n<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">\n<FileUnits><PrimaryUnits>'
+        "<LinearUnit><SIUnitName>metre</SIUnitName><UnitName>in</UnitName></LinearUnit></PrimaryUnits></FileUnits>\n"
+        f"<Features><FeatureNominals>{nominals}</FeatureNominals></Features>\n<MeasurementsResults>"
+        f"<FeatureMeasurements>{meas}</FeatureMeasurements></MeasurementsResults></QIFDocument>\n")
+    np.testing.assert_allclose(measure.read(tmp_path / "in.qif").deviation, DEV, atol=1e-12)
+    # unitless files: --units inch
+    (tmp_path / "in.txt").write_text("".join(" ".join(map(_r, (*nom_in[k], *NRM[k], *meas_in[k]))) + "\n"
+                                             for k in range(4)))
+    np.testing.assert_allclose(measure.read(tmp_path / "in.txt", units="inch").deviation, DEV, atol=1e-12)
+    r = CliRunner().invoke(main, ["analyze", str(tmp_path / "in.dmo"), "--units", "mm"])
+    assert r.exit_code == 2 and "in.dmo:2:1: error: UNITS/INCH disagrees" in r.output
+
+
+def _r(v) -> str:
+    return repr(float(v))
+
+
+def test_a_program_needs_the_tool_radius(tmp_path):
+    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,0.01" for x in range(0, 50, 5) for y in range(0, 50, 5)]
+    (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "p.ngc").write_text("G0 X0 Y0 Z1\nG1 Z0 F100\nG1 X40\nM2\n")
+    r = CliRunner().invoke(main, ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"),
+                                  "-o", str(tmp_path / "o.ngc")])
+    assert r.exit_code == 2 and "--program needs --tool-radius" in r.output and not (tmp_path / "o.ngc").exists()
+
+
+def test_a_surface_beyond_the_measured_points_is_refused_unless_accepted(tmp_path):
+    # a 15 x 11 grid over 5..75 x 5..55 (5 mm): the extent 0..80 x 0..60 adds a 5 mm strip, whose
+    # corners are sqrt(5² + 5²) = 7.07 mm from the points' hull; 56 of the 17 x 13 nodes are outside
+    pts = np.array([(x, y, 0.0) for x in range(5, 76, 5) for y in range(5, 56, 5)])
+    e = pf.nominal_extrapolation(pf.fit_height_surface(pts, extent=(0, 80, 0, 60)), pts)
+    assert e.max_distance == pytest.approx(np.hypot(5, 5), rel=1e-12) and e.area_fraction == pytest.approx(56 / 221)
+    assert pf.nominal_extrapolation(pf.fit_height_surface(pts), pts).max_distance == 0.0
+    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,{0.01 + 0.0002 * x:.5f}" for x, y, _ in pts]
+    (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
+    args = ["compensate", str(tmp_path / "m.csv"), "--extent", "0,80,0,60", "--json", str(tmp_path / "c.json"),
+            "--report", str(tmp_path / "r.html")]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and "would reach 7.07 mm beyond the measured points (25% of its grid" in r.output
+    assert not (tmp_path / "c.json").exists()
+    r = CliRunner().invoke(main, args + ["--extrapolate-nominal"])
+    assert r.exit_code == 0, r.output
+    j = json.loads((tmp_path / "c.json").read_text())
+    assert j["extrapolation"] == {"max_distance": pytest.approx(np.hypot(5, 5)), "area_fraction": pytest.approx(56 / 221)}
+    assert "Extrapolated nominal" in (tmp_path / "r.html").read_text()
+    # a scatter: the corners of its bounding box are beyond its hull
+    rng = np.random.default_rng(0)
+    sc = np.column_stack([rng.uniform(0, 80, 50), rng.uniform(0, 60, 50), np.zeros(50)])
+    assert pf.nominal_extrapolation(pf.fit_height_surface(sc), sc).max_distance > 1.0
+
+
+def test_the_border_holds_the_nearest_measured_value():
+    from ncadapt.surfaces import extrapolate_border
+
+    u, v = np.arange(6.0), np.arange(5.0)
+    vals = np.add.outer(u, 10 * v)
+    known = np.zeros((6, 5), bool)
+    known[1:5, 1:4] = True
+    out = extrapolate_border(u, v, np.where(known, vals, 0.0), known, mode="hold")
+    assert out[0, 0] == vals[1, 1] and out[5, 4] == vals[4, 3] and out[0, 2] == vals[1, 2]
+    np.testing.assert_array_equal(out[known], vals[known])

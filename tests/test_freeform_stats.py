@@ -21,14 +21,18 @@ def _data(n=300, seed=0):
 
 def _esda(values, w):
     w.transform = "r"
-    return esda.Moran(values, w, permutations=0)
+    # one-tailed: esda gives the tail on the side of z, P(Z ≥ z) for z > 0 and P(Z ≤ z) below
+    return esda.Moran(values, w, permutations=0, two_tailed=False)
 
 
 def _same(ours, ref):
     for a, b in ((ours.I, ref.I), (ours.expected, ref.EI), (ours.variance_normality, ref.VI_norm),
                  (ours.variance_randomization, ref.VI_rand), (ours.z_normality, ref.z_norm),
-                 (ours.z_randomization, ref.z_rand), (ours.p_normality, ref.p_norm), (ours.p_randomization, ref.p_rand)):
+                 (ours.z_randomization, ref.z_rand)):
         assert a == pytest.approx(b, rel=1e-10, abs=1e-10)
+    # ours is one-sided towards positive autocorrelation, P(Z ≥ z), whatever the sign of z
+    for p, z, tail in ((ours.p_normality, ref.z_norm, ref.p_norm), (ours.p_randomization, ref.z_rand, ref.p_rand)):
+        assert p == pytest.approx(tail if z > 0 else 1 - tail, rel=1e-9)
 
 
 def test_moran_knn_equals_esda():
@@ -69,7 +73,8 @@ def test_moran_st_louis_published_value():
     # esda's Moran docstring: round(I, 3) = 0.244, EI = -1/77, p_norm = 0.00027147862770937614
     assert round(ours.I, 3) == 0.244
     assert ours.expected == pytest.approx(-0.012987012987012988, rel=1e-12)
-    assert ours.p_normality == pytest.approx(0.00027147862770937614, rel=1e-6)
+    # one-sided (z > 0): half the published two-tailed value
+    assert ours.p_normality == pytest.approx(0.00027147862770937614 / 2, rel=1e-6)
     _same(ours, _esda(y, w))
 
 
@@ -86,7 +91,7 @@ def test_moran_sids_published_value():
     # esda's Moran docstring: round(I, 3) = 0.248, p_norm = 0.0001158330781489969
     assert round(ours.I, 3) == 0.248
     assert ours.expected == pytest.approx(-1.0 / (len(y) - 1), rel=1e-12)
-    assert ours.p_normality == pytest.approx(0.0001158330781489969, rel=1e-6)
+    assert ours.p_normality == pytest.approx(0.0001158330781489969 / 2, rel=1e-6)
     _same(ours, _esda(y, w))
 
 
@@ -108,6 +113,66 @@ def test_moran_rejects_bad_input():
     q[1] = q[0]
     with pytest.raises(ValueError, match="coincide"):
         stats.moran(q, v)
+
+
+def test_moran_idw_large_power_is_the_nearest_neighbour_limit():
+    # w_ij = d_ij^-K row-standardised tends, as K grows, to equal weights on each point's nearest
+    # neighbours: built here by hand on a jittered grid (a point's nearest is unique) and on an
+    # exact grid (2 to 4 nearest at one distance), for the dense and the distance-band weights
+    from scipy.spatial.distance import cdist
+
+    rng = np.random.default_rng(4)
+    g = np.array([(x, y) for x in range(12) for y in range(9)], float)
+    for p in (g + rng.uniform(-0.05, 0.05, g.shape), g):
+        v = np.sin(p[:, 0] / 2) + 0.3 * rng.normal(size=len(p))
+        d = cdist(p, p)
+        np.fill_diagonal(d, np.inf)
+        nearest = (d <= d.min(axis=1, keepdims=True) * (1 + 1e-12)).astype(float)
+        ref = stats.moran_matrix(nearest, v)
+        for kw in ({}, {"threshold": 3.0}):
+            ours = stats.moran(p, v, power=1e12, **kw)
+            assert np.isfinite([ours.I, ours.z_randomization, ours.z_normality]).all()
+            np.testing.assert_allclose([ours.I, ours.z_randomization, ours.z_normality],
+                                       [ref.I, ref.z_randomization, ref.z_normality], rtol=1e-9)
+
+
+def test_moran_is_free_of_units():
+    # I and its z do not depend on the units of the points or of the values (closed form: every
+    # term is a ratio of sums of the same degree); extreme scales must not overflow
+    p, v = _data(n=200, seed=7)
+    ref = stats.moran(p, v, power=2.0)
+    for sp, sv in ((1e-3, 1.0), (1e3, 1e-200), (1.0, 1e200)):
+        m = stats.moran(p * sp, v * sv, power=2.0)
+        np.testing.assert_allclose([m.I, m.z_randomization, m.z_normality],
+                                   [ref.I, ref.z_randomization, ref.z_normality], rtol=1e-9)
+
+
+def test_moran_knn_needs_more_points_than_neighbours():
+    p, v = _data(n=10)
+    with pytest.raises(ValueError, match="need more than 10 points; there are 10"):
+        stats.moran(p, v, weights="knn", neighbors=10)
+
+
+def test_too_many_pairs_are_refused_before_listing(monkeypatch):
+    from ncadapt import neighbours
+
+    p, v = _data(n=100)
+    monkeypatch.setattr(neighbours, "MAX_PAIRS", 1000)
+    # all pairs: 100 * 99 / 2 = 4950 > 1000
+    with pytest.raises(ValueError, match="joins 4,950 pairs"):
+        filters.bilateral(p, v, 1e6, 1.0)
+    with pytest.raises(ValueError, match="joins 4,950 pairs"):
+        stats.moran(p, v, threshold=1e9)
+
+
+def test_bilateral_limits_of_its_sigmas():
+    # sigma_s → 0: no neighbour weighs anything, the values come back as they were; both sigmas
+    # → ∞: every weight is 1 and each value becomes the mean (closed forms), with no overflow
+    p, v = _data(n=60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(filters.bilateral(p, v, 1.0, 1e-300), v)
+        np.testing.assert_allclose(filters.bilateral(p, v, 1e300, 1e300), np.full(60, v.mean()), rtol=1e-12)
 
 
 def test_bilateral_equals_opencv_away_from_borders():
@@ -173,3 +238,92 @@ def test_border_extrapolation_is_exact_for_cubics_and_bounded():
     lo, hi = g[known].min(), g[known].max()
     assert out.max() == pytest.approx(hi + (hi - lo) / 4) and out.min() >= lo - (hi - lo) / 4 - 1e-12
     np.testing.assert_allclose(out[known], g[known])
+
+
+def test_a_p_value_that_underflows_is_never_printed_as_zero():
+    # z = 40 has p = 2 sf(40) ≈ 7.3e-350, below the smallest double: it underflows to 0
+    from scipy.stats import norm
+
+    assert 2 * norm.sf(40) == 0
+    assert stats.p_text(2 * norm.sf(40)) == "< 1e-300"
+    assert stats.p_text(0.0123456) == "0.0123"
+    assert stats.p_text(2.5e-300) == "2.5e-300"
+
+
+def test_offset_test_equals_scipy_ttest_1samp():
+    from scipy.stats import ttest_1samp
+
+    for s in range(5):
+        v = np.random.default_rng(s).normal(0.002 * s, 0.005, 50)
+        o, ref = stats.offset(v), ttest_1samp(v, 0.0)
+        assert (o.t, o.p_value, o.mean) == (pytest.approx(ref.statistic, rel=1e-12), pytest.approx(ref.pvalue, rel=1e-9),
+                                            pytest.approx(v.mean(), rel=1e-12))
+    # every value alike: an offset exactly when it is not 0
+    assert stats.offset(np.full(10, 0.02)).p_value < 1e-100 and stats.offset(np.zeros(10)).p_value == 1.0
+
+
+def test_lag1_test_equals_scipy_pearsonr_one_sided():
+    from scipy.stats import pearsonr
+
+    for s in range(5):
+        x = np.cumsum(np.random.default_rng(s).normal(size=80)) * (s % 2) + np.random.default_rng(s).normal(size=80)
+        r, t, p = stats.lag1_autocorrelation(x)
+        ref = pearsonr(x[:-1], x[1:], alternative="greater")
+        assert r == pytest.approx(ref.statistic, rel=1e-12) and p == pytest.approx(ref.pvalue, rel=1e-8)
+
+
+def test_pearson_normality_equals_scipy_chisquare():
+    from scipy.stats import chisquare, norm
+
+    x = np.random.default_rng(2).normal(size=500)
+    chi2, dof, p = stats.pearson_normality(x)
+    k = dof + 3
+    edges = norm.ppf(np.linspace(0, 1, k + 1)[1:-1], loc=x.mean(), scale=x.std(ddof=1))
+    counts = np.bincount(np.searchsorted(edges, x), minlength=k)
+    ref = chisquare(counts, ddof=2)  # two parameters estimated: k - 1 - 2 degrees of freedom
+    assert chi2 == pytest.approx(ref.statistic, rel=1e-12) and p == pytest.approx(ref.pvalue, rel=1e-12)
+
+
+def test_permutation_p_agrees_with_esda_p_sim():
+    # both are (1 + #{I_r ≥ I}) / (R + 1) over random permutations (different generators): they
+    # agree within the Monte-Carlo error, about sqrt(p (1 - p) / R)
+    p, _ = _data(n=150, seed=9)
+    v = 0.15 * np.sin(p[:, 0]) + np.random.default_rng(9).normal(size=150)
+    w = libpysal.weights.KNN(p, k=6)
+    w.transform = "r"
+    ref = esda.Moran(v, w, permutations=9999, two_tailed=False)
+    ours = stats._with_permutations(stats.moran(p, v, weights="knn", neighbors=6), stats.weights_matrix(
+        p, stats.Weights("knn", None, None, 6)), v - v.mean(), r=9999)
+    assert ref.p_sim > 0.002 and ref.z_sim > 0
+    assert ours.p_permutation == pytest.approx(ref.p_sim, abs=4 * np.sqrt(ref.p_sim * (1 - ref.p_sim) / 9999))
+    # the decision uses the permutation p up to PERMUTATION_MAX_N points
+    assert stats.moran(p, v).p_value == stats.moran(p, v).p_permutation is not None
+
+
+def test_default_p_is_csaps_automatic_choice():
+    csaps = pytest.importorskip("csaps")
+    for h in (0.5, 1.0, 2.5, 4.0):
+        x = np.arange(0, 30 * h, h)
+        y = np.sin(x / (5 * h)) + np.random.default_rng(1).normal(0, 0.1, len(x))
+        assert filters.csaps_auto_p(h) == pytest.approx(csaps.CubicSmoothingSpline(x, y).smooth, rel=1e-9)
+    assert filters.csaps_auto_p(2.5) == pytest.approx(0.3655, abs=1e-4)  # the demo's 2.5 mm grid
+
+
+def test_one_p_smooths_grid_and_scattered_points_alike():
+    # points on a grid given to the grid smoother (tensor-product csaps) and to the scattered one
+    # (thin plate, λ = 8π (1 − p) / p): the residuals they leave agree within about a third, much closer than
+    # with λ = (1 − p) / p (8π times too flexible)
+    from scipy.interpolate import RBFInterpolator
+
+    xs, ys = np.arange(0, 70.1, 2.5), np.arange(0, 50.1, 2.5)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([X.ravel(), Y.ravel()])
+    for p in (0.05, 0.2, filters.csaps_auto_p(2.5), 0.6):
+        g = 0.02 * np.sin(X / 9) * np.cos(Y / 11) + 0.01 * (X / 70) ** 2 + rng.normal(0, 0.005, X.shape)
+        grid = g - filters.smoothing_spline_grid((xs, ys), g, p)
+        scattered = g.ravel() - filters.smoothing_spline(pts, g.ravel(), p)
+        ratio = np.sqrt((scattered**2).mean() / (grid**2).mean())
+        assert 0.75 <= ratio <= 1.35, (p, ratio)
+        loose = g.ravel() - RBFInterpolator(pts, g.ravel(), kernel="thin_plate_spline", smoothing=(1 - p) / p)(pts)
+        assert abs(np.log(np.sqrt((loose**2).mean() / (grid**2).mean()))) > 2 * abs(np.log(ratio))

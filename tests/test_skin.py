@@ -193,7 +193,8 @@ def test_opcua_loop_equals_the_in_process_run():
     th.start()
     assert ready.wait(20)
     lat: list = []
-    steps = asyncio.run(lp.run_opcua(url, lambda: sk.compensator("kalman"), sk.T_TARGET, pockets=len(ms), latencies=lat))
+    steps = asyncio.run(lp.run_opcua(url, lambda: sk.compensator("kalman"), sk.T_TARGET, pockets=len(ms), latencies=lat,
+                                     make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G)))
     th.join(20)
     assert not errors
     assert steps == ref.steps
@@ -326,13 +327,13 @@ def test_serve_and_loop_clis_over_opcua_equal_the_in_process_run(tmp_path):
     pytest.importorskip("asyncua")
     url = "opc.tcp://127.0.0.1:48412/ncadapt/"
     srv = subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                            "--endpoint", url, "--seed", "4", "--json", str(tmp_path / "srv.json")],
+                            "--endpoint", url, "--seed", "4", "--insecure", "--json", str(tmp_path / "srv.json")],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = srv.stderr.readline()
         assert line.startswith(f"serving the skin testbed at {url}"), line + srv.stderr.read()
         r = _cli("skin", "loop", "--opcua", url, "--pockets", 2, "--target", sk.T_TARGET, "--depth", sk.A_G,
-                 "--json", tmp_path / "cl.json")
+                 "--insecure", "--json", tmp_path / "cl.json")
         assert r.exit_code == 0, r.output
         out, err = srv.communicate(timeout=60)
     finally:
@@ -349,5 +350,5 @@ def test_serve_and_loop_clis_over_opcua_equal_the_in_process_run(tmp_path):
 
 def test_loop_cli_names_an_unreachable_controller():
     url = "opc.tcp://127.0.0.1:48413/ncadapt/"  # nothing listens here
-    r = _cli("skin", "loop", "--opcua", url, "--target", 1.5, "--depth", A_G)
+    r = _cli("skin", "loop", "--opcua", url, "--target", 1.5, "--depth", A_G, "--connect-timeout", 0, "--insecure")
     assert r.exit_code == 2 and r.output.startswith(f"{url}: error: cannot reach the controller")

@@ -3,6 +3,11 @@
 #: Millimetres per inch (exact, by the 1959 international yard and pound agreement).
 MM_PER_INCH = 25.4
 
+#: Largest coordinate or length read from a file or an option, mm. No machine tool has an axis
+#: of a kilometre (the largest gantry mills travel some 60 m); a value beyond this is not a
+#: position in millimetres, and bounding it keeps every square and sum of them finite.
+COORD_MAX = 1e6
+
 #: Default chord tolerance for linearising arcs, mm. 2 µm is below the form tolerance of
 #: precision milling (IT5 on 10–18 mm is 8 µm, ISO 286-1) and near a probe's repeatability.
 CHORD_TOL = 0.002

@@ -66,7 +66,9 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
     comp = pf.compensate(part, meas, decomposition.systematic)
     say("correcting the program")
     corrected_path = out / "corrected.ngc"
-    corr = prog.correct_to(corrected_path, comp.field(TOOL_RADIUS), progress=say)
+    # the surface is the whole part: tool centres along its edge, up to a tool radius beyond the
+    # tips' hull, take the edge value
+    corr = prog.correct_to(corrected_path, comp.field(TOOL_RADIUS, "clamp"), progress=say)
     step_path = out / "compensated.step"
     cad.write(comp.compensated, step_path)
     say("machining the second part with the corrected program (virtual)")
@@ -87,6 +89,8 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
         "measured_rms_before": rms(meas.deviation),
         "measured_rms_after": rms(after_measured),
         "moran": analysis.moran.as_dict(),
+        "offset": analysis.offset.as_dict(),
+        "verdict": analysis.verdict.as_dict(),
         "filter": decomposition.as_dict(),
         "program": corr.as_dict(),
         "model": {"tool_radius": TOOL_RADIUS, "stepover": STEPOVER, "noise": NOISE,

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .constants import COORD_MAX
 from ._io import csv_column, csv_reader, read_text
 from .errors import InputError, RefusedError, cut
 
@@ -338,6 +339,9 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
             if not math.isfinite(v):
                 raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno,
                                  csv_column(row, k))
+            if abs(v) > COORD_MAX:
+                raise InputError(f"column {c}: {v:g} is beyond ±{COORD_MAX:g}, larger than any machine value",
+                                 str(path), lineno, csv_column(row, k))
             cols[c].append(v)
         linenos.append(lineno)
     if header is None:
@@ -429,6 +433,8 @@ def _numbers(path: Path):
         for v, word in zip(values, s.split()):
             if not math.isfinite(v):
                 raise InputError(f"value is not finite ({cut(word)})", str(path), n, line.find(word) + 1)
+            if abs(v) > COORD_MAX:
+                raise InputError(f"{v:g} mm is beyond ±{COORD_MAX:g} mm", str(path), n, line.find(word) + 1)
         yield n, values
 
 

@@ -8,9 +8,17 @@ Bilateral filter on scattered points (Tomasi & Manduchi 1998, as the freeform me
 Smoothing spline with MATLAB csaps' parameter p ∈ [0, 1] (p = 0: least-squares straight line,
 p = 1: interpolating natural cubic spline): it minimises p Σ (y_i − f(x_i))² + (1 − p) ∫ f''² dx.
 On a grid the 1-D smoother (de Boor, "A Practical Guide to Splines", ch. XIV, the algorithm csaps
-implements) is applied along each axis in turn. Scattered points get a thin-plate smoothing spline
-with the same weighting: smoothing λ = (1 − p) / p (MATLAB tpaps' convention) through
-:class:`scipy.interpolate.RBFInterpolator`.
+implements) is applied along each axis in turn (csaps on gridded data). Scattered points get the
+thin-plate smoothing spline of the same weighting, p Σ (y_i − f(x_i))² + (1 − p) J(f) with the
+thin-plate energy J = ∫∫ f_xx² + 2 f_xy² + f_yy²: scipy's :class:`~scipy.interpolate.RBFInterpolator`
+with the kernel r² log r minimises Σ (y_i − f(x_i))² + λ cᵀKc and J(f) = 8π cᵀKc for that kernel
+(its Green's function is r² log r / 8π; Wahba 1990, ch. 2), so λ = 8π (1 − p) / p. The two are
+different functionals (a tensor product of 1-D splines, a thin plate), so one p smooths alike but
+not identically: on grid points both leave residuals within about a third of each other
+(tests/test_freeform_stats.py).
+
+The default p is csaps' automatic choice, p·trace(A) = (1 − p)·trace(B) in its linear system,
+which for sites h apart is p = 1 / (1 + h³ / 9) (:func:`csaps_auto_p`).
 """
 
 from __future__ import annotations
@@ -21,6 +29,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .errors import InputError
+from .neighbours import pairs_within
 
 
 def bilateral(points, values, sigma_c: float, sigma_s: float, radius: float | None = None) -> np.ndarray:
@@ -37,15 +46,25 @@ def bilateral(points, values, sigma_c: float, sigma_s: float, radius: float | No
         raise ValueError(f"sigma_c and sigma_s must be > 0, got {sigma_c}, {sigma_s}")
     r = 2.0 * sigma_c if radius is None else float(radius)
     # every pair closer than r once (i < j), from the KD-tree as an array; each counts both ways
-    pairs = cKDTree(p).query_pairs(r, output_type="ndarray")
+    pairs = pairs_within(cKDTree(p), r, "the bilateral filter's radius 2 sigma_c =")
     i, j = pairs[:, 0], pairs[:, 1]
-    d2 = ((p[i] - p[j]) ** 2).sum(axis=1)
-    w = np.exp(-d2 / (2 * sigma_c**2) - (s[i] - s[j]) ** 2 / (2 * sigma_s**2))
+    # distances divided by the sigmas before squaring: no overflow for any positive sigma
+    dc = np.sqrt(((p[i] - p[j]) ** 2).sum(axis=1)) / sigma_c
+    ds = np.abs(s[i] - s[j]) / sigma_s
+    with np.errstate(over="ignore"):  # a distance of many sigmas weighs exp(-inf) = 0
+        w = np.exp(-0.5 * (dc * dc + ds * ds))
     n = len(s)
     # the point itself has weight 1
     num = s + np.bincount(i, weights=w * s[j], minlength=n) + np.bincount(j, weights=w * s[i], minlength=n)
     den = 1.0 + np.bincount(i, weights=w, minlength=n) + np.bincount(j, weights=w, minlength=n)
     return num / den
+
+
+def csaps_auto_p(h: float) -> float:
+    """csaps' automatic smoothing parameter for sites ``h`` apart: 1 / (1 + trace(R) / (6 trace(QᵀQ)))
+    with R = tridiag(h, 4h, h) and Qᵀ the second differences / h, whose traces are 4h and 6/h² per
+    interior site: 1 / (1 + h³ / 9)."""
+    return 1.0 / (1.0 + h**3 / 9.0)
 
 
 def _csaps_1d_operator(x: np.ndarray, p: float) -> np.ndarray:
@@ -87,7 +106,8 @@ def smoothing_spline_grid(axes, values, p: float) -> np.ndarray:
 
 
 def smoothing_spline(points, values, p: float) -> np.ndarray:
-    """Thin-plate smoothing spline (λ = (1 − p) / p) of scattered ``values`` at their points."""
+    """Thin-plate smoothing spline (λ = 8π (1 − p) / p, see the module docstring) of scattered
+    ``values`` at their points."""
     from scipy.interpolate import RBFInterpolator
 
     if not 0 < p <= 1:
@@ -97,5 +117,5 @@ def smoothing_spline(points, values, p: float) -> np.ndarray:
     if len(v) < 4:
         raise InputError(f"a thin-plate spline needs at least 4 points, got {len(v)}")
     neighbors = None if len(v) <= 3000 else 100
-    f = RBFInterpolator(pts, v, kernel="thin_plate_spline", smoothing=(1 - p) / p, neighbors=neighbors)
+    f = RBFInterpolator(pts, v, kernel="thin_plate_spline", smoothing=8 * np.pi * (1 - p) / p, neighbors=neighbors)
     return f(pts)

@@ -14,29 +14,107 @@ OPC UA exchange (namespace ``urn:ncadapt:skin``, object ``Controller``): the con
 ``Sequence``; the client answers each sequence number by writing ``W1Offset`` (mm; only when it
 stepped) and then ``Ack`` = that number. The controller applies the offset and cuts on to the
 next reading only after the Ack, so a run over OPC UA is step for step the in-process run.
+Security: Basic256Sha256 with SignAndEncrypt, application certificates and a user name and
+password (:class:`Security`); NoSecurity only when asked for (``--insecure``). The
+controller also publishes ``Pockets`` (how many it will finish); the client sets ``Fault`` = true
+when its interlocks stop the loop, and the controller then holds W1 and stops feeding.
+
+Every adapter runs the same interlocks (:class:`ncadapt.processes.skin.Interlocks`) between the
+readings and the compensator.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
+from dataclasses import dataclass
 
 NAMESPACE = "urn:ncadapt:skin"
+SERVER_URI = "urn:ncadapt:skin:controller"
+CLIENT_URI = "urn:ncadapt:skin:client"
 
 
-def run(source, sink, compensator, target_thickness: float, *, on_step=None) -> int:
-    """Read until the source is exhausted; return the number of compensator steps."""
+@dataclass(frozen=True)
+class Security:
+    """OPC UA security of the exchange: Basic256Sha256 with SignAndEncrypt, an application
+    certificate (DER) and private key (PEM) per side, and a user name and password. The client also
+    names the controller's certificate (``peer_cert``); the controller accepts ``user`` with
+    ``password`` only. None instead of a Security is NoSecurity (``--insecure``)."""
+
+    cert: str
+    key: str
+    user: str
+    password: str
+    peer_cert: str | None = None
+
+
+async def make_certificates(folder, host: str = "127.0.0.1") -> dict:
+    """Self-signed application certificates (one year) for the controller and the client, as
+    asyncua makes them: ``controller.der``/``controller.pem``, ``client.der``/``client.pem`` in
+    ``folder``; an existing valid pair is kept. Returns the paths."""
+    from pathlib import Path
+
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    folder = Path(folder)
+    out = {}
+    for name, uri, use in (("controller", SERVER_URI, ExtendedKeyUsageOID.SERVER_AUTH),
+                           ("client", CLIENT_URI, ExtendedKeyUsageOID.CLIENT_AUTH)):
+        key, cert = folder / f"{name}.pem", folder / f"{name}.der"
+        await setup_self_signed_certificate(key, cert, uri, host, [use], {"commonName": f"ncadapt skin {name}"})
+        key.chmod(0o600)  # a private key: its owner's only
+        out[name] = (str(cert), str(key))
+    return out
+
+
+def ua_error():
+    from asyncua import ua
+
+    return ua.UaError
+
+
+def _user_manager(security: Security):
+    from asyncua.crypto.permission_rules import User, UserRole
+    from asyncua.server.user_managers import UserManager
+
+    class _Users(UserManager):
+        def get_user(self, iserver, username=None, password=None, certificate=None):  # noqa: ARG002
+            if username == security.user and password == security.password:
+                return User(role=UserRole.User)
+            return None
+
+    return _Users()
+
+
+def run(source, sink, compensator, target_thickness: float, *, guard=None, on_step=None) -> int:
+    """Read until the source is exhausted; return the number of compensator steps.
+
+    ``guard`` (:class:`ncadapt.processes.skin.Interlocks`) decides which readings reach the
+    compensator and bounds the commands it gives: a rejected reading holds the command in force
+    (``sink.skip()``), too many in a row raise :class:`ncadapt.processes.skin.LoopStopped` with W1
+    held. Without a guard only missing and non-finite readings are skipped (for tests of the
+    compensators alone)."""
     n = 0
-    for t in source:
-        if t is None or compensator is None or not math.isfinite(t):
+    for i, t in enumerate(source):
+        if guard is not None:
+            reason = guard.check(t)
+            if reason is not None or compensator is None:
+                sink.skip()
+                if reason is not None:
+                    guard.reject(reason, i)
+                continue
+        elif t is None or compensator is None or not math.isfinite(t):
             sink.skip()
             continue
         compensator.step(t - target_thickness)
-        sink.write(compensator.w1_offset)
+        w1 = guard.bound(compensator) if guard is not None else compensator.w1_offset
+        sink.write(w1)
         n += 1
         if on_step:
-            on_step(n, t, compensator.w1_offset)
+            on_step(n, t, w1)
     return n
 
 
@@ -48,7 +126,10 @@ class MachineLink:
 
     def __iter__(self):
         while not self.machine.done:
-            yield self.machine.advance()
+            t = self.machine.advance()
+            if t is None and self.machine.done:
+                return  # the path ended before the next reading
+            yield t
 
     def write(self, offset: float) -> None:
         self.machine.command(self.target_depth + offset)
@@ -57,11 +138,11 @@ class MachineLink:
         pass
 
 
-def run_in_process(machine, compensator) -> int:
-    from .sim.skin import A_G, T_TARGET
-
-    link = MachineLink(machine, A_G)
-    return run(link, link, compensator, T_TARGET)
+def run_in_process(machine, compensator, target_thickness: float, target_depth: float, *, guard=None) -> int:
+    """Run a compensator on an in-process machine (a source of readings with ``done``,
+    ``advance()`` and ``command(depth)``)."""
+    link = MachineLink(machine, target_depth)
+    return run(link, link, compensator, target_thickness, guard=guard)
 
 
 class CsvSource:
@@ -72,6 +153,7 @@ class CsvSource:
         self.path = str(path)
         self.header: list[str] = []
         self.row: list[str] = []
+        self.line = 1  # the line of the current row (1: the header)
 
     def __iter__(self):
         from ._io import csv_column, csv_reader
@@ -85,6 +167,7 @@ class CsvSource:
         k = head.index("thickness")
         for row in r:
             self.row = row
+            self.line = r.line_num
             v = row[k].strip() if k < len(row) else ""
             if not v:
                 yield None
@@ -136,22 +219,36 @@ class CsvSink:
 
 # ------------------------------------------------------------------------------------ OPC UA
 async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
-                        ready=None, poll: float = 0.0005):
+                        ready=None, poll: float = 0.0005, status: dict | None = None, ack_timeout: float = 5.0,
+                        security: Security | None = None):
     """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
-    its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done."""
+    its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done.
+    ``Pockets`` tells the client how many pockets there are; a client that sets ``Fault`` stops
+    the run with W1 held (``status["fault"]`` becomes True). A client that does not acknowledge a
+    reading within ``ack_timeout`` seconds is taken as lost: W1 held, the run stopped
+    (``status["lost"]`` becomes True) — the controller's watchdog."""
     from asyncua import Server, ua
 
-    server = Server()
+    server = Server(user_manager=_user_manager(security)) if security is not None else Server()
     await server.init()
     server.set_endpoint(endpoint)
-    server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    if security is None:
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    else:
+        await server.set_application_uri(SERVER_URI)
+        server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+        server.set_security_IDs(["Username"])
+        await server.load_certificate(security.cert)
+        await server.load_private_key(security.key)
     idx = await server.register_namespace(NAMESPACE)
     obj = await server.nodes.objects.add_object(idx, "Controller")
     thick = await obj.add_variable(idx, "Thickness", math.nan)
     seq = await obj.add_variable(idx, "Sequence", 0, varianttype=ua.VariantType.Int64)
     w1 = await obj.add_variable(idx, "W1Offset", 0.0)
     ack = await obj.add_variable(idx, "Ack", 0, varianttype=ua.VariantType.Int64)
-    for v in (w1, ack):
+    fault = await obj.add_variable(idx, "Fault", False, varianttype=ua.VariantType.Boolean)
+    await obj.add_variable(idx, "Pockets", len(machines), varianttype=ua.VariantType.Int64)
+    for v in (w1, ack, fault):
         await v.set_writable()
     async with server:
         if ready is not None:
@@ -163,55 +260,183 @@ async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.t
                 n += 1
                 await thick.write_value(math.nan if t is None else float(t))
                 await seq.write_value(n, ua.VariantType.Int64)
+                deadline = time.monotonic() + ack_timeout
                 while await ack.read_value() != n:
+                    if time.monotonic() > deadline:
+                        if status is not None:
+                            status["lost"] = True
+                        await seq.write_value(0, ua.VariantType.Int64)
+                        return
                     await asyncio.sleep(poll)
+                if await fault.read_value():
+                    # the client stopped the loop: hold W1 (no new command) and stop feeding
+                    if status is not None:
+                        status["fault"] = True
+                    await seq.write_value(0, ua.VariantType.Int64)
+                    await asyncio.sleep(0.05)
+                    return
                 if t is not None:
                     m.command(target_depth + float(await w1.read_value()))
             # a new pocket: the client starts its compensator afresh
             n += 1
             await thick.write_value(math.nan)
             await seq.write_value(-n, ua.VariantType.Int64)
+            deadline = time.monotonic() + ack_timeout
             while await ack.read_value() != -n:
+                if time.monotonic() > deadline:
+                    if status is not None:
+                        status["lost"] = True
+                    await seq.write_value(0, ua.VariantType.Int64)
+                    return
                 await asyncio.sleep(poll)
         await seq.write_value(0, ua.VariantType.Int64)
         await asyncio.sleep(0.05)
 
 
-async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int, poll: float = 0.0005,
-                    latencies: list | None = None) -> int:
-    """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
-    each pocket (a negative Sequence announces the next one). Returns the number of steps;
-    ``latencies`` collects, per reading, the seconds from seeing the new Sequence to writing Ack."""
-    from asyncua import Client, ua
+class ControllerLost(Exception):
+    """The OPC UA controller stopped publishing readings, or the connection broke."""
 
-    steps = 0
-    async with Client(url=url) as client:
+
+class ConnectionRefused(Exception):
+    """The controller refused the session: no endpoint with the client's security, or the user
+    name, password or certificate rejected."""
+
+
+async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4.0, security: Security | None = None):
+    """An asyncua client connected to ``url``, retrying (0.1 s, doubling to 1 s) for up to
+    ``timeout`` seconds while the server is still starting (refused or timed-out connections);
+    the last error once the time is up."""
+    from asyncua import Client
+
+    deadline = time.monotonic() + max(0.0, float(timeout))
+    delay = 0.1
+    while True:
+        client = Client(url=url, timeout=request_timeout)
+        if security is not None:
+            from asyncua import ua
+            from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+            client.application_uri = CLIENT_URI
+            await client.set_security(SecurityPolicyBasic256Sha256, security.cert, security.key,
+                                      server_certificate=security.peer_cert, mode=ua.MessageSecurityMode.SignAndEncrypt)
+            client.set_user(security.user)
+            client.set_password(security.password)
+        try:
+            await client.connect()
+            return client
+        except ua_error() as e:
+            with contextlib.suppress(Exception):
+                await client.disconnect()
+            raise ConnectionRefused(str(e).strip() or type(e).__name__) from None
+        except (OSError, asyncio.TimeoutError):
+            with contextlib.suppress(Exception):
+                await client.disconnect()
+            if time.monotonic() + delay > deadline:
+                raise
+            await asyncio.sleep(delay)
+            delay = min(2 * delay, 1.0)
+
+
+async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int | None = None,
+                    poll: float = 0.0005, latencies: list | None = None, make_guard=None,
+                    connect_timeout: float = 30.0, info: dict | None = None, stale_timeout: float = 5.0,
+                    security: Security | None = None) -> int:
+    """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
+    each pocket (a negative Sequence announces the next one), ``make_guard()`` its interlocks
+    (:class:`ncadapt.processes.skin.Interlocks`, the same as in a replay). ``pockets``: how many to
+    finish; None reads the controller's ``Pockets``. Returns the number of steps; ``latencies``
+    collects, per reading, the seconds from seeing the new Sequence to writing Ack; ``info`` gets
+    ``pockets``, ``rejected`` and ``max_abs_w1``.
+
+    When the interlocks stop the loop (persistent gauge faults) the client writes ``Fault`` = true
+    on the controller — its signal to hold W1 and stop feeding — acknowledges the reading, and
+    raises :class:`ncadapt.processes.skin.LoopStopped`. When the controller publishes no new
+    reading for ``stale_timeout`` seconds, or the connection breaks, :class:`ControllerLost` is
+    raised (the client's watchdog; the controller's own holds W1 when the Acks stop)."""
+    from asyncua import ua
+
+    info = {} if info is None else info
+    client = await connect(url, connect_timeout, security=security)
+    try:
         idx = await client.get_namespace_index(NAMESPACE)
         obj = await client.nodes.objects.get_child(f"{idx}:Controller")
-        thick = await obj.get_child(f"{idx}:Thickness")
-        seq = await obj.get_child(f"{idx}:Sequence")
-        w1 = await obj.get_child(f"{idx}:W1Offset")
-        ack = await obj.get_child(f"{idx}:Ack")
-        comp = make_compensator()
-        last, done = 0, 0
-        while done < pockets:
-            s = await seq.read_value()
-            if s == last or s == 0:
-                await asyncio.sleep(poll)
-                continue
-            t0 = time.perf_counter()
-            last = s
-            if s < 0:
-                done += 1
-                if comp is not None:
-                    steps += comp.steps
-                comp = make_compensator()
-            else:
-                t = await thick.read_value()
-                if comp is not None and math.isfinite(t):
+        nodes = {name: await obj.get_child(f"{idx}:{name}")
+                 for name in ("Thickness", "Sequence", "W1Offset", "Ack", "Fault")}
+        if pockets is None:
+            pockets = int(await (await obj.get_child(f"{idx}:Pockets")).read_value())
+            if pockets < 1:
+                raise ValueError(f"the controller announces {pockets} pockets")
+        info["pockets"] = pockets
+        try:
+            await _exchange(nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies,
+                            stale_timeout, info)
+        except (OSError, asyncio.TimeoutError, ua.UaError) as e:
+            raise ControllerLost(f"the connection to the controller broke: {e or type(e).__name__}") from None
+    finally:
+        with contextlib.suppress(Exception):
+            await client.disconnect()
+    return info["steps"]
+
+
+async def _exchange(nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies, stale_timeout,
+                    info) -> None:
+    """The client's side of the exchange (see :func:`run_opcua`); the totals go to ``info``."""
+    from asyncua import ua
+
+    thick, seq, w1, ack, fault = (nodes[k] for k in ("Thickness", "Sequence", "W1Offset", "Ack", "Fault"))
+    totals = {"steps": 0, "rejected": 0, "max_abs_w1": 0.0}
+
+    def add(comp, guard) -> None:
+        if comp is not None:
+            totals["steps"] += comp.steps
+        if guard is not None:
+            totals["rejected"] += guard.rejected
+            totals["max_abs_w1"] = max(totals["max_abs_w1"], guard.max_abs_w1)
+
+    comp = make_compensator()
+    guard = make_guard() if make_guard is not None else None
+    last, done, i = 0, 0, 0
+    seen = time.monotonic()
+    while done < pockets:
+        s = await seq.read_value()
+        if s == last or s == 0:
+            if time.monotonic() - seen > stale_timeout:
+                raise ControllerLost(f"the controller published no new reading for {stale_timeout:g} s")
+            await asyncio.sleep(poll)
+            continue
+        seen = time.monotonic()
+        t0 = time.perf_counter()
+        last = s
+        if s < 0:
+            done += 1
+            add(comp, guard)
+            comp = make_compensator()
+            guard = make_guard() if make_guard is not None else None
+        else:
+            t = await thick.read_value()
+            value = None
+            try:
+                if guard is not None:
+                    reason = guard.check(None if t is None or not math.isfinite(t) else t)
+                    if reason is not None:
+                        guard.reject(reason, i)
+                    elif comp is not None:
+                        comp.step(t - target_thickness)
+                        value = guard.bound(comp)
+                elif comp is not None and math.isfinite(t):
                     comp.step(t - target_thickness)
-                    await w1.write_value(ua.DataValue(ua.Variant(float(comp.w1_offset), ua.VariantType.Double)))
-            await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
-            if latencies is not None:
-                latencies.append(time.perf_counter() - t0)
-    return steps
+                    value = comp.w1_offset
+            except Exception:
+                # the interlocks stopped the loop: tell the controller, acknowledge, report
+                await fault.write_value(ua.DataValue(ua.Variant(True, ua.VariantType.Boolean)))
+                await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
+                add(comp, guard)
+                info.update(totals)
+                raise
+            i += 1
+            if value is not None:
+                await w1.write_value(ua.DataValue(ua.Variant(float(value), ua.VariantType.Double)))
+        await ack.write_value(ua.DataValue(ua.Variant(int(s), ua.VariantType.Int64)))
+        if latencies is not None:
+            latencies.append(time.perf_counter() - t0)
+    info.update(totals)

@@ -167,13 +167,18 @@ class Frame:
     def w(self, points) -> np.ndarray:
         return np.asarray(points, float) @ self.axes[2]
 
+    def local(self, points) -> np.ndarray:
+        """(n, 3) frame coordinates (u, v, w) of world points."""
+        return np.asarray(points, float) @ self.axes.T
+
     def to_world(self, u, v, w) -> np.ndarray:
         """Points (…, 3) from frame coordinates."""
         return np.stack([u, v, w], axis=-1) @ self.axes
 
 
-def extrapolate_border(u, v, values, known, *, fit_points: int = 12) -> np.ndarray:
-    """Fill the grid cells outside ``known`` by cubic extrapolation.
+def extrapolate_border(u, v, values, known, *, fit_points: int = 12, mode: str = "cubic") -> np.ndarray:
+    """Fill the grid cells outside ``known`` by cubic extrapolation (``mode="hold"``: with the
+    nearest known cell's value instead).
 
     ``values`` (nu, nv) are valid where ``known`` is True, a region that is convex along every grid
     row and column (the measured area of a part). Each row is extended by a least-squares cubic
@@ -186,6 +191,13 @@ def extrapolate_border(u, v, values, known, *, fit_points: int = 12) -> np.ndarr
     out = np.array(values, dtype=float)
     have = np.array(known, dtype=bool)
     out[~have] = np.nan
+    if mode == "hold":  # every unknown cell takes the value of the nearest known one
+        from scipy.ndimage import distance_transform_edt
+
+        _, (ii, jj) = distance_transform_edt(~have, return_indices=True)
+        return out[ii, jj]
+    if mode != "cubic":
+        raise ValueError(f"mode must be 'cubic' or 'hold', got {mode!r}")
     lo_v, hi_v = float(np.min(out[have])), float(np.max(out[have]))
     pad = 0.25 * (hi_v - lo_v)
     lo_v, hi_v = lo_v - pad, hi_v + pad

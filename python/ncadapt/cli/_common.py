@@ -17,6 +17,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
+from ..constants import COORD_MAX
 from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries, write_target
 from ..errors import InputError, NcadaptError, RefusedError, cut
 
@@ -156,7 +157,8 @@ class FiniteRange(click.FloatRange):
 
 
 def comma_floats(value: str, n: int, what: str) -> list[float]:
-    """``n`` comma-separated numbers of an option, or a click usage error saying ``what``."""
+    """``n`` comma-separated lengths of an option (within ±``COORD_MAX`` mm), or a click usage
+    error saying ``what``."""
     try:
         parts = [float(v) for v in value.split(",")]
     except ValueError:
@@ -165,6 +167,8 @@ def comma_floats(value: str, n: int, what: str) -> list[float]:
         raise click.BadParameter(f"expected {what}, got {cut(value)}")
     if not all(math.isfinite(v) for v in parts):
         raise click.BadParameter(f"expected {what} (finite), got {cut(value)}")
+    if any(abs(v) > COORD_MAX for v in parts):
+        raise click.BadParameter(f"expected {what} within ±{COORD_MAX:g} mm, got {cut(value)}")
     return parts
 
 
@@ -247,10 +251,24 @@ def write_json(path, payload: dict) -> None:
 
 
 @contextlib.contextmanager
-def progress():
-    """A status line on a terminal (quiet otherwise); yields a function taking a message."""
-    if err_console.is_terminal:
-        with err_console.status("") as status:
-            yield lambda msg: status.update(msg)
-    else:
-        yield lambda msg: None
+def progress(console: Console | None = None):
+    """Progress on a terminal, quiet otherwise (a pipe, a file, a CI log).
+
+    Yields ``say(message, done=None, total=None)``: with a total, a bar with the percentage and
+    the time left; without, the message beside a spinner. The bar is removed when the work ends.
+    """
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TaskProgressColumn, TextColumn, TimeRemainingColumn
+
+    con = console or err_console
+    if not con.is_terminal:
+        yield lambda msg, done=None, total=None: None
+        return
+    bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(),
+                   TimeRemainingColumn(), console=con, transient=True)
+    task = bar.add_task("", total=None)
+
+    def say(msg, done=None, total=None):
+        bar.update(task, description=msg, completed=done or 0, total=total)
+
+    with bar:
+        yield say

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import COORD_MAX
 from ..errors import InputError
 
 # how far |n| may be from 1 before a normal is refused rather than silently rescaled
@@ -64,6 +65,7 @@ def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, pro
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             fail(i, f"{name} is not a number (NaN or infinite) at point {i + 1}")
+    _bounded(p, "nominal point", fail)
     _, first, inverse = np.unique(p, axis=0, return_index=True, return_inverse=True)
     inverse = np.asarray(inverse).ravel()
     rep = np.flatnonzero(first[inverse] != np.arange(n))
@@ -79,8 +81,8 @@ def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, pro
         what = "zero" if length[i] == 0 else f"not a unit vector (|n| = {length[i]:.6g})"
         fail(i, f"normal of point {i + 1} is {what}; normals must be unit outward vectors")
     nn = nn / length[:, None]
-    if probe_radius < 0:
-        raise InputError(f"probe radius must be >= 0 mm, got {probe_radius}", source)
+    if not 0 <= probe_radius <= COORD_MAX:
+        raise InputError(f"probe radius must be in [0, {COORD_MAX:g}] mm, got {probe_radius}", source)
     m = None
     if measured is not None:
         m = np.asarray(measured, dtype=float)
@@ -90,6 +92,7 @@ def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, pro
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             fail(i, f"measured point is not a number (NaN or infinite) at point {i + 1}")
+        _bounded(m, "measured point", fail)
         m = m - probe_radius * nn
         dev = np.einsum("ij,ij->i", m - p, nn)
     else:
@@ -100,6 +103,7 @@ def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, pro
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             fail(i, f"deviation is not a number at point {i + 1}")
+        _bounded(dev[:, None], "deviation", fail)
         dev = dev - probe_radius
     if ids is not None:
         ids = tuple(str(x) for x in ids)
@@ -111,3 +115,12 @@ def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, pro
                 fail(i, f"duplicate id {name!r} (first at point {seen[name] + 1})")
             seen[name] = i
     return Measurements(p, nn, dev, m, ids, ln if lines is not None else None, source)
+
+
+def _bounded(a: np.ndarray, name: str, fail) -> None:
+    """Refuse a value beyond ``COORD_MAX`` mm: it is not a position on a machine."""
+    bad = (np.abs(a) > COORD_MAX).any(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        v = a[i][np.abs(a[i]) > COORD_MAX][0]
+        fail(i, f"{name} {v:g} mm at point {i + 1} is beyond ±{COORD_MAX:g} mm: not a position in millimetres")

@@ -11,6 +11,11 @@ from .._io import csv_reader, read_text
 from ..errors import InputError
 from ._core import Measurements, from_arrays
 
+#: Millimetres per unit of the length units measurement files declare (DMIS UNITS/…, QIF
+#: LinearUnit UnitName) or ``--units`` names.
+UNITS_MM = {"mm": 1.0, "millimeter": 1.0, "millimetre": 1.0, "cm": 10.0, "meter": 1000.0, "metre": 1000.0,
+            "m": 1000.0, "inch": 25.4, "in": 25.4, "feet": 304.8, "foot": 304.8, "ft": 304.8}
+
 NOMINAL = ("x", "y", "z")
 NORMAL = ("i", "j", "k")
 MEASURED = ("mx", "my", "mz")
@@ -28,8 +33,22 @@ def _number(s: str, src: str, line: int, what: str) -> float:
         raise InputError(f"{what}: expected a number, got {s.strip()!r}", src, line) from None
 
 
-def read_csv(path, probe_radius: float = 0.0) -> Measurements:
-    """CSV with a header naming ``x,y,z,i,j,k`` and ``mx,my,mz`` or ``dev`` (optional ``id``)."""
+def _scale(units: str | None) -> float:
+    """Millimetres per unit of a file without units of its own (mm unless ``units`` says)."""
+    return UNITS_MM[units] if units else 1.0
+
+
+def _lengths(a: np.ndarray, has_m: bool, k: float) -> np.ndarray:
+    """Rows x,y,z,i,j,k,(mx,my,mz | dev) with the lengths multiplied by ``k`` (not the normal)."""
+    a = a.copy()
+    a[:, 0:3] *= k
+    a[:, 6:] *= k
+    return a
+
+
+def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
+    """CSV with a header naming ``x,y,z,i,j,k`` and ``mx,my,mz`` or ``dev`` (optional ``id``), in
+    mm unless ``units`` says otherwise."""
     src = str(Path(path))
     rows = csv_reader(path)
     try:
@@ -58,13 +77,13 @@ def read_csv(path, probe_radius: float = 0.0) -> Measurements:
         lines.append(line)
     if not values:
         raise InputError("no points", src)
-    a = np.array(values)
+    a = _lengths(np.array(values), has_m, _scale(units))
     return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if has_m else None,
                        deviation=None if has_m else a[:, 6], ids=ids or None, probe_radius=probe_radius,
                        lines=lines, source=src)
 
 
-def read_xyzijk(path, probe_radius: float = 0.0) -> Measurements:
+def read_xyzijk(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
     """PC-DMIS XYZIJK text: ``x y z i j k`` and a deviation (7 numbers) or the measured point
     (9 numbers) per row, separated by blanks or commas. Lines that do not start with a number
     (headers, comments) are skipped; every point row must have the same count."""
@@ -84,17 +103,24 @@ def read_xyzijk(path, probe_radius: float = 0.0) -> Measurements:
         lines.append(ln)
     if not values:
         raise InputError("no point rows (x y z i j k ...)", src)
-    a = np.array(values)
+    a = _lengths(np.array(values), width == 9, _scale(units))
     return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if width == 9 else None,
                        deviation=a[:, 6] if width == 7 else None, probe_radius=probe_radius, lines=lines, source=src)
 
 
-_DMIS = re.compile(r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*POINT\s*,\s*CART\s*,(.*)$", re.I)
+_DMIS = re.compile(r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*POINT\s*,\s*(\w+)\s*,(.*)$", re.I)
+_DMIS_UNITS = re.compile(r"^\s*UNITS\s*/\s*(\w+)", re.I)
+# DMIS length units (ANSI/DMIS 105.2 UNITS statement); MM when a file has no UNITS statement
+_DMIS_LENGTH = {"MM": 1.0, "CM": 10.0, "METER": 1000.0, "INCH": 25.4, "FEET": 304.8}
 
 
-def read_dmis(path, probe_radius: float = 0.0) -> Measurements:
+def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
     """DMIS: nominal ``F(label)=FEAT/POINT,CART,x,y,z,i,j,k`` and actual ``FA(label)=…`` statements,
-    a trailing ``$`` continuing a statement. Every nominal needs its actual and vice versa."""
+    a trailing ``$`` continuing a statement. Every nominal needs its actual and vice versa.
+
+    Lengths are in the units of the last ``UNITS/MM|CM|METER|INCH|FEET,…`` statement before them
+    (MM before any, or ``units`` for a file without one: a file's own statement must agree with
+    ``units``). Polar points (``FEAT/POINT,POL``) are refused."""
     text, src = _text(path)
     statements: list[tuple[int, str]] = []
     buf, start = "", 0
@@ -111,14 +137,28 @@ def read_dmis(path, probe_radius: float = 0.0) -> Measurements:
         raise InputError("statement continued with $ at the end of the file", src, start)
     nominal: dict[str, tuple[int, list[float]]] = {}
     actual: dict[str, tuple[int, list[float]]] = {}
+    k = _scale(units)
     for ln, st in statements:
+        u = _DMIS_UNITS.match(st)
+        if u:
+            name = u.group(1).upper()
+            if name not in _DMIS_LENGTH:
+                raise InputError(f"UNITS/{name}: unknown length unit; expected one of {', '.join(_DMIS_LENGTH)}", src, ln)
+            if units and _DMIS_LENGTH[name] != _scale(units):
+                raise InputError(f"UNITS/{name} disagrees with --units {units}", src, ln)
+            k = _DMIS_LENGTH[name]
+            continue
         m = _DMIS.match(st)
         if not m:
             continue
-        kind, label, rest = m.group(1).upper(), m.group(2).strip(), m.group(3)
+        kind, label, system, rest = m.group(1).upper(), m.group(2).strip(), m.group(3).upper(), m.group(4)
+        if system != "CART":
+            raise InputError(f"FEAT/POINT,{system}: only Cartesian (CART) points are read; export the points in CART",
+                             src, ln)
         nums = [_number(v, src, ln, "coordinate") for v in rest.split(",") if v.strip()]
         if len(nums) != 6:
             raise InputError(f"FEAT/POINT needs x,y,z,i,j,k (6 numbers), got {len(nums)}", src, ln)
+        nums = [v * k for v in nums[:3]] + nums[3:]
         table = nominal if kind == "F" else actual
         if label in table:
             raise InputError(f"duplicate id {label!r} (first at line {table[label][0]})", src, ln)
@@ -136,19 +176,43 @@ def read_dmis(path, probe_radius: float = 0.0) -> Measurements:
                        lines=[nominal[k][0] for k in labels], source=src)
 
 
-def read_qif(path, probe_radius: float = 0.0) -> Measurements:
+def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
     """QIF 3 results: ``PointFeatureNominal`` (``Location``, ``Normal``) and the
-    ``PointFeatureMeasurement`` (``Location``) that refers to it through its feature item."""
+    ``PointFeatureMeasurement`` (``Location``) that refers to it through its feature item.
+
+    Lengths are in the document's ``FileUnits/PrimaryUnits/LinearUnit`` (its ``UnitName``: mm, cm,
+    m, in, ft …), else in ``units`` (mm by default); a declared unit must agree with ``units``."""
     from lxml import etree
 
     src = str(path)
+    # no entity expansion and no network: a measurement file cannot make the reader fetch or inline
+    # anything else
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
     try:
-        root = etree.parse(str(path)).getroot()
-    except (OSError, etree.XMLSyntaxError) as e:
+        root = etree.parse(str(path), parser).getroot()
+    except OSError as e:
         raise InputError(f"not a readable QIF (XML) file: {e}", src) from None
+    except etree.XMLSyntaxError as e:
+        line, col = e.position if e.position else (0, 0)
+        msg = re.sub(r",? line \d+, column \d+$", "", e.msg or "")
+        raise InputError(f"not well-formed XML (QIF): {msg}", src, line or 0, col or 0) from None
+    if root is None:
+        raise InputError("not a QIF (XML) document: no root element", src)
 
     def local(el):
         return etree.QName(el).localname
+
+    k = _scale(units)
+    for el in root.iter():
+        if isinstance(el.tag, str) and local(el) == "LinearUnit":
+            name = next((c.text or "" for c in el if isinstance(c.tag, str) and local(c) == "UnitName"), "").strip()
+            if name.lower() not in UNITS_MM:
+                raise InputError(f"LinearUnit {name!r}: unknown length unit; expected one of {', '.join(UNITS_MM)}",
+                                 src, el.sourceline)
+            if units and UNITS_MM[name.lower()] != _scale(units):
+                raise InputError(f"LinearUnit {name!r} disagrees with --units {units}", src, el.sourceline)
+            k = UNITS_MM[name.lower()]
+            break
 
     def child(el, name):
         for c in el:
@@ -163,7 +227,8 @@ def read_qif(path, probe_radius: float = 0.0) -> Measurements:
         parts = (c.text or "").split()
         if len(parts) != 3:
             raise InputError(f"{name} needs 3 numbers, got {len(parts)}", src, c.sourceline)
-        return [_number(p, src, c.sourceline, name) for p in parts]
+        v = [_number(p, src, c.sourceline, name) for p in parts]
+        return v if name == "Normal" else [x * k for x in v]
 
     def ref(el, name):
         c = child(el, name)
@@ -200,19 +265,23 @@ def read_qif(path, probe_radius: float = 0.0) -> Measurements:
                        ids=[r[0] for r in rows], probe_radius=probe_radius, lines=[r[1][0] for r in rows], source=src)
 
 
-def read(path, probe_radius: float = 0.0) -> Measurements:
-    """Read measurements, choosing the reader from the file's contents."""
+def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
+    """Read measurements, choosing the reader from the file's contents. ``units`` (mm, inch …):
+    the length unit of a file that does not declare one (CSV, XYZIJK; DMIS and QIF without a
+    units statement); a file that declares one must agree. Results are in mm."""
+    if units is not None and units not in UNITS_MM:
+        raise ValueError(f"units must be one of {', '.join(UNITS_MM)}, got {units!r}")
     p = Path(path)
     if not p.is_file():
         raise InputError("no such file", str(p))
     data = p.read_bytes()
     head = data[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
     if head.startswith("<"):
-        return read_qif(p, probe_radius)
+        return read_qif(p, probe_radius, units)
     # DMIS: a point feature anywhere (a long header may come first), or a DMIS header statement
     if re.search(rb"FEAT\s*/\s*POINT", data, re.I) or re.match(r"(DMISMN|DMISMD)\s*/", head, re.I):
-        return read_dmis(p, probe_radius)
+        return read_dmis(p, probe_radius, units)
     first = head.splitlines()[0] if head else ""
     if re.search(r"[A-Za-z]", first) and "," in first and re.search(r"\bx\b", first, re.I):
-        return read_csv(p, probe_radius)
-    return read_xyzijk(p, probe_radius)
+        return read_csv(p, probe_radius, units)
+    return read_xyzijk(p, probe_radius, units)

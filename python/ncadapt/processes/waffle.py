@@ -61,18 +61,27 @@ from ..errors import InputError
 
 __all__ = ["segments", "fit_segments", "Tilt", "tilt", "read_tracking", "read_thickness", "DepthField", "Sum",
            "feedback_correction", "play", "drive", "copy", "copying_error", "estimate_backlash",
-           "Backlash", "SelfTuning"]
+           "Backlash", "SelfTuning", "reversal_travels", "CellState", "plan_cells", "Z_TOL"]
 
 
 # ------------------------------------------------------------------------------ spindle tilt
-def segments(z, n: int) -> list[tuple[int, int]]:
+#: default tolerance on Z within one pass, mm: rows whose Z differs from the previous row's by
+#: no more than this belong to the same pass (encoder jitter of a few tenths of a µm; passes of a
+#: pre-measurement are millimetres apart)
+Z_TOL = 0.01
+
+
+def segments(z, n: int, z_tol: float = Z_TOL) -> list[tuple[int, int]]:
     """Index ranges [start, end) of the segments: N consecutive rows from the first, restarting
-    where Z changes; a last piece shorter than N/2 joins the previous segment of its pass."""
+    where Z changes by more than ``z_tol`` (mm) from one row to the next (a new pass); a last piece
+    shorter than N/2 joins the previous segment of its pass."""
     if n < 2:
         raise ValueError(f"a segment needs at least 2 points, got N = {n}")
+    if not (math.isfinite(z_tol) and z_tol >= 0):
+        raise ValueError(f"z_tol must be a finite number ≥ 0 mm, got {z_tol}")
     z = np.asarray(z, float)
     out: list[tuple[int, int]] = []
-    breaks = np.flatnonzero(np.diff(z) != 0) + 1
+    breaks = np.flatnonzero(np.abs(np.diff(z)) > z_tol) + 1
     for a, b in zip(np.r_[0, breaks], np.r_[breaks, len(z)]):
         pass_segs = [(s, min(s + n, b)) for s in range(a, b, n)]
         if len(pass_segs) > 1 and pass_segs[-1][1] - pass_segs[-1][0] < n / 2:
@@ -124,13 +133,16 @@ class Tilt:
                 "rms_error": float(np.sqrt(np.mean(e ** 2))) if len(e) else 0.0}
 
 
-def tilt(b, z, v, *, tool_radius: float, diameter: float, segment: int = 10) -> Tilt:
+def tilt(b, z, v, *, tool_radius: float, diameter: float, segment: int = 10, z_tol: float = Z_TOL) -> Tilt:
     """The spindle-tilt error along a tracking pre-measurement (B in degrees, Z and V in mm)."""
-    if not tool_radius > 0 or not diameter > 0:
-        raise ValueError("tool radius and shell diameter must be > 0 mm")
+    if not (math.isfinite(tool_radius) and tool_radius > 0) or not (math.isfinite(diameter) and diameter > 0):
+        raise ValueError("tool radius and shell diameter must be finite and > 0 mm")
     b, z, v = (np.asarray(a, float).ravel() for a in (b, z, v))
-    segs = segments(z, segment)
-    k, _ = fit_segments(b, v, segs)
+    segs = segments(z, segment, z_tol)
+    with np.errstate(over="ignore", invalid="ignore"):
+        k, _ = fit_segments(b, v, segs)
+    if not np.all(np.isfinite(k)) or not np.all(np.isfinite(tool_radius * 360.0 / (math.pi * diameter) * k)):
+        raise ValueError("the wall's slope overflows: B, V or the diameter are out of any machine's range")
     seg = np.empty(len(b), dtype=np.int64)
     for i, (s, e) in enumerate(segs):
         seg[s:e] = i
@@ -138,21 +150,54 @@ def tilt(b, z, v, *, tool_radius: float, diameter: float, segment: int = 10) -> 
     return Tilt(b, z, v, seg, tan_a, tool_radius * tan_a)
 
 
+#: physical ranges of the input data: a tracking sensor's travel (V, mm), a shell's length (Z, mm),
+#: the rotary axis over many turns (B, degrees), a web's thickness (mm)
+V_RANGE = 1000.0
+Z_RANGE = 1.0e5
+B_RANGE = 1.0e5
+THICKNESS_RANGE = 1000.0
+
+
+def _check_ranges(path, c: dict, lines, ranges: dict) -> None:
+    """Every value of column ``name`` within ±``ranges[name][0]`` (``[1]``: its unit; a third item
+    True: > 0), or an error at its line."""
+    for name, (bound, unit, *pos) in ranges.items():
+        a = c[name]
+        bad = ~(np.abs(a) <= bound)
+        if pos and pos[0]:
+            bad |= ~(a > 0)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            what = f"between 0 and {bound:g}" if pos and pos[0] else f"within ±{bound:g}"
+            raise InputError(f"column {name}: {a[i]:g} is not {what} {unit}", str(path), int(lines[i]))
+
+
 def read_tracking(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A tracking log: CSV with columns B (deg), Z (mm), V (mm)."""
     from .. import fields
 
-    c, _ = fields.read_columns(path, ("b", "z", "v"))
+    c, lines = fields.read_columns(path, ("b", "z", "v"))
     if len(c["b"]) < 2:
         raise InputError(f"a tracking log needs at least 2 rows, found {len(c['b'])}", str(path))
+    _check_ranges(path, c, lines, {"b": (B_RANGE, "deg"), "z": (Z_RANGE, "mm"), "v": (V_RANGE, "mm (the sensor's travel)")})
     return c["b"], c["z"], c["v"]
 
 
 def read_thickness(path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A thickness map: CSV with columns B (deg), Z (mm), thickness (mm); also the line numbers."""
+    """A thickness map: CSV with columns B (deg), Z (mm), thickness (mm); also the line numbers.
+    A point measured twice is refused (which of two values is right cannot be told)."""
     from .. import fields
 
     c, lines = fields.read_columns(path, ("b", "z", "thickness"))
+    _check_ranges(path, c, lines, {"b": (B_RANGE, "deg"), "z": (Z_RANGE, "mm"), "thickness": (THICKNESS_RANGE, "mm", True)})
+    pts = np.column_stack([c["b"], c["z"]])
+    _, first, inverse = np.unique(pts, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    rep = np.flatnonzero(first[inverse] != np.arange(len(pts)))
+    if len(rep):
+        i, j = int(rep[0]), int(first[inverse[rep[0]]])
+        raise InputError(f"point B={pts[i, 0]:g} Z={pts[i, 1]:g} repeats the point at line {int(lines[j])}", str(path),
+                         int(lines[i]))
     return c["b"], c["z"], c["thickness"], lines
 
 
@@ -199,6 +244,9 @@ class DepthField:
                 raise ValueError("a depth correction needs at least 2 distinct points")
             order = np.argsort(pts[:, varying])
             self._1d = (varying, pts[order, varying], vals[order])
+        elif np.linalg.matrix_rank(pts - pts.mean(axis=0), tol=1e-9 * max(1.0, float(np.abs(pts).max()))) < 2:
+            raise ValueError(f"the {len(pts)} points lie on one line that is neither one pass (one Z) nor one B: "
+                             "a depth correction needs points spanning B and Z")
         elif len(pts) == len(xs) * len(zs):
             # a full grid (a pre-measurement along B at regular Z): bilinear, fast for any size
             from scipy.interpolate import RegularGridInterpolator
@@ -337,7 +385,17 @@ def estimate_backlash(v_ideal, v_measured, dt: float = 1.0, *, fit_tau: bool = T
     vi, vm = np.asarray(v_ideal, float), np.asarray(v_measured, float)
     if vi.shape != vm.shape or len(vi) < 4:
         raise ValueError("the two signals must have the same length (at least 4 samples)")
-    span = float(np.ptp(vi)) or 1.0
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"the sampling period must be > 0 s, got {dt}")
+    if not (np.all(np.isfinite(vi)) and np.all(np.isfinite(vm))):
+        raise ValueError("the signals must be finite numbers")
+    span = float(np.ptp(vi))
+    if not span > 0:
+        raise ValueError("V_ideal does not change: the gap cannot be identified from a constant signal")
+    travels = reversal_travels(vi)
+    if not len(travels):
+        raise ValueError("V_ideal never reverses: one way, the gap only delays the signal by g/2, which a "
+                         "constant offset absorbs; record the pair across reversals (a zig-zag cell)")
 
     def model(p):
         g, tau = abs(p[0]), (abs(p[1]) if fit_tau else 0.0)
@@ -355,8 +413,42 @@ def estimate_backlash(v_ideal, v_measured, dt: float = 1.0, *, fit_tau: bool = T
             if best is None or r.cost < best.cost:
                 best = r
     g, tau = abs(best.x[0]), (abs(best.x[1]) if fit_tau else 0.0)
+    if not travels.max() > g:
+        raise ValueError(f"V_ideal reverses by at most {travels.max() * 1000:.3g} µm, not more than the fitted gap "
+                         f"({g * 1000:.3g} µm): the shelf never ends, so the gap is not identified")
     w, c = model(best.x)
     return Backlash(g, tau, c, float(np.sqrt(np.mean((w + c - vm) ** 2))), vi - (w + c))
+
+
+def reversal_travels(v) -> np.ndarray:
+    """How far the signal travels back after each reversal (mm), before it turns again: the
+    reversals are found with a hysteresis of 3σ of the signal's sample-to-sample noise (from the
+    median absolute second difference), so noise alone does not make one."""
+    v = np.asarray(v, float)
+    d2 = np.diff(v, 2)
+    sigma = float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / math.sqrt(6.0) if len(d2) else 0.0
+    h = max(3.0 * sigma, 1e-9 * max(1.0, float(np.abs(v).max())))
+    out = []
+    direction, ext = 0, v[0]  # the current direction and its extremum
+    start = None  # the extremum where the current leg started after a reversal
+    for x in v[1:]:
+        if direction >= 0 and x > ext:
+            ext = x
+            direction = 1 if x - v[0] > h or direction else direction
+        elif direction <= 0 and x < ext:
+            ext = x
+            direction = -1 if v[0] - x > h or direction else direction
+        if direction == 1 and ext - x > h:  # turned down
+            if start is not None:
+                out.append(abs(ext - start))
+            start, direction, ext = ext, -1, x
+        elif direction == -1 and x - ext > h:  # turned up
+            if start is not None:
+                out.append(abs(ext - start))
+            start, direction, ext = ext, 1, x
+    if start is not None:
+        out.append(abs(ext - start))
+    return np.asarray(out)
 
 
 # ------------------------------------------------------------------------------ self-tuning
@@ -388,3 +480,60 @@ class SelfTuning:
         t = np.asarray(thickness, float)
         self._retune_next = bool(t.max() >= self.t_max or t.min() <= self.t_min)
         return self._retune_next
+
+
+@dataclass(frozen=True)
+class CellState:
+    """The self-tuning state of one cell (1-based row and cell): ``status`` is ``"finished"`` (a
+    finished thickness map was read: ``t_min``, ``t_max`` in mm, ``in_band``), ``"next"`` (the next
+    cell to machine) or ``"pending"``; ``semi_finish`` says whether the cell needs (or needed) a
+    semi-finishing pass before finishing — True, False, or None while it depends on cells not
+    finished yet."""
+
+    row: int
+    cell: int
+    status: str
+    semi_finish: bool | None
+    t_min: float | None = None
+    t_max: float | None = None
+    in_band: bool | None = None
+    source: str | None = None
+
+    def as_dict(self) -> dict:
+        return {"row": self.row, "cell": self.cell, "status": self.status, "semi_finish": self.semi_finish,
+                "t_min": self.t_min, "t_max": self.t_max, "in_band": self.in_band, "source": self.source}
+
+
+def plan_cells(finished: dict, rows: int, cells: int, t_min: float, t_max: float) -> list[CellState]:
+    """The self-tuning decision over a shell machined row by row (cell 1 … ``cells`` of row 1, then
+    row 2 …), from the finished thickness maps there are: ``finished`` maps (row, cell), 1-based, to
+    (thickness array, source name). The first cell is semi-finished; a cell is semi-finished when
+    the cell machined before it finished with max ≥ ``t_max`` or min ≤ ``t_min`` (the paper's rule,
+    "or"). The maps must be of consecutive cells from the first: a gap is refused (the decision for
+    the cell after it would be a guess)."""
+    if not t_min < t_max:
+        raise ValueError(f"the band's lower end {t_min:g} must be below its upper end {t_max:g}")
+    order = [(r, c) for r in range(1, rows + 1) for c in range(1, cells + 1)]
+    extra = sorted(set(finished) - set(order))
+    if extra:
+        raise ValueError(f"a finished map of row {extra[0][0]} cell {extra[0][1]} is outside the {rows} x {cells} shell")
+    out: list[CellState] = []
+    retune, next_seen = True, False
+    for r, c in order:
+        if (r, c) in finished:
+            if next_seen:
+                gap = next(s for s in out if s.status == "next")
+                raise ValueError(f"row {r} cell {c} is finished but row {gap.row} cell {gap.cell}, machined before "
+                                 "it, has no finished map")
+            t, src = finished[(r, c)]
+            t = np.asarray(t, float)
+            lo, hi = float(t.min()), float(t.max())
+            inside = not (hi >= t_max or lo <= t_min)
+            out.append(CellState(r, c, "finished", retune, lo, hi, inside, src))
+            retune = not inside
+        elif not next_seen:
+            out.append(CellState(r, c, "next", retune))
+            next_seen = True
+        else:
+            out.append(CellState(r, c, "pending", None))
+    return out

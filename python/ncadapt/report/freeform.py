@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..stats import p_text
 from . import figure_png, page, pyplot, table
 
 
@@ -36,20 +37,39 @@ def _hist(series):
     return figure_png(fig)
 
 
+def _strip(extrapolation, xy, names):
+    """The surface grid's nodes, the extrapolated ones in red, with the measured points."""
+    plt = pyplot()
+    e = extrapolation
+    U, V = np.meshgrid(e.u, e.v, indexing="ij")
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    ax.scatter(U[~e.outside], V[~e.outside], s=2, c="0.75", label="surface grid, measured area")
+    ax.scatter(U[e.outside], V[e.outside], s=2, c="tab:red", label="extrapolated nominal")
+    ax.scatter(xy[:, 0], xy[:, 1], s=6, c="k", label="measured points")
+    ax.set_xlabel(f"{names[0]}, mm")
+    ax.set_ylabel(f"{names[1]}, mm")
+    ax.set_aspect("equal")
+    ax.legend(fontsize=8, loc="upper right")
+    return figure_png(fig)
+
+
 def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None,
-           names=("x", "y")) -> str:
+           names=("x", "y"), extrapolation=None) -> str:
     """The report as HTML text. ``xy``: the points' (u, v), named ``names`` on the maps; ``after``:
     deviations of the re-machined part at the same points."""
     m = analysis.moran
-    p_txt = f"{m.p_value:.2g}" if m.p_value > 0 else "< 1e-300"
+    p_txt = p_text(m.p_value, 2)
     w = m.weights
     w_txt = (f"k nearest neighbours, k = {w.neighbors}" if w.kind == "knn" else
              f"1/d^{w.power:g}, " + (f"pairs closer than {w.threshold:g} mm" if w.threshold else "all pairs")
              if w.kind == "idw" else w.kind) + ", row-standardised"
-    verdict = (f"<p class='verdict {'yes' if m.systematic else 'no'}'>The deviations are "
-               f"{'<b>systematic</b>' if m.systematic else '<b>not systematic</b>'} "
-               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt.startswith('<') else '= ' + p_txt}, "
-               f"α = {m.alpha:g})</p>")
+    v, o = analysis.verdict, analysis.offset
+    o_txt = p_text(o.p_value, 2)
+    verdict = (f"<p class='verdict {'yes' if v.systematic else 'no'}'>The deviations are "
+               f"{'<b>systematic</b>' if v.systematic else '<b>not systematic</b>'} "
+               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt.startswith('<') else '= ' + p_txt}; "
+               f"mean offset {o.mean * 1000:+.2f} µm, t = {o.t:.2f}, p {o_txt if o_txt.startswith('<') else '= ' + o_txt}; "
+               f"each test at α/2 = {v.alpha / 2:g})</p>")
     sections = []
     if summary:
         cards = "".join(f"<div class='card'><div>{k}</div><div class='big'>{v}</div></div>" for k, v in summary.items())
@@ -57,7 +77,8 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     sections.append(("Is the error systematic?", verdict + table([
         ("Moran's I", m.I), ("E[I]", m.expected), ("Var[I], normality", m.variance_normality),
         ("Var[I], randomisation", m.variance_randomization), ("z, normality", m.z_normality),
-        ("z, randomisation", m.z_randomization), ("p (two-sided, randomisation)", m.p_value),
+        ("z, randomisation", m.z_randomization), ("p (one-sided, randomisation)", p_text(m.p_value, 4)),
+        ("mean offset, mm", o.mean), ("offset t", o.t), ("offset p (two-sided)", p_text(o.p_value, 4)),
         ("weights", w_txt),
         ("points", m.n)], ["statistic", "value"])))
     d = analysis.deviation
@@ -67,13 +88,21 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     nz = decomposition.noise
     sections.append(("Separating systematic from random error", table([
         ("filter", decomposition.method), *((k, v) for k, v in decomposition.parameters.items()),
-        ("random part: std, mm", nz.std), ("Pearson χ² normality p", nz.pearson_p),
-        ("lag-1 autocorrelation r", nz.lag1_r), ("Student t test p", nz.student_p),
-        ("Moran's I of the random part: z", nz.moran_z), ("... p", nz.moran_p)], ["", "value"])))
+        ("random part: std, mm", nz.std), ("Pearson χ² normality p", p_text(nz.pearson_p, 4)),
+        ("lag-1 autocorrelation r", nz.lag1_r), ("Student t test p (one-sided)", p_text(nz.student_p, 4)),
+        ("Moran's I of the random part: z", nz.moran_z), ("... p (one-sided)", p_text(nz.moran_p, 4)),
+        ("no systematic error left", "yes" if nz.passed else "no")], ["", "value"])))
     if after is not None:
         sections.append(("After compensation", _maps(xy, [("before", deviation), ("after", after)],
                                                      "Deviation of the first part and of the re-machined part", names)
                          + _hist([("before", deviation), ("after", after)])))
+    if extrapolation is not None:
+        sections.append(("Extrapolated nominal", (
+            f"<p class='verdict no'>The compensated surface reaches up to <b>{extrapolation.max_distance:.3g} mm</b> "
+            f"beyond the measured points, over <b>{100 * extrapolation.area_fraction:.0f} %</b> of its grid. In that "
+            "strip its nominal is extrapolated from the measured points, not measured, and so is the systematic "
+            "error: check it against the CAD model before machining there.</p>")
+            + _strip(extrapolation, xy, names)))
     if files:
         sections.append(("Files", table([(k, v) for k, v in files.items()], ["", "file"])))
     return page(title, "ncadapt freeform compensation report", sections)

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..processes import bore as pb
 
 MATERIALS = {"steel": 2000.0, "titanium": 1400.0, "aluminium": 700.0, "hardened": 3200.0}  # k_c, N/mm²
@@ -106,8 +107,11 @@ def run_part(rng, *, diameter: float = 40.0, final: str = "H6", prefinish: str =
     r_aim = target / 2 - allowance
     r = r_aim - part.compliance(ZETA, part.c0_prefinish) * t0
     meas = probe(rng, lambda zz: np.interp(zz, ZETA, r))
-    plan = pb.plan_from_measurement(diameter, meas, final=final, prefinish=prefinish, t0=t0, allowance=allowance, k=k,
-                                    target_diameter=target)
+    try:
+        plan = pb.plan_from_measurement(diameter, meas, final=final, prefinish=prefinish, t0=t0, allowance=allowance,
+                                        k=k, target_diameter=target)
+    except InputError:  # the plan refuses this part (a correction that would not converge): not machined
+        return PartResult(False, 0, r, r, False, False, None)
     r_pre = r.copy()
     applied = 0.0
     ratio = None
@@ -144,9 +148,11 @@ def simulate(parts: int = 1000, seed: int = 1, *, material: str = "steel", progr
         if res.applicable:
             done.append(res)
             if progress and len(done) % 100 == 0:
-                progress(f"{len(done)}/{parts} parts")
+                progress(f"{len(done)}/{parts} parts", len(done), parts)
         if drawn > 20 * parts:
-            raise RuntimeError("the applicability condition almost never holds for these settings")
+            raise InputError(f"condition (3) held for {len(done)} of the {drawn} parts drawn with these settings "
+                             f"(t0 = {kw.get('t0', 0.5):g} mm: the pre-finish deflection grows with t0); use a "
+                             "smaller --t0")
     d = np.array([r.diameters for r in done])
     diameter, final = kw.get("diameter", 40.0), kw.get("final", "H6")
     target = diameter + sum(pb.class_limits(diameter, final)) / 2

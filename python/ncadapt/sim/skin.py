@@ -197,6 +197,66 @@ def toolpath(pocket: int):
     return np.concatenate(lines)
 
 
+def spiral_path():
+    """Pocket-local (x, y) samples, every STEP mm, of a spiral out from the centre: the centre
+    line y = 0, x ∈ [−50, 50] mm, then rings 12.5 mm apart (half-sizes 50 + 12.5k by 12.5k,
+    k = 1 … 7), each entered from the previous by a 12.5 mm step outward along +x and run
+    anticlockwise (N, W, S, E, N) back to its start."""
+    corners = [(-50.0, 0.0), (50.0, 0.0)]
+    for k in range(1, 8):
+        a, b = 50.0 + 12.5 * k, 12.5 * k
+        corners += [(a, 0.0), (a, b), (-a, b), (-a, -b), (a, -b), (a, 0.0)]
+    out = [np.array(corners[0])]
+    for p0, p1 in zip(corners[:-1], corners[1:]):
+        p0, p1 = np.array(p0), np.array(p1)
+        n = int(round(np.linalg.norm(p1 - p0) / STEP))
+        out += [p0 + (p1 - p0) * t for t in np.arange(1, n + 1) / n]
+    return np.array(out)
+
+
+def readable(path: np.ndarray) -> np.ndarray:
+    """(n,) bool: the samples where a reading can be taken — the gauge's spot lies on one straight
+    piece of the path (SPOT/2 from every turn)."""
+    d = np.diff(path, axis=0)
+    turn = np.zeros(len(path), bool)
+    turn[1:-1] = np.abs(d[1:, 0] * d[:-1, 1] - d[1:, 1] * d[:-1, 0]) > 1e-9
+    turn[[0, -1]] = True
+    h = int(round(SPOT / 2 / STEP))
+    idx = np.flatnonzero(turn)
+    near = np.zeros(len(path), bool)
+    for i in idx:
+        near[max(0, i - h):i + h] = True
+    return ~near
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A testbed condition beyond the paper's (issue 21 item 3).
+
+    ``feed`` (mm/s) with the spindle speed scaled so f_z and the force stay the paper's;
+    ``latency_ms`` replaces the run's dead time when given; ``gauge_hz`` a fixed-rate gauge (a
+    reading every 1/f s whether or not it reflects the latest command, drawn per seed from the
+    range); ``path`` ``"zigzag"`` or ``"spiral"``; ``servo_ms`` the time constant of the W1 axis
+    as a first-order servo (0: it moves at once when the command lands)."""
+
+    name: str
+    feed: float = FEED
+    latency_ms: float | None = None
+    gauge_hz: tuple | None = None
+    path: str = "zigzag"
+    servo_ms: float = 0.0
+
+
+#: the paper's condition and the variants the default compensator must hold on
+VARIANTS = {
+    "paper": Variant("paper"),
+    "fixed-rate": Variant("fixed-rate", gauge_hz=(20.0, 25.0)),
+    "spiral": Variant("spiral", path="spiral"),
+    "fast": Variant("fast", feed=100.0, latency_ms=60.0),
+    "servo": Variant("servo", servo_ms=30.0),
+}
+
+
 # ------------------------------------------------------------------------------ the paper's protocol
 def protocol(method: str, compensations: int = 2) -> dict:
     """Noise-free, at each checkpoint: a pass with a_p = a_g, then ``compensations`` compensated
@@ -246,13 +306,15 @@ class Run:
     rejected: int = 0
     steps: int = 0
     path_errors: list = field(default_factory=list)  # per pocket: the true error along the path
+    max_abs_w1: float = 0.0  # mm, the largest W1 command
+    clamped: int = 0  # commands the interlocks bounded
 
     def as_dict(self) -> dict:
         e = np.abs([c["error"] for c in self.checkpoints])
         return {"method": self.method, "noise": self.noise, "latency_ms": self.latency_ms, "seed": self.seed,
                 "max_abs_error": float(e.max()), "min_abs_error": float(e.min()), "mean_abs_error": float(e.mean()),
                 "checkpoints": self.checkpoints, "fallbacks": self.fallbacks, "rejected_readings": self.rejected,
-                "compensator_steps": self.steps}
+                "compensator_steps": self.steps, "max_abs_w1": self.max_abs_w1, "clamped": self.clamped}
 
 
 class Machine:
@@ -266,20 +328,31 @@ class Machine:
     is fresh when the back half was cut after the latest command landed, SPOT/2 + v·τ of path
     after the reading that caused it."""
 
-    def __init__(self, pocket: int, *, noise: float, latency_ms: float, rng, t_var):
+    def __init__(self, pocket: int, *, noise: float, latency_ms: float, rng, t_var, variant: Variant | None = None):
+        v = variant or VARIANTS["paper"]
+        self.variant = v
         self.pocket = pocket
-        self.path = toolpath(pocket)
+        self.path = spiral_path() if v.path == "spiral" else toolpath(pocket)
         cx, cy = POCKETS[pocket]
         self.t_s = T_INITIAL + t_var(self.path[:, 0] + cx, self.path[:, 1] + cy)
         self.alpha = alpha(self.path[:, 0], self.path[:, 1])
-        self.line_length = line_samples()
-        self.lag = int(round(FEED * latency_ms / 1000.0 / STEP))
+        self.readable = readable(self.path)
+        latency = v.latency_ms if v.latency_ms is not None else latency_ms
+        self.lag = int(round(v.feed * latency / 1000.0 / STEP))
         self.half_spot = int(round(SPOT / 2 / STEP))
+        self.period = None  # samples between readings of a fixed-rate gauge
+        if v.gauge_hz is not None:
+            hz = float(rng.uniform(*v.gauge_hz))
+            self.period = max(1, int(round(v.feed / hz / STEP)))
+        dt = STEP / v.feed  # s per sample
+        self.servo = 1.0 - math.exp(-dt / (v.servo_ms / 1000.0)) if v.servo_ms > 0 else 1.0
         self.gauge = Gauge(noise, rng)
         self.i = 0
-        self.a_cmd = A_G  # the programmed depth in force
-        self.pending = None  # (sample index it lands at, depth)
-        self.landed = 0  # the sample at which the command in force landed
+        self.a_cmd = A_G  # the programmed depth commanded to the axis
+        self.a_eff = A_G  # the depth in force (the servo's output)
+        self.pending: list = []  # (sample index it lands at, depth), in order
+        self.landed = 0  # the sample at which the latest command landed
+        self.last_read = -10**9
         self.thickness = np.full(len(self.path), np.nan)
 
     @property
@@ -288,36 +361,43 @@ class Machine:
 
     def command(self, depth: float) -> None:
         """A new programmed depth (a_g + W1 offset); it lands ``lag`` samples later."""
-        self.pending = (self.i + self.lag, float(depth))
+        self.pending.append((self.i + self.lag, float(depth)))
 
     def _cut(self, at: int, points) -> np.ndarray:
         """Thickness of ``points`` cut with the depth in force and the tool axis at sample ``at``."""
-        f = deflection_at(self.alpha[at], self.a_cmd, self.t_s[at])
-        return self.t_s[points] - (self.a_cmd - f)
+        f = deflection_at(self.alpha[at], self.a_eff, self.t_s[at])
+        return self.t_s[points] - (self.a_eff - f)
 
     def advance(self):
-        """Cut up to the next fresh reading; return the measured thickness (None: rejected, or
-        the path ended)."""
+        """Cut up to the next reading — the next fresh one (the paper's gauge), or the next of a
+        fixed-rate gauge; return the measured thickness (None: rejected, or the path ended)."""
         h = self.half_spot
         while self.i < len(self.path):
             i = self.i
-            if self.pending is not None and i >= self.pending[0]:
-                self.a_cmd, self.landed = self.pending[1], i
-                self.pending = None
+            while self.pending and i >= self.pending[0][0]:
+                self.a_cmd, self.landed = self.pending.pop(0)[1], i
+            self.a_eff += self.servo * (self.a_cmd - self.a_eff)
             self.thickness[i] = self._cut(i, i)
             self.i += 1
-            on_line = h <= i % self.line_length < self.line_length - h
-            if self.pending is None and on_line and i - h >= self.landed:
+            if not (h <= i < len(self.path) - h and self.readable[i]):
+                continue
+            if self.period is not None:
+                due = i - self.last_read >= self.period
+            else:
+                due = not self.pending and i - h >= self.landed
+            if due:
+                self.last_read = i
                 ahead = self._cut(i, np.arange(i + 1, i + h + 1))
                 return self.gauge.read(np.concatenate([self.thickness[i - h:i + 1], ahead]))
         return None
 
 
-def machines(*, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1) -> list:
+def machines(*, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1, variant: str = "paper") -> list:
     """The machine of each pocket for a seed (one generator shared in pocket order)."""
     rng = np.random.default_rng(seed)
     t_var = thickness_variation(seed)
-    return [Machine(k, noise=noise, latency_ms=latency_ms, rng=rng, t_var=t_var) for k in range(len(POCKETS))]
+    v = VARIANTS[variant]
+    return [Machine(k, noise=noise, latency_ms=latency_ms, rng=rng, t_var=t_var, variant=v) for k in range(len(POCKETS))]
 
 
 def compensator(method: str, noise: float = 0.005):
@@ -345,16 +425,34 @@ def result(method: str, ms: list, comps: list, *, noise: float, latency_ms: floa
     return out
 
 
-def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1) -> Run:
-    """Finish both pockets along the toolpath with a compensator (``none``: without), in process."""
+def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1,
+        on_progress=None, variant: str = "paper") -> Run:
+    """Finish both pockets along the toolpath with a compensator (``none``: without), in process,
+    behind the loop's interlocks with their defaults (:class:`ncadapt.processes.skin.Interlocks`);
+    if they stop the loop, the pocket is finished with W1 held. ``on_progress(done, total)`` gets
+    the path samples cut so far."""
     from .. import loop as lp
 
-    ms = machines(noise=noise, latency_ms=latency_ms, seed=seed)
-    comps = []
-    for m in ms:
+    ms = machines(noise=noise, latency_ms=latency_ms, seed=seed, variant=variant)
+    comps, guards = [], []
+    total = sum(len(m.path) for m in ms)
+    for k, m in enumerate(ms):
         comps.append(compensator(method, max(noise, 1e-4)))
-        lp.run_in_process(m, comps[-1])
-    return result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
+        guards.append(ps.Interlocks(T_TARGET, A_G))
+        before = sum(len(p.path) for p in ms[:k])
+        step = None if on_progress is None else (lambda n, t, w, _m=m, _b=before: on_progress(_b + _m.i, total))
+        try:
+            link = lp.MachineLink(m, A_G)
+            lp.run(link, link, comps[-1], T_TARGET, guard=guards[-1], on_step=step)
+        except ps.LoopStopped:
+            while not m.done:
+                m.advance()
+        if on_progress is not None:
+            on_progress(before + len(m.path), total)
+    out = result(method, ms, comps, noise=noise, latency_ms=latency_ms, seed=seed)
+    out.max_abs_w1 = max(g.max_abs_w1 for g in guards)
+    out.clamped = sum(g.clamped for g in guards)
+    return out
 
 
 # ------------------------------------------------------------------------------ offline mode
@@ -375,6 +473,18 @@ def finishing_program(pocket: int = 0, depth: float = A_G) -> str:
         out.append(f"G1 X{cx + x1:.3f} F{FEED * 60:.0f}")
     out += ["G0 Z5.000", "M5", "M2"]
     return "\n".join(out) + "\n"
+
+
+def recut(lx, ly, t_now, depth, t_s=T_INITIAL):
+    """The wall thickness after a pass programmed ``depth`` (mm below the roughed floor, Z = −depth)
+    over a floor already cut to thickness ``t_now`` (pocket-local x, y; the roughed thickness
+    ``t_s``): the cutter engages a = depth − (T_s − t_now) of material (nothing when a ≤ 0), the
+    wall, now t_now thick, deflects by f(a) under that cut, and a − f(a) is removed. The testbed's
+    own law for the offline rounds (no compensator formula in it)."""
+    lx, ly, t_now, depth, t_s = np.broadcast_arrays(*(np.asarray(v, float) for v in (lx, ly, t_now, depth, t_s)))
+    a = np.maximum(depth - (t_s - t_now), 0.0)
+    f = deflection(lx, ly, a, t_now)
+    return t_now - (a - f)
 
 
 def thickness_map(depth: float, *, pocket: int = 0, spacing: float = 10.0, noise: float = 0.005, seed: int = 1):
