@@ -19,7 +19,6 @@ G1 X2
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -747,14 +746,19 @@ def _inspect(source, name) -> dict:
 
 class _BackgroundWriter:
     """Writes chunks to a file in a second thread, so the disk works while the next chunk is
-    computed (file writes release the GIL). At most two chunks wait; errors surface on exit."""
+    computed (file writes release the GIL). At most two chunks wait; errors surface on exit. The
+    thread starts with the first chunk (a native correction writes the file itself)."""
 
     def __init__(self, f):
         self._f = f
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ncadapt-writer")
+        self._pool = None
         self._pending: list = []
 
     def write(self, data: bytes) -> None:
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor  # imported where needed: start-up time
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ncadapt-writer")
         if len(self._pending) >= 2:
             self._pending.pop(0).result()
         self._pending.append(self._pool.submit(self._f.write, data))
@@ -767,7 +771,8 @@ class _BackgroundWriter:
             for fut in self._pending:
                 fut.result()
         finally:
-            self._pool.shutdown(wait=True)
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
         return False
 
 
