@@ -456,6 +456,20 @@ fn eval_field<'py>(py: Python<'py>, spec: &Bound<'py, PyAny>, xyz: &[u8]) -> PyR
     Ok(if f.eval(&pts, &mut out) { Some(raw_bytes(py, &out)) } else { None })
 }
 
+/// The caller's open file `fd`, duplicated (it is not taken over: the caller closes its own).
+#[cfg(unix)]
+fn output_file(fd: i32) -> PyResult<Option<std::fs::File>> {
+    use std::os::fd::BorrowedFd;
+    // SAFETY: the caller's open file outlives the call
+    Ok(Some(std::fs::File::from(unsafe { BorrowedFd::borrow_raw(fd) }.try_clone_to_owned()?)))
+}
+
+/// Elsewhere the engine does not write the caller's file: the Python evaluation does the run.
+#[cfg(not(unix))]
+fn output_file(_fd: i32) -> PyResult<Option<std::fs::File>> {
+    Ok(None)
+}
+
 /// Correct a program (bytes, or the path of its file) with a native field, writing the output
 /// to the open file descriptor `fd` (from its current offset) in threads that run without the
 /// GIL. Returns the figures as a dict, or None when a check refuses the program (the caller runs
@@ -480,7 +494,6 @@ fn correct_native<'py>(
     shift_norm: Option<f64>,
     progress: Option<PyObject>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
-    use std::os::fd::BorrowedFd;
     let src = if let Ok(b) = source.downcast::<PyBytes>() {
         Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
     } else {
@@ -490,8 +503,7 @@ fn correct_native<'py>(
     if fd < 0 {
         return Err(PyValueError::new_err("a file descriptor is >= 0"));
     }
-    // SAFETY: the caller's open file outlives the call; it is duplicated, not taken over
-    let out = std::fs::File::from(unsafe { BorrowedFd::borrow_raw(fd) }.try_clone_to_owned()?);
+    let Some(out) = output_file(fd)? else { return Ok(None) };
     let opts = Options {
         sample: SampleOpts { chord_tol, max_segment, include_rapids, only_supported: true, grid_x, grid_y },
         piece_bytes: piece_bytes.max(1),

@@ -61,7 +61,7 @@ pub struct Report {
 /// How a run ended.
 #[derive(Debug)]
 pub enum Outcome {
-    Done(Report),
+    Done(Box<Report>),
     /// A check refuses the program; nothing useful was written.
     Refused,
     /// The progress callback asked to stop (a signal, say).
@@ -316,7 +316,7 @@ fn pass(
         report.notes = end.interp.notes;
         report.summary = end.interp.summary;
         report.lines_read = end.lines_read;
-        Ok(Ok(Outcome::Done(report)))
+        Ok(Ok(Outcome::Done(Box::new(report))))
     })
 }
 
