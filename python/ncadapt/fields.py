@@ -331,16 +331,17 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
         if len(row) != len(header):
             raise InputError(f"expected {len(header)} fields, found {len(row)}", str(path), lineno, 1)
         for c, k in zip(required, idx):
-            col = csv_column(row, k)
             try:
                 v = float(row[k])
             except ValueError:
-                raise InputError(f"column {c}: expected a number, found {cut(row[k].strip())}", str(path), lineno, col) from None
+                raise InputError(f"column {c}: expected a number, found {cut(row[k].strip())}", str(path), lineno,
+                                 csv_column(row, k)) from None
             if not math.isfinite(v):
-                raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno, col)
+                raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno,
+                                 csv_column(row, k))
             if abs(v) > COORD_MAX:
                 raise InputError(f"column {c}: {v:g} is beyond ±{COORD_MAX:g}, larger than any machine value",
-                                 str(path), lineno, col)
+                                 str(path), lineno, csv_column(row, k))
             cols[c].append(v)
         linenos.append(lineno)
     if header is None:
@@ -354,16 +355,21 @@ def _grid_from_points(x, y, dz, linenos, path, method, outside) -> GridField:
     if len(xs) < 2 or len(ys) < 2:
         raise InputError("a grid needs at least 2 distinct x and 2 distinct y values", str(path))
     grid = np.full((len(ys), len(xs)), np.nan)
-    seen = np.zeros_like(grid, dtype=np.int64)
     i = np.searchsorted(xs, x)
     j = np.searchsorted(ys, y)
-    for k in range(len(x)):
-        if seen[j[k], i[k]]:
-            raise InputError(
-                f"duplicate grid point x={x[k]:g} y={y[k]:g} (first on line {seen[j[k], i[k]]})",
-                str(path), int(linenos[k]), 1)
-        seen[j[k], i[k]] = linenos[k]
-        grid[j[k], i[k]] = dz[k]
+    cell = j * len(xs) + i
+    if len(np.unique(cell)) == len(cell):
+        grid.ravel()[cell] = dz
+    else:
+        # a point given twice: found in file order, to name both lines
+        seen = np.zeros_like(grid, dtype=np.int64)
+        for k in range(len(x)):
+            if seen[j[k], i[k]]:
+                raise InputError(
+                    f"duplicate grid point x={x[k]:g} y={y[k]:g} (first on line {seen[j[k], i[k]]})",
+                    str(path), int(linenos[k]), 1)
+            seen[j[k], i[k]] = linenos[k]
+            grid[j[k], i[k]] = dz[k]
     if np.isnan(grid).any():
         jj, ii = np.argwhere(np.isnan(grid))[0]
         n_missing = int(np.isnan(grid).sum())

@@ -19,7 +19,6 @@ G1 X2
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -29,6 +28,7 @@ import numpy as np
 from . import constants
 from ._io import atomic_open, atomic_write
 from ._nc import Corrector as _NativeCorrector
+from ._nc import correct_native as _nc_correct
 from ._nc import EngineError
 from ._nc import Program as _Native
 from .errors import InputError, RefusedError
@@ -179,7 +179,7 @@ def correct_file(path: str | os.PathLike, output: str | os.PathLike, field: Call
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
     with atomic_open(out) as f, _BackgroundWriter(f) as w:
-        return _correct(str(p), str(p), w.write, field, keep_points=False, **options)
+        return _correct(str(p), str(p), w.write, field, keep_points=False, out_file=f, **options)
 
 
 def inspect_file(path: str | os.PathLike) -> dict:
@@ -396,7 +396,7 @@ class Program:
         _refuse_overwrite(p, self.path)
         self._refuse_unsupported(options.get("keep_unsupported", False))
         with atomic_open(p) as f, _BackgroundWriter(f) as w:
-            return _correct(self._data, self.name, w.write, field, keep_points=False, **options)
+            return _correct(self._data, self.name, w.write, field, keep_points=False, out_file=f, **options)
 
     def _refuse_unsupported(self, keep_unsupported) -> None:
         uns = self.unsupported
@@ -519,14 +519,75 @@ def _engine(fn, name):
         raise _engine_error(e, name) from None
 
 
+def _native_field(field) -> tuple | None:
+    """The field as the engine evaluates it itself (``_nc.correct_native``): a :class:`Shift` or a
+    bilinear :class:`GridField`, given with the numbers their ``_eval`` uses; None for any other
+    field (subclasses included), which is evaluated in Python."""
+    if type(field) is _fields.Shift:
+        return ("shift", tuple(float(v) for v in field.d))
+    if type(field) is _fields.GridField and field.method == "linear" and field.outside in _fields.OUTSIDE:
+        return ("grid", [float(v) for v in field.xs], [float(v) for v in field.ys],
+                field._steps[0], field._steps[1], np.ascontiguousarray(field.dz, dtype=np.float64).ravel().tolist(),
+                field.outside, tuple(float(v) for v in field.bounds))
+    return None
+
+
+def _correct_native(source, name, out_file, field, spec, *, chord_tol, max_segment, limit, rapids, keep_unsupported,
+                    clearance, say, gx, gy) -> Correction | None:
+    """The correction run by the engine alone (reading, field, figures, emitting and writing to
+    ``out_file`` in threads without the GIL), for the fields of :func:`_native_field`. None when a
+    check refuses the program: ``out_file`` is then emptied and the caller runs the Python
+    evaluation, which reports the refusal as it always has."""
+    shift_norm = None
+    if spec[0] == "shift":
+        # the displacement's length as the Python evaluation computes it for every point
+        d = field(np.zeros((1, 3)))
+        shift_norm = float(np.sqrt(np.einsum("ij,ij->i", d, d))[0])
+    out_file.flush()
+    start = out_file.tell()
+    r = _engine(lambda: _nc_correct(source, out_file.fileno(), spec, float(chord_tol), float(max_segment), bool(rapids),
+                                    gx, gy, _PIECE_BYTES, float(limit), bool(keep_unsupported),
+                                    None if clearance is None else float(clearance), shift_norm,
+                                    lambda a, b: say(f"correcting lines {a + 1:,}-{b:,}")), name)
+    if r is None:
+        out_file.seek(start)
+        out_file.truncate()
+        return None
+    notes = _Warnings(field, clearance)
+    notes.unknown, notes.first, notes.low = r["unknown"], r["first_unknown"], list(r["low"])
+    uns = tuple(Unsupported(*u) for u in r["unsupported"])
+    warnings = notes.messages()
+    if keep_unsupported and uns:
+        warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
+    stats, n_pts = r["stats"], r["n_points"]
+    return Correction(
+        lines_in=stats["lines_in"],
+        lines_out=stats["lines_out"],
+        blocks_changed=stats["blocks_changed"],
+        lines_added=stats["lines_added"],
+        arcs_linearised=stats["arcs_linearised"],
+        max_displacement=r["max"],
+        mean_displacement=r["total"] / n_pts if n_pts else 0.0,
+        n_points=n_pts,
+        points=None,
+        displacements=None,
+        line=None,
+        unsupported_kept=uns if keep_unsupported else (),
+        warnings=tuple(warnings),
+        notes=tuple(r["notes"]),
+    )
+
+
 def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_segment=constants.MAX_SEGMENT,
              limit=constants.LIMIT, rapids=False, keep_unsupported=False, clearance=None, progress=None,
-             keep_points=True) -> Correction:
+             keep_points=True, out_file=None) -> Correction:
     """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
 
     ``source`` is the program's bytes or its file's path. Every check runs over the whole program
     before the caller's output counts as written: a refusal raises after the last piece, and the
-    callers discard what ``write`` received.
+    callers discard what ``write`` received. With ``out_file`` (the open file ``write`` ends in,
+    nothing written yet) a field the engine evaluates itself (:func:`_native_field`) is applied
+    by the engine alone, writing to the file directly.
     """
     say = progress or (lambda msg: None)
     Program._check_sampling(chord_tol, max_segment)
@@ -534,6 +595,13 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
         raise ValueError(f"limit must be > 0 mm, got {limit}")
     grid = getattr(field, "grid_lines", None)
     gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
+    spec = _native_field(field) if out_file is not None and not keep_points else None
+    if spec is not None:
+        c = _correct_native(source, name, out_file, field, spec, chord_tol=chord_tol, max_segment=max_segment,
+                            limit=limit, rapids=rapids, keep_unsupported=keep_unsupported, clearance=clearance,
+                            say=say, gx=gx, gy=gy)
+        if c is not None:
+            return c
     run = _engine(lambda: _NativeCorrector(source, float(chord_tol), float(max_segment), bool(rapids), True,
                                            gx, gy, _PIECE_BYTES), name)
     kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -678,14 +746,19 @@ def _inspect(source, name) -> dict:
 
 class _BackgroundWriter:
     """Writes chunks to a file in a second thread, so the disk works while the next chunk is
-    computed (file writes release the GIL). At most two chunks wait; errors surface on exit."""
+    computed (file writes release the GIL). At most two chunks wait; errors surface on exit. The
+    thread starts with the first chunk (a native correction writes the file itself)."""
 
     def __init__(self, f):
         self._f = f
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ncadapt-writer")
+        self._pool = None
         self._pending: list = []
 
     def write(self, data: bytes) -> None:
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor  # imported where needed: start-up time
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ncadapt-writer")
         if len(self._pending) >= 2:
             self._pending.pop(0).result()
         self._pending.append(self._pool.submit(self._f.write, data))
@@ -698,7 +771,8 @@ class _BackgroundWriter:
             for fut in self._pending:
                 fut.result()
         finally:
-            self._pool.shutdown(wait=True)
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
         return False
 
 
@@ -707,4 +781,5 @@ def _wcs_name(code: int) -> str:
 
 
 # imported late: fields imports nothing from here, but keeps the outside error type
+from . import fields as _fields  # noqa: E402
 from .fields import OutsideError as _OutsideError  # noqa: E402

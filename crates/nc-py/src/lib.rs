@@ -3,6 +3,8 @@
 //! Arrays cross as little-endian bytes that the Python side views with `numpy.frombuffer`.
 
 use nc::emit::{EmitState, EmitStats, Emitter};
+use nc::field::{Field, Grid, Outside};
+use nc::pipeline::{self, Options, Outcome};
 use nc::interp::{Interp, NAXES};
 use nc::sample::{SampleOpts, Samples};
 use nc::stream::{scan_style, Piece, Reader, Stream};
@@ -415,10 +417,147 @@ impl Corrector {
     }
 }
 
+/// A field the engine evaluates itself, from Python: `("shift", (dx, dy, dz))` or
+/// `("grid", xs, ys, step_x, step_y, values, outside, bounds)` (values in row order, steps None for an
+/// irregular grid, outside "error", "clamp" or "extrapolate").
+fn native_field(spec: &Bound<'_, PyAny>) -> PyResult<Field> {
+    let kind: String = spec.get_item(0)?.extract()?;
+    match kind.as_str() {
+        "shift" => Ok(Field::Shift(spec.get_item(1)?.extract()?)),
+        "grid" => {
+            let outside = match spec.get_item(6)?.extract::<String>()?.as_str() {
+                "error" => Outside::Error,
+                "clamp" => Outside::Clamp,
+                "extrapolate" => Outside::Extrapolate,
+                o => return Err(PyValueError::new_err(format!("unknown outside mode {o:?}"))),
+            };
+            let f = Field::Grid(Grid {
+                xs: spec.get_item(1)?.extract()?,
+                ys: spec.get_item(2)?.extract()?,
+                steps: [spec.get_item(3)?.extract()?, spec.get_item(4)?.extract()?],
+                v: spec.get_item(5)?.extract()?,
+                outside,
+                bounds: spec.get_item(7)?.extract()?,
+            });
+            f.check().map_err(PyValueError::new_err)?;
+            Ok(f)
+        }
+        k => Err(PyValueError::new_err(format!("unknown native field {k:?}"))),
+    }
+}
+
+/// Evaluate a native field at points (bytes of float64, 3 per point): the displacements as
+/// bytes, or None when a point is outside a refusing domain or a value is not finite.
+#[pyfunction]
+fn eval_field<'py>(py: Python<'py>, spec: &Bound<'py, PyAny>, xyz: &[u8]) -> PyResult<Option<Bound<'py, PyBytes>>> {
+    let f = native_field(spec)?;
+    let pts: Vec<f64> = xyz.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap())).collect();
+    let mut out = Vec::new();
+    Ok(if f.eval(&pts, &mut out) { Some(raw_bytes(py, &out)) } else { None })
+}
+
+/// The caller's open file `fd`, duplicated (it is not taken over: the caller closes its own).
+#[cfg(unix)]
+fn output_file(fd: i32) -> PyResult<Option<std::fs::File>> {
+    use std::os::fd::BorrowedFd;
+    // SAFETY: the caller's open file outlives the call
+    Ok(Some(std::fs::File::from(unsafe { BorrowedFd::borrow_raw(fd) }.try_clone_to_owned()?)))
+}
+
+/// Elsewhere the engine does not write the caller's file: the Python evaluation does the run.
+#[cfg(not(unix))]
+fn output_file(_fd: i32) -> PyResult<Option<std::fs::File>> {
+    Ok(None)
+}
+
+/// Correct a program (bytes, or the path of its file) with a native field, writing the output
+/// to the open file descriptor `fd` (from its current offset) in threads that run without the
+/// GIL. Returns the figures as a dict, or None when a check refuses the program (the caller runs
+/// the Python evaluation to report it). `progress(first, end)` is called for each piece.
+#[pyfunction]
+#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress))]
+#[allow(clippy::too_many_arguments)]
+fn correct_native<'py>(
+    py: Python<'py>,
+    source: &Bound<'py, PyAny>,
+    fd: i32,
+    field: &Bound<'py, PyAny>,
+    chord_tol: f64,
+    max_segment: f64,
+    include_rapids: bool,
+    grid_x: Vec<f64>,
+    grid_y: Vec<f64>,
+    piece_bytes: usize,
+    limit: f64,
+    keep_unsupported: bool,
+    clearance: Option<f64>,
+    shift_norm: Option<f64>,
+    progress: Option<PyObject>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let src = if let Ok(b) = source.downcast::<PyBytes>() {
+        Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
+    } else {
+        Source::File(std::path::PathBuf::from(source.extract::<String>()?))
+    };
+    let field = native_field(field)?;
+    if fd < 0 {
+        return Err(PyValueError::new_err("a file descriptor is >= 0"));
+    }
+    let Some(out) = output_file(fd)? else { return Ok(None) };
+    let opts = Options {
+        sample: SampleOpts { chord_tol, max_segment, include_rapids, only_supported: true, grid_x, grid_y },
+        piece_bytes: piece_bytes.max(1),
+        limit,
+        keep_unsupported,
+        clearance,
+        shift_norm,
+    };
+    // between pieces: the progress display, and Python's signal handlers (SIGTERM, Ctrl-C), which
+    // run only when the main thread asks for them; an exception they raise stops the run
+    let mut raised: Option<PyErr> = None;
+    let mut say = |a: usize, b: usize| -> bool {
+        Python::with_gil(|py| {
+            if let Some(p) = &progress {
+                if let Err(e) = p.call1(py, (a, b)) {
+                    raised = Some(e);
+                    return false;
+                }
+            }
+            match py.check_signals() {
+                Ok(()) => true,
+                Err(e) => {
+                    raised = Some(e);
+                    false
+                }
+            }
+        })
+    };
+    let r = py.allow_threads(|| pipeline::correct(&|| src.open(), &field, &opts, &out, &mut say)).map_err(to_py)?;
+    let rep = match r {
+        Outcome::Done(rep) => rep,
+        Outcome::Refused => return Ok(None),
+        Outcome::Stopped => return Err(raised.unwrap_or_else(|| PyValueError::new_err("the correction was stopped"))),
+    };
+    let d = PyDict::new(py);
+    d.set_item("stats", stats_dict(py, &rep.stats)?)?;
+    d.set_item("n_points", rep.n_points)?;
+    d.set_item("total", rep.total)?;
+    d.set_item("max", rep.max)?;
+    d.set_item("unknown", rep.unknown)?;
+    d.set_item("first_unknown", rep.first_unknown)?;
+    d.set_item("low", rep.low)?;
+    d.set_item("unsupported", unsupported_list(&rep.unsupported))?;
+    d.set_item("notes", notes_list(&rep.notes))?;
+    d.set_item("lines_read", rep.lines_read)?;
+    Ok(Some(d))
+}
+
 #[pymodule]
 fn _nc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Program>()?;
     m.add_class::<Corrector>()?;
+    m.add_function(wrap_pyfunction!(correct_native, m)?)?;
+    m.add_function(wrap_pyfunction!(eval_field, m)?)?;
     m.add("EngineError", m.py().get_type::<EngineError>())?;
     Ok(())
 }

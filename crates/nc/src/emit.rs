@@ -7,7 +7,7 @@
 
 use crate::error::NcError;
 use crate::interp::{Interp, Motion, Record, AXES, MM_PER_INCH, NAXES, PLANE_AXES};
-use crate::lex::{Lexed, NumberStyle, Word};
+use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
 
 /// Corrected pieces this close to a straight line (mm) are written as one move. Far below any
@@ -62,82 +62,106 @@ impl Format {
     }
 
     /// Write `v` in the program's style and return the value the written text stands for.
+    #[inline]
     pub fn number(&self, v: f64, inch: bool, out: &mut Vec<u8>) -> f64 {
+        match self.decimals(inch) {
+            4 => self.number_dec::<4>(v, out),
+            5 => self.number_dec::<5>(v, out),
+            6 => self.number_dec::<6>(v, out),
+            7 => self.number_dec::<7>(v, out),
+            8 => self.number_dec::<8>(v, out),
+            _ => self.number_dec::<9>(v, out),
+        }
+    }
+
+    /// [`Format::number`] with `D` decimals: rounded half away from zero, the fraction's
+    /// trailing zeros dropped unless the program writes them, the leading zero and a bare point
+    /// as the program writes them. The text is written straight into `out`.
+    #[inline(always)]
+    fn number_dec<const D: usize>(&self, v: f64, out: &mut Vec<u8>) -> f64 {
         const POW10: [u64; 10] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
-        let dec = self.decimals(inch).min(9);
-        let scale = POW10[dec];
+        let scale = POW10[D];
         let scaled = v * scale as f64;
         if scaled.is_nan() || scaled.abs() >= 9.0e15 {
             // beyond any machine's travel; keep the text exact all the same
-            let t = format!("{:.*}", dec, v);
+            let t = format!("{:.*}", D, v);
             out.extend_from_slice(t.as_bytes());
             return t.parse().unwrap_or(v);
         }
         // round half away from zero with one conversion (f64::round is a library call)
-        let m = if scaled >= 0.0 { (scaled + 0.5) as i64 } else { (scaled - 0.5) as i64 };
-        // the digits of |m| are written from the right into a buffer, two at a time, then copied
-        // once: the last `dec` are the fraction
-        let mut a = m.unsigned_abs();
-        let mut buf = [0u8; 48];
-        let end = buf.len();
-        let mut i = end;
-        let mut k = 0;
-        while k + 2 <= dec {
-            let d = (a % 100) as usize;
-            a /= 100;
-            i -= 2;
-            buf[i..i + 2].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
-            k += 2;
+        // SAFETY: |scaled| < 9e15 (checked above) fits an i64
+        let m = unsafe { if scaled >= 0.0 { (scaled + 0.5).to_int_unchecked::<i64>() } else { (scaled - 0.5).to_int_unchecked::<i64>() } };
+        let a = m.unsigned_abs();
+        let (q, mut r) = (a / scale, a % scale);
+        // the fraction's D digits, and how many of them are written
+        let mut frac = [b'0'; 10];
+        let mut k = D;
+        while k >= 2 {
+            let d = (r % 100) as usize;
+            r /= 100;
+            frac[k - 2] = DIGIT_PAIRS[2 * d];
+            frac[k - 1] = DIGIT_PAIRS[2 * d + 1];
+            k -= 2;
         }
-        if k < dec {
-            i -= 1;
-            buf[i] = b'0' + (a % 10) as u8;
-            a /= 10;
+        if k == 1 {
+            frac[0] = b'0' + r as u8;
         }
-        // the fraction without its trailing zeros, unless the program writes them
-        let mut stop = end;
+        let mut digits = D;
         if !self.style.fixed {
-            while stop > i && buf[stop - 1] == b'0' {
-                stop -= 1;
+            while digits > 0 && frac[digits - 1] == b'0' {
+                digits -= 1;
             }
         }
-        let digits = stop - i;
-        let frac_at = i;
-        // the point (and "0" after it for a whole number, unless the program writes "5.")
-        let mut head = [0u8; 24];
-        let mut h = head.len();
-        h -= 1;
-        head[h] = b'.';
-        if !(self.style.no_leading_zero && a == 0 && digits > 0) {
-            loop {
-                if a >= 10 {
-                    let d = (a % 100) as usize;
-                    a /= 100;
-                    h -= 2;
-                    head[h..h + 2].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
-                    if a == 0 {
-                        break;
-                    }
-                } else {
-                    h -= 1;
-                    head[h] = b'0' + a as u8;
-                    break;
-                }
+        // the text is put together in 32 bytes and copied at once: sign, whole digits (omitted
+        // for ".5" when the program writes so), point, fraction (or "0" after a bare point unless
+        // the program writes "5.")
+        let mut b = [0u8; 32];
+        let mut i = (m < 0) as usize;
+        b[0] = b'-';
+        if !(self.style.no_leading_zero && q == 0 && digits > 0) {
+            let mut nq = 1;
+            while nq < 16 && q >= POW10_U64[nq] {
+                nq += 1;
             }
+            let mut x = q;
+            let mut j = i + nq;
+            while j >= i + 2 {
+                let d = (x % 100) as usize;
+                x /= 100;
+                b[j - 2] = DIGIT_PAIRS[2 * d];
+                b[j - 1] = DIGIT_PAIRS[2 * d + 1];
+                j -= 2;
+            }
+            if j > i {
+                b[i] = b'0' + x as u8;
+            }
+            i += nq;
         }
-        if m < 0 {
-            h -= 1;
-            head[h] = b'-';
-        }
-        out.extend_from_slice(&head[h..]);
+        b[i] = b'.';
+        i += 1;
+        // (at most 1 + 16 + 1 bytes so far: the ten below fit)
+        b[i..i + 10].copy_from_slice(&frac);
         if digits > 0 {
-            out.extend_from_slice(&buf[frac_at..stop]);
+            i += digits;
         } else if !self.style.bare_point {
-            out.push(b'0');
+            i += 1; // frac[0] is '0'
+        }
+        out.reserve(b.len());
+        let len = out.len();
+        // SAFETY: `reserve` made room for the 32 bytes copied; the first `i` are the text
+        unsafe {
+            std::ptr::copy_nonoverlapping(b.as_ptr(), out.as_mut_ptr().add(len), b.len());
+            out.set_len(len + i);
         }
         m as f64 / scale as f64
     }
 }
+
+const POW10_U64: [u64; 17] = [
+    1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000, 10_000_000_000,
+    100_000_000_000, 1_000_000_000_000, 10_000_000_000_000, 100_000_000_000_000, 1_000_000_000_000_000,
+    10_000_000_000_000_000,
+];
 
 const DIGIT_PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
 2021222324252627282930313233343536373839\
@@ -171,18 +195,31 @@ fn motion_text(m: Motion, padded: bool) -> &'static str {
 #[inline]
 fn is_motion_g(w: &Word) -> bool {
     w.letter == b'G' && {
-        let c = (w.value * 10.0).round() as i32;
+        let c = round(w.value * 10.0) as i32;
         matches!(c, 0 | 10 | 20 | 30 | 800 | 730 | 740 | 760 | 810..=890 | 330 | 331 | 382..=385 | 50 | 51 | 52)
     }
 }
 
 #[inline]
 fn is_stop_m(w: &Word) -> bool {
-    w.letter == b'M' && matches!(w.value.round() as i32, 0 | 1 | 2 | 30 | 60)
+    w.letter == b'M' && matches!(round(w.value) as i32, 0 | 1 | 2 | 30 | 60)
 }
 
+#[inline]
 fn axis_index(letter: u8) -> Option<usize> {
-    AXES.iter().position(|&a| a == letter)
+    // the index in AXES ("XYZABCUVW")
+    match letter {
+        b'X' => Some(0),
+        b'Y' => Some(1),
+        b'Z' => Some(2),
+        b'A' => Some(3),
+        b'B' => Some(4),
+        b'C' => Some(5),
+        b'U' => Some(6),
+        b'V' => Some(7),
+        b'W' => Some(8),
+        _ => None,
+    }
 }
 
 /// What the emitter carries from one run of lines to the next: the position the output's
@@ -447,15 +484,16 @@ impl<'a> Emitter<'a> {
         let uniform = disp.chunks_exact(3).all(|d| (0..3).all(|k| (d[k] - d0[k]).abs() <= 1e-9));
         let half_mm = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
         let target_at = |k: usize, t: f64| -> [f64; NAXES] {
-            let mut p = [0.0; NAXES];
-            for a in 0..NAXES {
-                p[a] = if a < 3 {
-                    xyz[3 * k + a] + disp[3 * k + a]
-                } else if rec.named & (1 << a) != 0 {
-                    if t == 1.0 { rec.end[a] } else { start[a] + t * (rec.end[a] - start[a]) }
-                } else {
-                    epos0[a]
-                };
+            // XYZ corrected, the axes the block names interpolated, the others where they are
+            let mut p = epos0;
+            for a in 0..3 {
+                p[a] = xyz[3 * k + a] + disp[3 * k + a];
+            }
+            let mut named = rec.named >> 3;
+            while named != 0 {
+                let a = 3 + named.trailing_zeros() as usize;
+                p[a] = if t == 1.0 { rec.end[a] } else { start[a] + t * (rec.end[a] - start[a]) };
+                named &= named - 1;
             }
             p
         };
@@ -505,7 +543,7 @@ impl<'a> Emitter<'a> {
             self.restore_modal(li, rec, explicit);
         }
         // a uniform straight move that starts off the corrected path needs one piece to reach it
-        let pieces: Vec<usize> = if !linearise && uniform && only_xyz { vec![n - 1] } else { (1..n).collect() };
+        let pieces = if !linearise && uniform && only_xyz { n - 1..n } else { 1..n };
         // program stops move to the last piece (they stay where they are when there is none)
         let mut stops: Vec<u8> = Vec::new();
         for w in words.iter().filter(|w| is_stop_m(w) && !pieces.is_empty()) {
@@ -516,7 +554,7 @@ impl<'a> Emitter<'a> {
         let first = target_at(0, ts[0]);
         self.set_axes(li, rec, &first);
         let prefix: &[u8] = if self.lx.lines[li].block_delete { b"/" } else { b"" };
-        for &k in &pieces {
+        for k in pieces {
             let p = target_at(k, ts[k]);
             let t0 = self.st.tail.len();
             let body = t0 + prefix.len();
@@ -680,6 +718,84 @@ mod tests {
         String::from_utf8(out).unwrap()
     }
 
+    /// The formatting before `number_dec`, digit by digit, as a reference.
+    fn reference_number(f: &Format, v: f64, inch: bool, out: &mut Vec<u8>) -> f64 {
+        let this = f;
+        const POW10: [u64; 10] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
+        let dec = this.decimals(inch).min(9);
+        let scale = POW10[dec];
+        let scaled = v * scale as f64;
+        if scaled.is_nan() || scaled.abs() >= 9.0e15 {
+            // beyond any machine's travel; keep the text exact all the same
+            let t = format!("{:.*}", dec, v);
+            out.extend_from_slice(t.as_bytes());
+            return t.parse().unwrap_or(v);
+        }
+        // round half away from zero with one conversion (f64::round is a library call)
+        let m = if scaled >= 0.0 { (scaled + 0.5) as i64 } else { (scaled - 0.5) as i64 };
+        // the digits of |m| are written from the right into a buffer, two at a time, then copied
+        // once: the last `dec` are the fraction
+        let mut a = m.unsigned_abs();
+        let mut buf = [0u8; 48];
+        let end = buf.len();
+        let mut i = end;
+        let mut k = 0;
+        while k + 2 <= dec {
+            let d = (a % 100) as usize;
+            a /= 100;
+            i -= 2;
+            buf[i..i + 2].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
+            k += 2;
+        }
+        if k < dec {
+            i -= 1;
+            buf[i] = b'0' + (a % 10) as u8;
+            a /= 10;
+        }
+        // the fraction without its trailing zeros, unless the program writes them
+        let mut stop = end;
+        if !this.style.fixed {
+            while stop > i && buf[stop - 1] == b'0' {
+                stop -= 1;
+            }
+        }
+        let digits = stop - i;
+        let frac_at = i;
+        // the point (and "0" after it for a whole number, unless the program writes "5.")
+        let mut head = [0u8; 24];
+        let mut h = head.len();
+        h -= 1;
+        head[h] = b'.';
+        if !(this.style.no_leading_zero && a == 0 && digits > 0) {
+            loop {
+                if a >= 10 {
+                    let d = (a % 100) as usize;
+                    a /= 100;
+                    h -= 2;
+                    head[h..h + 2].copy_from_slice(&DIGIT_PAIRS[2 * d..2 * d + 2]);
+                    if a == 0 {
+                        break;
+                    }
+                } else {
+                    h -= 1;
+                    head[h] = b'0' + a as u8;
+                    break;
+                }
+            }
+        }
+        if m < 0 {
+            h -= 1;
+            head[h] = b'-';
+        }
+        out.extend_from_slice(&head[h..]);
+        if digits > 0 {
+            out.extend_from_slice(&buf[frac_at..stop]);
+        } else if !this.style.bare_point {
+            out.push(b'0');
+        }
+        m as f64 / scale as f64
+    }
+
     #[test]
     fn numbers_are_the_rounded_values_in_every_style() {
         // against the standard library's formatting of the rounded value, trimmed by the style
@@ -690,8 +806,11 @@ mod tests {
             seed ^= seed << 17;
             seed
         };
-        for (fixed, nlz, bare) in [(true, false, false), (false, false, false), (false, true, false), (false, false, true), (false, true, true)] {
-            let style = NumberStyle { fixed, no_leading_zero: nlz, bare_point: bare, ..NumberStyle::default() };
+        for ((fixed, nlz, bare), max_decimals) in [(true, false, false), (false, false, false), (false, true, false), (false, false, true), (false, true, true)]
+            .into_iter()
+            .flat_map(|s| [(s, 0u8), (s, 6), (s, 7), (s, 8)])
+        {
+            let style = NumberStyle { fixed, no_leading_zero: nlz, bare_point: bare, max_decimals, ..NumberStyle::default() };
             let f = Format::new(style);
             for k in 0..20000 {
                 let mag = 10f64.powi((next() % 9) as i32 - 4);
@@ -715,8 +834,14 @@ mod tests {
                     if m < 0.0 {
                         want.insert(0, '-');
                     }
-                    assert_eq!(String::from_utf8(out).unwrap(), want, "{v} inch={inch} style={style:?}");
-                    assert_eq!(got, m / 10f64.powi(dec as i32));
+                    let mut reference = Vec::new();
+                    let got_ref = reference_number(&f, v, inch, &mut reference);
+                    assert_eq!(String::from_utf8(out.clone()).unwrap(), String::from_utf8(reference).unwrap(), "{v} inch={inch} style={style:?}");
+                    assert_eq!(got.to_bits(), got_ref.to_bits());
+                    if max_decimals == 0 {
+                        assert_eq!(String::from_utf8(out).unwrap(), want, "{v} inch={inch} style={style:?}");
+                        assert_eq!(got, m / 10f64.powi(dec as i32));
+                    }
                 }
             }
         }

@@ -165,7 +165,7 @@ struct State {
 }
 
 fn code(w: &Word) -> i32 {
-    (w.value * 10.0).round() as i32
+    crate::lex::round(w.value * 10.0) as i32
 }
 
 fn g_name(c: i32) -> String {
@@ -356,7 +356,7 @@ impl Interpreter {
                     ng += 1;
                 }
                 b'M' if nm < ms.len() => {
-                    ms[nm] = (w.value.round() as i32, col(w));
+                    ms[nm] = (crate::lex::round(w.value) as i32, col(w));
                     nm += 1;
                 }
                 b'G' | b'M' => {

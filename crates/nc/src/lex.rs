@@ -195,6 +195,26 @@ fn number(s: &[u8], mut i: usize) -> Option<(f64, i8, usize, bool, bool, bool)> 
     ))
 }
 
+/// `x.round()` (half away from zero) without the library call: the same value for every x.
+#[inline]
+pub fn round(x: f64) -> f64 {
+    if x.abs() < 4.0e15 {
+        // the whole part is exact, and so is the difference
+        // SAFETY: |x| < 4e15 fits an i64
+        let t = unsafe { x.to_int_unchecked::<i64>() } as f64;
+        let d = x - t;
+        if d >= 0.5 {
+            t + 1.0
+        } else if d <= -0.5 {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x.round()
+    }
+}
+
 fn err(line: usize, col: usize, msg: impl Into<String>) -> NcError {
     NcError::Parse { line: line + 1, col: col + 1, message: msg.into() }
 }
@@ -461,6 +481,27 @@ mod tests {
         assert_eq!(first_error(b"G0 X0\rG1 X1\r"), (1, 6));
         // a CR before the line end is a blank, as in LinuxCNC
         assert!(lex(b"G0 X0\r\r\nG1 X1 \r\n").unwrap().errors.is_empty());
+    }
+
+    #[test]
+    fn round_is_the_library_round() {
+        let mut seed = 0x9E3779B97F4A7C15u64;
+        for k in 0..200_000 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let x = match k % 4 {
+                0 => f64::from_bits(seed),
+                1 => (seed >> 11) as f64 / (1u64 << 53) as f64 * 2000.0 - 1000.0,
+                2 => ((seed % 20001) as f64 - 10000.0) / 10.0 + 0.05,
+                _ => ((seed % 2001) as f64 - 1000.0) * 0.5,
+            };
+            let (a, b) = (round(x), x.round());
+            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()) || (a == 0.0 && b == 0.0), "{x}: {a} {b}");
+        }
+        for x in [0.49999999999999994, -0.49999999999999994, 0.5, -0.5, 2.5, -2.5, 4503599627370495.5, 1e300, -0.0] {
+            assert_eq!(round(x) as i64, x.round() as i64, "{x}");
+        }
     }
 
     #[test]

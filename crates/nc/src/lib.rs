@@ -5,8 +5,10 @@
 
 pub mod emit;
 pub mod error;
+pub mod field;
 pub mod interp;
 pub mod lex;
+pub mod pipeline;
 pub mod sample;
 pub mod stream;
 

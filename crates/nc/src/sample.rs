@@ -157,6 +157,7 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
     s.range.clear();
     s.rec0 = recs.start;
     let mut cuts: Vec<f64> = Vec::new();
+    let (grid_x, grid_y) = (GridLines::new(&opts.grid_x), GridLines::new(&opts.grid_y));
     for i in recs {
         let rec = &it.records[i];
         let start = start_of(it, i);
@@ -173,8 +174,8 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
         let push = |s: &mut Samples, p: [f64; 3], t: f64, prev: &mut [f64; 3], prev_t: &mut f64, cuts: &mut Vec<f64>| {
             if !opts.grid_x.is_empty() || !opts.grid_y.is_empty() {
                 cuts.clear();
-                crossings(&opts.grid_x, prev[0], p[0], cuts);
-                crossings(&opts.grid_y, prev[1], p[1], cuts);
+                crossings(&grid_x, prev[0], p[0], cuts);
+                crossings(&grid_y, prev[1], p[1], cuts);
                 if cuts.len() > 1 {
                     cuts.sort_by(|a, b| a.partial_cmp(b).unwrap());
                 }
@@ -241,16 +242,70 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
     Ok(())
 }
 
+/// Sorted grid lines with a guess of where a value falls among them (exact for a uniform grid,
+/// a starting point for any other).
+struct GridLines<'a> {
+    v: &'a [f64],
+    first: f64,
+    /// Lines per mm: (n - 1) / (last - first).
+    per_mm: f64,
+}
+
+impl<'a> GridLines<'a> {
+    fn new(v: &'a [f64]) -> Self {
+        let n = v.len();
+        let per_mm = if n >= 2 { (n - 1) as f64 / (v[n - 1] - v[0]) } else { 0.0 };
+        GridLines { v, first: if n > 0 { v[0] } else { 0.0 }, per_mm: if per_mm.is_finite() { per_mm } else { 0.0 } }
+    }
+
+    /// `v.partition_point(|&g| g <= x)` (`OR_EQUAL`) or `v.partition_point(|&g| g < x)`: from
+    /// the guess, walked to the exact place; a binary search when the guess is far off.
+    #[inline(always)]
+    fn partition<const OR_EQUAL: bool>(&self, x: f64) -> usize {
+        let v = self.v;
+        let n = v.len();
+        let before = |g: f64| if OR_EQUAL { g <= x } else { g < x };
+        let k = (x - self.first) * self.per_mm;
+        let mut i = if k >= 0.0 {
+            if k < n as f64 {
+                // SAFETY: 0 <= k < n, so its whole part is a valid index; the line after it is
+                // where x falls on a uniform grid
+                (unsafe { k.to_int_unchecked::<u64>() as usize } + 1).min(n)
+            } else {
+                n
+            }
+        } else {
+            0
+        };
+        let mut steps = 0;
+        while i > 0 && !before(v[i - 1]) {
+            i -= 1;
+            steps += 1;
+            if steps > 3 {
+                return v.partition_point(|&g| before(g));
+            }
+        }
+        while i < n && before(v[i]) {
+            i += 1;
+            steps += 1;
+            if steps > 3 {
+                return v.partition_point(|&g| before(g));
+            }
+        }
+        i
+    }
+}
+
 /// Fractions u in (0, 1) where the segment a→b crosses one of the sorted lines.
 #[inline]
-fn crossings(lines: &[f64], a: f64, b: f64, out: &mut Vec<f64>) {
-    if lines.is_empty() || a == b {
+fn crossings(lines: &GridLines, a: f64, b: f64, out: &mut Vec<f64>) {
+    if lines.v.is_empty() || a == b {
         return;
     }
     let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-    let i0 = lines.partition_point(|&v| v <= lo);
-    let i1 = lines.partition_point(|&v| v < hi);
-    for &v in &lines[i0..i1] {
+    let i0 = lines.partition::<true>(lo);
+    let i1 = lines.partition::<false>(hi).max(i0);
+    for &v in &lines.v[i0..i1] {
         let u = (v - a) / (b - a);
         if u > 1e-12 && u < 1.0 - 1e-12 {
             out.push(u);
@@ -282,6 +337,28 @@ mod tests {
         for k in 0..n {
             let (x, y) = (s.xyz[3 * k], s.xyz[3 * k + 1]);
             assert!((x.hypot(y) - 10.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn grid_line_search_is_partition_point() {
+        let uniform: Vec<f64> = (0..=100).map(|i| i as f64 * 0.1).collect();
+        let irregular = vec![-3.0, -1.0, 0.0, 0.001, 0.5, 7.0, 7.0000001, 100.0];
+        let mut seed = 0x2545F4914F6CDD1Du64;
+        for v in [uniform, irregular, vec![1.0], vec![]] {
+            let g = GridLines::new(&v);
+            let mut xs: Vec<f64> = v.iter().flat_map(|&x| [x, x - 1e-12, x + 1e-12, x.next_up(), x.next_down()]).collect();
+            for _ in 0..10000 {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                xs.push((seed >> 11) as f64 / (1u64 << 53) as f64 * 130.0 - 15.0);
+            }
+            xs.extend([f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300]);
+            for x in xs {
+                assert_eq!(g.partition::<true>(x), v.partition_point(|&a| a <= x), "{x} in {v:?}");
+                assert_eq!(g.partition::<false>(x), v.partition_point(|&a| a < x), "{x} in {v:?}");
+            }
         }
     }
 

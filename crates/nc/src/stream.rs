@@ -114,13 +114,19 @@ impl Stream {
 
     /// The next piece, or None at the end of the input.
     pub fn next_piece(&mut self) -> Result<Option<Piece>, NcError> {
+        let (style, crlf) = (self.style, self.crlf);
+        self.next_piece_with(|_| (style, crlf))
+    }
+
+    /// The next piece, written in the style `style` gives from the piece's own lexing (which
+    /// carries the piece's style and counts).
+    pub fn next_piece_with(&mut self, style: impl FnOnce(&Lexed) -> (NumberStyle, bool)) -> Result<Option<Piece>, NcError> {
         let Some(src) = self.lines.next(self.piece_bytes)? else { return Ok(None) };
         if self.line_base + src.len() >= u32::MAX as usize {
             return Err(NcError::Usage("a program of more than 4 billion lines".into()));
         }
         let mut lexed = lex_at(&src, self.line_base)?;
-        lexed.style = self.style;
-        lexed.crlf = self.crlf;
+        (lexed.style, lexed.crlf) = style(&lexed);
         let interp = self.interp.run(&lexed, self.line_base)?;
         let line_base = self.line_base;
         self.line_base += lexed.lines.len();
