@@ -176,13 +176,17 @@ def forces(depth, k_c11: float, m_c: float, **chip_kw) -> tuple[np.ndarray, np.n
     return fc, THRUST_RATIO * fc * np.cos(c.lead_angle)
 
 
-def bar_compliance(diameter: float = BAR_DIAMETER, overhang: float = BAR_OVERHANG,
-                   modulus: float = BAR_MODULUS) -> float:
-    """Radial compliance of a solid round cantilever at its tip, L³/(3EI), I = πd⁴/64 (mm/N)."""
-    return overhang ** 3 / (3 * modulus * math.pi * diameter ** 4 / 64)
+def bar_compliance(diameter: float | None = None, overhang: float | None = None,
+                   modulus: float | None = None) -> float:
+    """Radial compliance of a solid round cantilever at its tip, L³/(3EI), I = πd⁴/64 (mm/N);
+    by default the testbed's bar (``BAR_DIAMETER``, ``BAR_OVERHANG``, ``BAR_MODULUS``)."""
+    d = BAR_DIAMETER if diameter is None else diameter
+    length = BAR_OVERHANG if overhang is None else overhang
+    e = BAR_MODULUS if modulus is None else modulus
+    return length ** 3 / (3 * e * math.pi * d ** 4 / 64)
 
 
-def deflection(nominal_depth, compliance, k_c11: float, m_c: float, iterations: int = 60) -> np.ndarray:
+def deflection(nominal_depth, compliance, k_c11: float, m_c: float, iterations: int = 48) -> np.ndarray:
     """The static give-way d (mm) with d = c·F_p(a − d): the tool set for a nominal depth a
     cuts a − d. Bisection on [0, max(a, 0)] (F_p grows with the depth: one root)."""
     a = np.asarray(nominal_depth, dtype=float)
