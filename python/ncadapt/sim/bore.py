@@ -12,8 +12,9 @@ of the pre-finish (t₀ = 0.5 mm, past the nose arc) is not that of the correcti
 
 Radial lengths in mm, forces in N; ζ ∈ [0, 1] along the bore from face A (the tool's entry) to B.
 
-1. The chip (insert CCMT-style: nose radius r_ε = 0.4 mm, entering angle κ_r = 95° of a boring
-   bar, feed f = 0.05 mm/rev). The nose arc of the pass before, shifted by f, meets the arc at
+1. The chip (a finishing insert with nose radius r_ε = 0.4 mm, the "04" of ISO 1832's insert
+   code; entering angle κ_r = 95°, a common boring-bar holder; feed f = 0.05 mm/rev, the set-up's
+   choice). The nose arc of the pass before, shifted by f, meets the arc at
    the trailing half-angle α_s = arcsin(f / 2r_ε), height y_s = r_ε(1 − cos α_s) (the feed
    mark). For a depth a_p > y_s the engaged edge runs from α_s on the trailing side to the angle
    θ = arccos(1 − a_p/r_ε) on the leading side (on the arc while a_p ≤ r_ε(1 − cos κ_r), then
@@ -45,7 +46,8 @@ Radial lengths in mm, forces in N; ζ ∈ [0, 1] along the bore from face A (the
    the feed force F_f = F_T sin κ_e. At 5 µm … 0.1 mm F_p/a_p falls from 208 to 133 N/mm on
    steel; at the 0.5 mm pre-finish it is 75 N/mm.
 
-3. The boring bar: a steel cantilever (E = 210 GPa), Ø16 mm, overhang L = 100 mm (6.25 × D, a
+3. The boring bar (the set-up's choice): a steel cantilever (E = 210 GPa), Ø16 mm, overhang
+   L = 100 mm (6.25 × D, a
    long reach for a steel bar: Sandvik recommends up to 4 × D, so the bar dominates the
    compliance, as in the paper's case) clamped in the turret of a mill-turn; radial compliance
    at the tip c_bar = L³/(3EI), I = πd⁴/64 (4.93·10⁻⁴ mm/N, 0.49 µm/N). The overhang is set
@@ -55,9 +57,10 @@ Radial lengths in mm, forces in N; ζ ∈ [0, 1] along the bore from face A (the
 4. The part: held in the chuck, face B 20 mm and face A 80 mm from the jaws (a 60 mm bore).
    The chuck and spindle tilt under the radial force, so the wall gives way by x²/k_θ at a
    distance x from the jaws: c_w(ζ) = c_A (x(ζ)/x_A)², x(ζ) = 80 − 60ζ, with the stiffness at
-   face A 1/c_A ~ U(8, 30) N/µm per part (a three-jaw chuck holding a housing by a short
-   spigot). This is the paper's taper with the smaller diameter at the tool's entry, from a
-   physical cause; the paper's barrel shape has no cause in this set-up and is not modelled.
+   face A 1/c_A ~ U(8, 30) N/µm per part (assumed, not from a source: a three-jaw chuck holding
+   a housing by a short spigot; it sets the taper, 6–20 % of the deflection at face A). This
+   is the paper's taper with the smaller diameter at the tool's entry, from a physical cause;
+   the paper's barrel shape has no cause in this set-up and is not modelled.
    The part's own wall (Ø40 bore in a thick housing) bends by far less than 0.01 µm/N: left out.
 
 5. The cut: at each of 41 points along ζ the tool is set at radius R_set; the nominal depth is
