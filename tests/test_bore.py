@@ -125,8 +125,10 @@ def test_testbed_targets():
 
 
 def test_hardened_identifies_the_stiffness_ratio():
-    """Pre-finished soft (k_c 2000), finished hardened (k_c 3200): compliance ratio 2000/3200."""
-    r = sb.simulate(200, seed=2, material="hardened")
+    """Pre-finished soft (k_c 2000), finished hardened (k_c 3200): compliance ratio 2000/3200 on the
+    linear testbed, where the compliance is a ratio of k_c (on the beam testbed the identified ratio
+    also carries the force law's non-linearity: see test_beam_testbed_reaches_h6)."""
+    r = sb.simulate(200, seed=2, material="hardened", model="linear")
     assert r["stiffness_ratio_mean"] == pytest.approx(2000 / 3200, rel=0.05)
     assert r["within_tolerance"] >= 0.95
 
@@ -194,7 +196,7 @@ def _noise_free(monkeypatch):
 
 @pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
 def test_plan_agrees_with_the_noise_free_testbed(monkeypatch, seed):
-    """The testbed cuts with its own model (compliance × real depth at every point of the bore,
+    """The linear testbed (the paper's assumption, kept for this) cuts with its own model (compliance × real depth at every point of the bore,
     the tool set δK into the body on the aim); its deflection measured near A after each pass is
     the plan's prediction to 0.1 µm (the paper's (8) is not, from pass 2 on)."""
     _noise_free(monkeypatch)
@@ -207,7 +209,7 @@ def test_plan_agrees_with_the_noise_free_testbed(monkeypatch, seed):
         return c
 
     monkeypatch.setattr(pb, "next_correction", spy)
-    res = sb.run_part(np.random.default_rng(seed))
+    res = sb.run_part(np.random.default_rng(seed), model="linear")
     assert res.applicable and res.passes == 4
     p = seen[0][0]
     measured = [d for _, n, d in seen if n >= 1]
@@ -364,8 +366,14 @@ def test_fuzz_findings_plan_file(tmp_path, text, says):
 
 
 def test_fuzz_finding_simulate_t0():
+    """Settings for which condition (3) almost never holds end with the reason instead of drawing
+    forever. On the linear testbed the pre-finish deflection grows with t₀ and --t0 3 is refused; on
+    the beam testbed (the CLI's) a 3 mm pre-finish chip flows along the feed, the radial force
+    stays moderate and the run finishes."""
+    with pytest.raises(InputError, match="smaller --t0"):
+        sb.simulate(5, seed=1, t0=3, model="linear")
     r = CliRunner().invoke(main, ["bore", "simulate", "--parts", "5", "--t0", "3"])
-    assert r.exit_code == 2 and "smaller --t0" in r.output and "Traceback" not in r.output, r.output
+    assert r.exit_code in (0, 2) and "Traceback" not in r.output, r.output
 
 
 # ------------------------------------------------------------------ real probe results (issue 20, bores 11)
@@ -451,3 +459,136 @@ def test_probing_program_runs_in_rs274(tmp_path):
     out = tmp_path / "probe.ngc"
     out.write_text(pb.probing_program(40, [55, 30, 5]))
     assert canonical(out).error is None
+
+
+# ------------------------------------------------------------------ the testbed's own physics (issue 20, Tests)
+# Values below are computed here from the force law and the beam, not read from the testbed.
+R_EPS, FEED, KAPPA = 0.4, 0.05, math.radians(95.0)  # CCMT-style insert, boring bar κr 95°, f 0.05 mm/rev
+
+
+def _profile_x(y):
+    """The insert's edge at height y above the tip: trailing side (arc), leading side (arc up to
+    r(1 − cos κ), then the straight edge at κ)."""
+    y = np.asarray(y, dtype=float)
+    yk = R_EPS * (1 - math.cos(KAPPA))
+    arc = np.sqrt(np.clip(R_EPS ** 2 - (R_EPS - np.minimum(y, yk)) ** 2, 0, None))
+    right = np.where(y <= yk, arc, R_EPS * math.sin(KAPPA) + (y - yk) / math.tan(KAPPA))
+    return -np.sqrt(np.clip(R_EPS ** 2 - (R_EPS - np.minimum(y, R_EPS)) ** 2, 0, None)), right
+
+
+def _chip_numerically(ap, n=400_001):
+    """The chip between the tool and its position one revolution earlier (shifted by f), by
+    integrating its width over the height and measuring the engaged edge as a polyline."""
+    y = np.linspace(0, ap, n)
+    left, right = _profile_x(y)
+    width = right - np.maximum(left, right - FEED)
+    area = float(np.sum((width[1:] + width[:-1]) / 2 * np.diff(y)))
+    # the engaged edge: the trailing side below the feed mark (where left > right − f), all the leading side
+    trailing = left > right - FEED
+    xs = np.concatenate([left[trailing][::-1], right])
+    ys = np.concatenate([y[trailing][::-1], y])
+    length = float(np.sum(np.hypot(np.diff(xs), np.diff(ys))))
+    lead = math.atan2(ys[-1] - ys[0], xs[-1] - xs[0])  # Colwell's chord, end to end
+    return length, area, lead
+
+
+@pytest.mark.parametrize("ap", [0.0004, 0.005, 0.025, 0.1, 0.3, 0.5])
+def test_chip_geometry_against_the_drawn_profile(ap):
+    c = sb.chip(ap)
+    length, area, lead = _chip_numerically(ap)
+    assert float(c.length) == pytest.approx(length, rel=2e-4)
+    assert float(c.area) == pytest.approx(area, rel=2e-4)
+    assert float(c.lead_angle) == pytest.approx(lead, abs=2e-4)
+
+
+def test_cutting_force_by_hand():
+    """Steel (Sandvik P: k_c1 2000 N/mm², m_c 0.25), r_ε 0.4, f 0.05, a_p 25 µm, by hand:
+    α_s = asin(0.05/0.8) = 0.062541, y_s = 0.4(1 − cos α_s) = 0.782 µm, θ = acos(1 − 0.025/0.4)
+    = 0.355421; b = 0.4(θ + α_s) = 0.167185 mm; A = 0.05(0.025 − y_s) + 0.4²(α_s − sin α_s cos α_s)
+    = 1.23697e-3 mm²; h = A/b = 7.3988 µm; F_c = 2000·b·h^0.75 = 8.4353 N; Colwell's chord from
+    (−0.025, y_s) to (0.4 sin θ, 0.025): κ_e = 8.3904°; F_p = 0.5 F_c cos κ_e = 4.1725 N."""
+    fc, fp = sb.forces(0.025, 2000.0, 0.25)
+    assert float(fc) == pytest.approx(8.4353, rel=1e-4) and float(fp) == pytest.approx(4.1725, rel=1e-4)
+    c = sb.chip(0.025)
+    assert float(c.thickness) * 1000 == pytest.approx(7.3988, rel=1e-4)
+    assert math.degrees(float(c.lead_angle)) == pytest.approx(8.3904, abs=1e-3)
+    # the radial force is not proportional to depth: per mm of depth 208 N at 5 µm, 133 N at 0.1 mm,
+    # 75 N at the 0.5 mm pre-finish (past the nose arc the chip turns to flow along the feed)
+    per_mm = sb.forces(np.array([0.005, 0.1, 0.5]), 2000.0, 0.25)[1] / np.array([0.005, 0.1, 0.5])
+    assert per_mm == pytest.approx([208.0, 132.9, 75.2], rel=2e-3)
+    assert float(sb.forces(0.0, 2000.0, 0.25)[1]) == 0.0 and float(sb.forces(-0.01, 2000.0, 0.25)[1]) == 0.0
+
+
+def test_single_pass_deflection_by_hand():
+    """Ø16 steel bar, 100 mm overhang: c = L³/(3EI) = 10⁶ / (3 · 210000 · π·16⁴/64) = 4.9341e-4 mm/N.
+    A pass set 0.5 mm deep on a straight bore cuts 0.5 − d with d = c F_p(0.5 − d); with the chuck
+    (20 N/µm at face A, x² from the jaws) the wall adds 5e-5 (x/80)² mm/N."""
+    c_bar = 100 ** 3 / (3 * 210_000 * math.pi * 16 ** 4 / 64)
+    assert sb.bar_compliance() == pytest.approx(4.9341e-4, rel=1e-4)
+    part = sb.BeamPart(c_bar, 1 / 20_000, 2000.0, 2000.0, 0.25)
+    r_prev = np.full_like(sb.ZETA, 19.5)
+    r = part.cut(20.0, r_prev, 1.0)
+    d = 20.0 - r
+    c = c_bar + (1 / 20_000) * ((80 - 60 * sb.ZETA) / 80) ** 2  # face A at 80 mm from the jaws, B at 20 mm
+    fp = np.array([float(sb.forces(0.5 - di, 2000.0, 0.25)[1]) for di in d])
+    np.testing.assert_allclose(d, c * fp, rtol=1e-9)  # the static equilibrium
+    # by hand at face B (c = 4.9341e-4 + 5e-5/16 = 4.9654e-4 mm/N), iterating d = c F_p(0.5 − d):
+    # F_p(0.5) = 37.580 N → 18.660 µm; F_p(0.48134) = 37.186 N → 18.464 µm; → 18.466 µm
+    assert d[-1] * 1000 == pytest.approx(18.466, abs=0.001)
+    assert d[0] > d[-1]  # more compliant at the entry: the paper's taper, smaller diameter at A
+    # the planner's assumption would scale d with depth; the testbed's deflection at 25 µm nominal
+    # depth (by hand as above: 1.934 µm at face B) is 2.09 × what 25/500 of the pre-finish's gives
+    r25 = part.cut(20.0, np.full_like(sb.ZETA, 19.975), 1.0)
+    assert (20.0 - r25[-1]) * 1000 == pytest.approx(1.934, abs=0.001)
+    assert (20.0 - r25[-1]) / (d[-1] * 0.025 / 0.5) == pytest.approx(2.09, abs=0.01)
+
+
+def _h6_limits_40():
+    """ISO 286-1 from its formula, not its table: Ø40 is in 30–50 mm, D = √(30·50), i = 0.45 ∛D +
+    0.001 D µm, IT6 = 10 i rounded = 16 µm; H: lower deviation 0."""
+    dm = math.sqrt(30 * 50)
+    it6 = round(10 * (0.45 * dm ** (1 / 3) + 0.001 * dm))
+    assert it6 == 16
+    return 40.0, 40.0 + it6 / 1000, it6 / 1000
+
+
+@pytest.mark.parametrize("material", ["steel", "hardened"])
+def test_beam_testbed_reaches_h6(material):
+    """The plan and the measured loop on the beam testbed: the finished bores, judged here against
+    H6 and k·IT6 on the form, over 150 parts; one uncorrected pass does far worse."""
+    lo, hi, it6 = _h6_limits_40()
+    rng = np.random.default_rng(11)
+    ok = one = n = 0
+    while n < 150:
+        res = sb.run_part(rng, material=material)
+        if not res.applicable:
+            continue
+        n += 1
+        assert res.passes == 4
+        d, d1 = res.diameters, res.one_pass
+        ok += bool(d.min() >= lo and d.max() <= hi and d.max() - d.min() <= 0.25 * it6)
+        one += bool(d1.min() >= lo and d1.max() <= hi and d1.max() - d1.min() <= 0.25 * it6)
+    assert ok / n >= 0.95 and one / n <= 0.1
+
+
+def test_beam_testbed_is_not_the_planners_model(monkeypatch):
+    """Noise-free, the plan's prediction after pass 1 (δ_A/t₀ × real depth) falls short of the
+    beam testbed's deflection: finishing chips are thin and the chip flows across the feed, so the
+    radial force per µm of depth is about twice the pre-finish's. The loop corrects by what it
+    measures and still finishes inside H6."""
+    _noise_free(monkeypatch)
+    seen = []
+    real = pb.next_correction
+
+    def spy(p, meas, pass_done, **kw):
+        c = real(p, meas, pass_done, **kw)
+        seen.append((p, pass_done, c.deviations[0]))
+        return c
+
+    monkeypatch.setattr(pb, "next_correction", spy)
+    res = sb.run_part(np.random.default_rng(1))
+    p = seen[0][0]
+    measured = [d for _, n, d in seen if n >= 1]
+    assert measured[0] / p.predicted[0] > 1.5
+    lo, hi, it6 = _h6_limits_40()
+    assert res.diameters.min() >= lo and res.diameters.max() <= hi and res.ok

@@ -567,3 +567,27 @@ def test_workpiece_options_change_the_plan(cfg, tmp_path, examples):
 
     with pytest.raises(InputError, match=r'\[model\] chuck must be "pinned" or "clamped"'):
         tu.load(p)
+
+
+def test_entry_transient_costs_one_revolution(cfg, tmp_path):
+    """The planner leaves out the entry transient; the virtual lathe turns it: the revolution that
+    enters the stock has no axial deflection before it, so its feed is S − a instead of S, the
+    force and the radial deflection are smaller and the diameter there is smaller. Turned with and
+    without it (``entry_transient=False``: the steady state S_p = S from the first revolution),
+    the difference is the first revolution alone (the second is 1.5 % of it) and it is almost the
+    whole of what the path program leaves."""
+    p = tu.plan(cfg, "path")
+    f = tmp_path / "path.ngc"
+    f.write_text(tu.program(p, cfg, css=False))
+    a = st.simulate(cfg, f)
+    b = st.simulate(cfg, f, entry_transient=False)
+    assert np.array_equal(a.x3, b.x3)
+    diff = (a.diameter - b.diameter) * 1000  # µm
+    x = a.x3 - a.x3.min()
+    feed = float(p.feed[0]) * 1e3  # mm/rev (0.425; the plan holds SI)
+    first = x < feed - 1e-9
+    assert np.all(diff[first] < -0.9) and np.all(diff[first] > -1.05)  # 0.97 µm smaller
+    assert np.abs(diff[~first]).max() < 0.02
+    assert np.abs(diff[x > 2 * feed]).max() < 1e-3
+    va, vb = (a.diameter.max() - a.diameter.min()) * 1000, (b.diameter.max() - b.diameter.min()) * 1000
+    assert 0.9 < va < 1.1 and vb < 0.15

@@ -268,9 +268,14 @@ def _force(rho, g, g3, s, a_prev, t0, zeta) -> float:
 
 
 def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_sigma: float = 0.0,
-             seed: int = 1, progress=None, dialect: str = "linuxcnc") -> Profile:
+             seed: int = 1, progress=None, dialect: str = "linuxcnc", entry_transient: bool = True) -> Profile:
     """Turn the shaft of ``cfg`` with the program (see the module); ``progress(fraction)`` is
-    called as the revolutions go by."""
+    called as the revolutions go by.
+
+    ``entry_transient=False`` turns a lathe without it, to measure what it costs: the revolution
+    that enters the stock after a revolution without contact cuts as if the axial deflection of
+    the revolution before were already its own (S_p = S, the steady state the planner assumes)
+    instead of 0."""
     for name, v in (("rho_sigma", rho_sigma), ("stiffness_sigma", stiffness_sigma)):
         if not (math.isfinite(v) and 0 <= v <= SIGMA_MAX):
             raise InputError(f"{name} must be within 0 … {SIGMA_MAX:g}, got {v!r}")
@@ -347,6 +352,13 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
             rho = float(np.interp(v, cfg.rho_speed, cfg.rho)) * rs * (1 + drift * (a / L - 0.5) * 2)
             t0 = (rsk - rp) * 1e-3
             F = _force(rho, float(gs[j]), float(g3s[j]), mv.feed * 1e-3, a_prev, t0, zeta) if t0 > 0 else 0.0
+            if F > 0 and a_prev == 0.0 and not entry_transient:  # the steady state: a_prev = g₃F₀ (fixed point)
+                for _ in range(200):
+                    nxt = _force(rho, float(gs[j]), float(g3s[j]), mv.feed * 1e-3, float(g3s[j]) * F, t0, zeta)
+                    if abs(nxt - F) <= 1e-12 * F:
+                        break
+                    F = nxt
+                F = nxt
             w = float(gs[j]) * F * 1e3  # mm
             a_prev = float(g3s[j]) * F  # no contact: 0, the next contact is an entry
             covered[lo_i:hi_i] = True
