@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 import tomllib
-from importlib.metadata import metadata
+from importlib.metadata import metadata, version
 from pathlib import Path
 
 import ncadapt
@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_one_version_in_cargo_python_and_the_metadata():
     versions = {tomllib.loads((ROOT / c / "Cargo.toml").read_text())["package"]["version"]
                 for c in ("crates/nc", "crates/nc-py")}
-    assert versions == {ncadapt.__version__}
+    assert versions == {ncadapt.__version__} == {version("ncadapt")}
     assert re.fullmatch(r"\d+\.\d+\.\d+", ncadapt.__version__)
 
 

@@ -559,5 +559,7 @@ fn _nc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(correct_native, m)?)?;
     m.add_function(wrap_pyfunction!(eval_field, m)?)?;
     m.add("EngineError", m.py().get_type::<EngineError>())?;
+    // the package's one version (the crates'), without importlib.metadata at start-up
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
