@@ -189,16 +189,9 @@ def test_condition_4_follows_k(k, limit_um):
     assert p.form_limit * 1000 == pytest.approx(limit_um, rel=1e-12)
 
 
-def _noise_free(monkeypatch):
-    for name in ("SETTING_SIGMA", "PASS_SIGMA", "PROBE_SIGMA", "STIFFNESS_SIGMA"):
-        monkeypatch.setattr(sb, name, 0.0)
-
-
-@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
-def test_plan_agrees_with_the_noise_free_testbed(monkeypatch, seed):
-    """The linear testbed (the paper's assumption, kept for this) cuts with its own model (compliance × real depth at every point of the bore,
-    the tool set δK into the body on the aim); its deflection measured near A after each pass is
-    the plan's prediction to 0.1 µm (the paper's (8) is not, from pass 2 on)."""
+def _spy_corrections(monkeypatch) -> list:
+    """A noise-free testbed whose every corrective step is recorded: (plan, pass done, deviation
+    at face A the plan predicts)."""
     _noise_free(monkeypatch)
     seen = []
     real = pb.next_correction
@@ -209,6 +202,20 @@ def test_plan_agrees_with_the_noise_free_testbed(monkeypatch, seed):
         return c
 
     monkeypatch.setattr(pb, "next_correction", spy)
+    return seen
+
+
+def _noise_free(monkeypatch):
+    for name in ("SETTING_SIGMA", "PASS_SIGMA", "PROBE_SIGMA", "STIFFNESS_SIGMA"):
+        monkeypatch.setattr(sb, name, 0.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+def test_plan_agrees_with_the_noise_free_testbed(monkeypatch, seed):
+    """The linear testbed (the paper's assumption, kept for this) cuts with its own model (compliance × real depth at every point of the bore,
+    the tool set δK into the body on the aim); its deflection measured near A after each pass is
+    the plan's prediction to 0.1 µm (the paper's (8) is not, from pass 2 on)."""
+    seen = _spy_corrections(monkeypatch)
     res = sb.run_part(np.random.default_rng(seed), model="linear")
     assert res.applicable and res.passes == 4
     p = seen[0][0]
@@ -576,16 +583,7 @@ def test_beam_testbed_is_not_the_planners_model(monkeypatch):
     beam testbed's deflection: finishing chips are thin and the chip flows across the feed, so the
     radial force per µm of depth is about twice the pre-finish's. The loop corrects by what it
     measures and still finishes inside H6."""
-    _noise_free(monkeypatch)
-    seen = []
-    real = pb.next_correction
-
-    def spy(p, meas, pass_done, **kw):
-        c = real(p, meas, pass_done, **kw)
-        seen.append((p, pass_done, c.deviations[0]))
-        return c
-
-    monkeypatch.setattr(pb, "next_correction", spy)
+    seen = _spy_corrections(monkeypatch)
     res = sb.run_part(np.random.default_rng(1))
     p = seen[0][0]
     measured = [d for _, n, d in seen if n >= 1]

@@ -556,26 +556,7 @@ def _correct_native(source, name, out_file, field, spec, *, chord_tol, max_segme
     notes = _Warnings(field, clearance)
     notes.unknown, notes.first, notes.low = r["unknown"], r["first_unknown"], list(r["low"])
     uns = tuple(Unsupported(*u) for u in r["unsupported"])
-    warnings = notes.messages()
-    if keep_unsupported and uns:
-        warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
-    stats, n_pts = r["stats"], r["n_points"]
-    return Correction(
-        lines_in=stats["lines_in"],
-        lines_out=stats["lines_out"],
-        blocks_changed=stats["blocks_changed"],
-        lines_added=stats["lines_added"],
-        arcs_linearised=stats["arcs_linearised"],
-        max_displacement=r["max"],
-        mean_displacement=r["total"] / n_pts if n_pts else 0.0,
-        n_points=n_pts,
-        points=None,
-        displacements=None,
-        line=None,
-        unsupported_kept=uns if keep_unsupported else (),
-        warnings=tuple(warnings),
-        notes=tuple(r["notes"]),
-    )
+    return _correction(r["stats"], r["max"], r["total"], r["n_points"], uns, keep_unsupported, notes, r["notes"])
 
 
 def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_segment=constants.MAX_SEGMENT,
@@ -681,30 +662,36 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
     tail = _engine(run.finish, name)
     if not refused:
         write(tail)
-    stats = run.stats()
-    warnings = notes.messages()
-    if keep_unsupported and uns:
-        warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
     pts_all = disp_all = line_all = None
     if keep_points:
         pts_all = np.concatenate([k[0] for k in kept]) if kept else np.zeros((0, 3))
         disp_all = np.concatenate([k[1] for k in kept]) if kept else np.zeros((0, 3))
         line_all = np.concatenate([k[2] for k in kept]) if kept else np.zeros(0, dtype=np.int64)
+    return _correction(run.stats(), worst_norm, total, n_pts, uns, keep_unsupported, notes, run.notes(),
+                       pts_all, disp_all, line_all)
+
+
+def _correction(stats, max_norm, total, n_pts, uns, keep_unsupported, notes, engine_notes, points=None,
+                displacements=None, line=None) -> Correction:
+    """The :class:`Correction` of a run: its engine's figures and the warnings gathered."""
+    warnings = notes.messages()
+    if keep_unsupported and uns:
+        warnings.insert(0, f"{len(uns)} unsupported construct(s) kept unchanged, their blocks not corrected")
     return Correction(
         lines_in=stats["lines_in"],
         lines_out=stats["lines_out"],
         blocks_changed=stats["blocks_changed"],
         lines_added=stats["lines_added"],
         arcs_linearised=stats["arcs_linearised"],
-        max_displacement=worst_norm,
+        max_displacement=max_norm,
         mean_displacement=total / n_pts if n_pts else 0.0,
         n_points=n_pts,
-        points=pts_all,
-        displacements=disp_all,
-        line=line_all,
+        points=points,
+        displacements=displacements,
+        line=line,
         unsupported_kept=uns if keep_unsupported else (),
         warnings=tuple(warnings),
-        notes=tuple(run.notes()),
+        notes=tuple(engine_notes),
     )
 
 

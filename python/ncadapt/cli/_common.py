@@ -195,6 +195,16 @@ def comma_floats(value: str, n: int, what: str) -> list[float]:
     return parts
 
 
+def extent_value(ctx, param, value):  # noqa: ARG001 - a click callback's signature
+    """A click callback: ``XMIN,XMAX,YMIN,YMAX`` in mm with XMIN < XMAX and YMIN < YMAX."""
+    if value is None:
+        return None
+    v = comma_floats(value, 4, "XMIN,XMAX,YMIN,YMAX in mm")
+    if v[0] >= v[1] or v[2] >= v[3]:
+        raise click.BadParameter(f"expected XMIN < XMAX and YMIN < YMAX, got {value!r}")
+    return tuple(v)
+
+
 def _same(a: Path, b: Path) -> bool:
     if a.resolve() == b.resolve():
         return True

@@ -8,7 +8,8 @@ import click
 
 from .. import constants
 from ..errors import InputError
-from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
+from ._common import (FiniteRange, check_outputs, echo_err, extent_value, handle_errors, progress, summary,
+                      write_json)
 
 
 def _moran_options(f):
@@ -99,15 +100,6 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
                                       xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation))
 
 
-def _extent(ctx, param, value):
-    if value is None:
-        return None
-    v = comma_floats(value, 4, "XMIN,XMAX,YMIN,YMAX in mm")
-    if v[0] >= v[1] or v[2] >= v[3]:
-        raise click.BadParameter(f"expected XMIN < XMAX and YMIN < YMAX, got {value!r}")
-    return tuple(v)
-
-
 @click.command()
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True,
@@ -121,7 +113,7 @@ def _extent(ctx, param, value):
 @click.option("--tool-radius", type=FiniteRange(0, constants.COORD_MAX), default=None,
               help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre); required with "
                    "--program (0: the programmed point is the contact point).")
-@click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX",
+@click.option("--extent", callback=extent_value, metavar="XMIN,XMAX,YMIN,YMAX",
               help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
                    "extrapolated into it (default: the measured area).")
 @click.option("--border", type=click.Choice(["hold", "cubic"]), default="hold", show_default=True,

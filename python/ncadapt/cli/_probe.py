@@ -9,7 +9,8 @@ from pathlib import Path
 import click
 
 from ..constants import COORD_MAX
-from ._common import FiniteRange, check_outputs, comma_floats, handle_errors, json_option, progress, summary, write_json
+from ._common import (FiniteRange, check_outputs, extent_value, handle_errors, json_option, progress,
+                      summary, write_json)
 
 _LENGTH = FiniteRange(-COORD_MAX, COORD_MAX)
 _POSITIVE = FiniteRange(0, COORD_MAX, min_open=True)
@@ -36,15 +37,6 @@ _log_option = click.option("--log", "log_name", default="probe-log.txt", show_de
                                 "LOGOPEN, Sinumerik WRITE).")
 
 
-def _extent(ctx, param, value):
-    if value is None:
-        return None
-    v = comma_floats(value, 4, "XMIN,XMAX,YMIN,YMAX in mm")
-    if v[0] >= v[1] or v[2] >= v[3]:
-        raise click.BadParameter(f"expected XMIN < XMAX and YMIN < YMAX, got {value!r}")
-    return tuple(v)
-
-
 def _bad(option: str, message: str):
     from ..errors import InputError
 
@@ -57,7 +49,7 @@ def probe() -> None:
 
 
 @probe.command()
-@click.option("--extent", callback=_extent, metavar="XMIN,XMAX,YMIN,YMAX", help="Area to probe, mm.")
+@click.option("--extent", callback=extent_value, metavar="XMIN,XMAX,YMIN,YMAX", help="Area to probe, mm.")
 @click.option("--program", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Probe the area of this NC program's feed moves instead of --extent.")
 @click.option("--margin", type=FiniteRange(0, COORD_MAX), default=0.0, show_default=True,
