@@ -99,6 +99,14 @@ class Moran:
         ``PERMUTATION_MAX_N``), else P(Z ≥ z) of the normal approximation (randomisation)."""
         return self.p_permutation if self.p_permutation is not None else self.p_randomization
 
+    def p_said(self) -> str:
+        """The decision's p for people: a permutation p that no permutation reached is its least
+        value, ``≤ 1/(R + 1)``; a normal-approximation p below 1e-300 is ``< 1e-300``."""
+        if self.p_permutation is None:
+            return p_text(self.p_randomization)
+        least = self.p_permutation * (self.permutations + 1) < 1.5
+        return f"{'≤ ' if least else ''}{self.p_permutation:.3g}"
+
     @property
     def systematic(self) -> bool:
         """Significant positive spatial autocorrelation at ``alpha`` (:attr:`p_value`)."""

@@ -54,11 +54,10 @@ def _print_analysis(a) -> None:
     summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
     o, v = a.offset, a.verdict
     if m.p_permutation is None:
-        p_said = f"p {p_text(m.p_value)} (one-sided, normal approximation)"
-    else:  # the smallest a permutation p can be is 1 / (R + 1): no permutation reached I
-        least = m.p_permutation * (m.permutations + 1) < 1.5
-        p_said = (f"p {'≤ ' if least else ''}{m.p_permutation:.3g} (one-sided, {m.permutations} permutations; "
-                  f"normal approximation {p_text(m.p_randomization)})")
+        p_said = f"p {m.p_said()} (one-sided, normal approximation)"
+    else:
+        p_said = (f"p {m.p_said()} (one-sided, {m.permutations} permutations; normal approximation "
+                  f"{p_text(m.p_randomization)})")
     summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
             f"{m.z_normality:.2f} (normality), {p_said}")
     summary(f"offset: mean {o.mean:+.4f} mm, t {o.t:.2f}, p {p_text(o.p_value)}")

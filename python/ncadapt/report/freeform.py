@@ -58,13 +58,13 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     """The report as HTML text. ``xy``: the points' (u, v), named ``names`` on the maps; ``after``:
     deviations of the re-machined part at the same points."""
     m = analysis.moran
-    p_txt = p_text(m.p_value, 2)
+    p_txt = m.p_said()
     w_txt = m.weights.describe() + ", row-standardised"
     v, o = analysis.verdict, analysis.offset
     o_txt = p_text(o.p_value, 2)
     verdict = (f"<p class='verdict {'yes' if v.systematic else 'no'}'>The deviations are "
                f"{'<b>systematic</b>' if v.systematic else '<b>not systematic</b>'} "
-               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt.startswith('<') else '= ' + p_txt}; "
+               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt[0] in '<≤' else '= ' + p_txt}; "
                f"mean offset {o.mean * 1000:+.2f} µm, t = {o.t:.2f}, p {o_txt if o_txt.startswith('<') else '= ' + o_txt}; "
                f"each test at α/2 = {v.alpha / 2:g})</p>")
     sections = []
@@ -74,7 +74,9 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     sections.append(("Is the error systematic?", verdict + table([
         ("Moran's I", m.I), ("E[I]", m.expected), ("Var[I], normality", m.variance_normality),
         ("Var[I], randomisation", m.variance_randomization), ("z, normality", m.z_normality),
-        ("z, randomisation", m.z_randomization), ("p (one-sided, randomisation)", p_text(m.p_value, 4)),
+        ("z, randomisation", m.z_randomization), ("p (one-sided, " + (f"{m.permutations} permutations)" if m.permutations else "randomisation)"),
+         m.p_said()),
+        ("p (one-sided, normal approximation)", p_text(m.p_randomization, 4)),
         ("mean offset, mm", o.mean), ("offset t", o.t), ("offset p (two-sided)", p_text(o.p_value, 4)),
         ("weights", w_txt),
         ("points", m.n)], ["statistic", "value"])))
