@@ -381,6 +381,8 @@ def test_fuzz_finding_simulate_t0():
         sb.simulate(5, seed=1, t0=3, model="linear")
     r = CliRunner().invoke(main, ["bore", "simulate", "--parts", "5", "--t0", "3"])
     assert r.exit_code in (0, 2) and "Traceback" not in r.output, r.output
+    r = CliRunner().invoke(main, ["bore", "simulate", "--parts", "5", "--t0", "3", "--model", "linear"])
+    assert r.exit_code == 2 and "smaller --t0" in r.output, r.output
 
 
 # ------------------------------------------------------------------ real probe results (issue 20, bores 11)

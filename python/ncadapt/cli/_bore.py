@@ -289,6 +289,9 @@ def probe_program_cmd(diameter, planes, dialect, points, feed, safe_z, output):
 @seed_option
 @click.option("--material", type=click.Choice(["steel", "titanium", "aluminium", "hardened"]), default="steel",
               show_default=True, help="Material of the simulated parts (sets the cutting behaviour of the model).")
+@click.option("--model", type=click.Choice(["beam", "linear"]), default="beam", show_default=True,
+              help="The machine: a cantilever bar cut by a Kienzle force on the nose radius (its own physics), "
+                   "or deflection proportional to depth (the paper's assumption, the planner's model).")
 @click.option("--diameter", type=_DIAMETER, default=40.0, show_default=True, help="Nominal diameter, mm.")
 @click.option("--t0", type=FiniteRange(0.001, 10), default=0.5, show_default=True,
               help="Radial depth of the last pre-finish pass, mm (0.001 … 10).")
@@ -298,15 +301,16 @@ def probe_program_cmd(diameter, planes, dialect, points, feed, safe_z, output):
               help="Share of the final tolerance allowed for form error (0.01 … 1).")
 @json_option
 @handle_errors
-def simulate_cmd(parts, seed, material, diameter, t0, allowance, k, json_path):
+def simulate_cmd(parts, seed, material, model, diameter, t0, allowance, k, json_path):
     """Run the plan and the pass-by-pass loop on seeded virtual parts, against one uncorrected pass."""
     from ..sim import bore as sb
 
     check_outputs({}, {"--json": json_path})
     with progress() as say:
-        r = sb.simulate(parts, seed, material=material, diameter=diameter, t0=t0, allowance=allowance, k=k, progress=say)
+        r = sb.simulate(parts, seed, material=material, model=model, diameter=diameter, t0=t0, allowance=allowance,
+                        k=k, progress=say)
     w = r["without_correction"]
-    summary(f"{parts} {material} parts (applicability held for {r['applicable_share']:.1%} of those drawn)")
+    summary(f"{parts} {material} parts, {model} model (applicability held for {r['applicable_share']:.1%} of those drawn)")
     summary(f"corrective passes: {r['within_tolerance']:.1%} inside H6 with form ≤ k·IT6, {r['mean_passes']:.2f} "
             f"passes, form error {r['form_error_mean'] * 1000:.2f} µm, diameter {_um(r['diameter_error_mean'])}")
     summary(f"one uncorrected pass: {w['within_tolerance']:.1%} inside, form error {w['form_error_mean'] * 1000:.2f} µm, "
