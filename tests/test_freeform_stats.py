@@ -327,3 +327,14 @@ def test_one_p_smooths_grid_and_scattered_points_alike():
         assert 0.75 <= ratio <= 1.35, (p, ratio)
         loose = g.ravel() - RBFInterpolator(pts, g.ravel(), kernel="thin_plate_spline", smoothing=(1 - p) / p)(pts)
         assert abs(np.log(np.sqrt((loose**2).mean() / (grid**2).mean()))) > 2 * abs(np.log(ratio))
+
+
+def test_a_small_alpha_gets_enough_permutations_to_reject():
+    # a permutation p is never below 1 / (R + 1): with alpha 0.005 (0.0025 for Moran) 499
+    # permutations could never reject; R grows to 20 / alpha, beyond 19,999 the normal approximation
+    p, v = _data(n=200, seed=3)
+    v = np.sin(p[:, 0]) + 0.05 * np.random.default_rng(3).normal(size=200)  # strongly patterned
+    m = stats.moran(p, v, alpha=0.005)
+    assert m.permutations == 3_999 and m.p_permutation == pytest.approx(1 / 4000) and m.systematic
+    tiny = stats.moran(p, v, alpha=0.0005)  # 39,999 permutations would be needed
+    assert tiny.p_permutation is None and tiny.p_value < 1e-20 and tiny.systematic

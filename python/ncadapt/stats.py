@@ -51,6 +51,9 @@ _DENSE_ROWS = 512
 # on a grid it rejects 4-5 % of noise-only samples at a nominal 2.5 %, at n = 3150 3 %)
 PERMUTATION_MAX_N = 3000
 PERMUTATIONS = 499
+# a permutation p is never below 1 / (R + 1): for a small alpha R grows to 20 / alpha; beyond this
+# many the normal approximation decides (it is good in the far tail the decision then needs)
+PERMUTATIONS_MAX = 19_999
 PERMUTATION_SEED = 20161231
 
 
@@ -286,7 +289,8 @@ def moran(
         w = weights_matrix(p, wt)
         s0, s1, s2, zwz = _sums_sparse(w, z)
     m = _moran(v, s0, s1, s2, zwz, alpha, wt)
-    return _with_permutations(m, w, z) if exact else m
+    r = max(PERMUTATIONS, math.ceil(20 / alpha) - 1)
+    return _with_permutations(m, w, z, r) if exact and r <= PERMUTATIONS_MAX else m
 
 
 def moran_matrix(w, values, alpha: float = 0.05) -> Moran:

@@ -21,8 +21,9 @@ def _moran_options(f):
         click.option("--threshold", type=FiniteRange(min=0, min_open=True), default=None,
                      help="Distance band for idw weights, mm (default: all pairs)."),
         click.option("--neighbors", type=click.IntRange(min=1), default=8, show_default=True, help="N of knn weights."),
-        click.option("--alpha", type=FiniteRange(0, 1, min_open=True, max_open=True), default=0.05,
-                     show_default=True, help="Significance of the 'systematic' decision."),
+        click.option("--alpha", type=FiniteRange(1e-12, 0.5), default=0.05, show_default=True,
+                     help="Significance of the 'systematic' decision, 1e-12 to 0.5 (Moran's I and the offset test "
+                          "each at alpha/2)."),
         click.option("--probe-radius", type=FiniteRange(0, constants.COORD_MAX), default=0.0, show_default=True,
                      help="The measured points are probe-tip centres of this radius, mm."),
         click.option("--units", type=click.Choice(["mm", "inch"]), default=None,
