@@ -7,7 +7,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # rustup installs cargo here; maturin needs it on the PATH
 export PATH := $(HOME)/.cargo/bin:$(PATH)
 
-.PHONY: demo test fuzz bench wheel install install-test system-deps rust clean
+.PHONY: demo test lint fuzz bench wheel install install-test system-deps rust clean
 
 $(VENV)/bin/python:
 	python3 -m venv $(VENV)
@@ -42,6 +42,14 @@ demo: install
 test: install-test
 	cargo test -q --workspace --exclude ncadapt-nc-py
 	$(PY) -m pytest -q
+
+# ruff (lint and format), cargo fmt and clippy, mypy on the public API
+lint: install-test
+	$(VENV)/bin/ruff check python tests benchmarks examples
+	$(VENV)/bin/ruff format --check python tests benchmarks examples
+	cargo fmt --all --check
+	cargo clippy -q --workspace -- -D warnings
+	$(VENV)/bin/mypy
 
 # the property tests with large budgets: generated programs against rs274 (make test runs 25
 # examples) and the CLI contract on mutated inputs and extreme options (make test: 100 per target,

@@ -47,7 +47,13 @@ def machine() -> str:
 def generate(path: Path, n_lines: int, seed: int, size: float = 100.0) -> None:
     """A milling-like program: short G1 moves, ~10 % G2/G3 arcs, a comment every ~10 lines."""
     rng = np.random.default_rng(seed)
-    lines = ["%", "(generated benchmark program)", "G21 G90 G17 G94", "G0 X50.0000 Y50.0000 Z5.0000", "G1 Z-0.5000 F800"]
+    lines = [
+        "%",
+        "(generated benchmark program)",
+        "G21 G90 G17 G94",
+        "G0 X50.0000 Y50.0000 Z5.0000",
+        "G1 Z-0.5000 F800",
+    ]
     x, y, z = 50.0, 50.0, -0.5
     kinds = rng.random(n_lines)
     steps = rng.uniform(-2.5, 2.5, size=(n_lines, 2))
@@ -81,15 +87,20 @@ def generate(path: Path, n_lines: int, seed: int, size: float = 100.0) -> None:
         if k == n_lines:
             k = 0
     lines += ["G0 Z5.0000", "M30", "%"]
-    path.write_text("\n".join(lines[:n_lines - 1] + lines[-1:]) + "\n")
+    path.write_text("\n".join(lines[: n_lines - 1] + lines[-1:]) + "\n")
 
 
 def generate_circles(path: Path, n_lines: int, seed: int, size: float = 100.0) -> None:
     """The throughput program: short G1 moves in X, Y and Z, and every tenth line a full circle of
     radius 0.25 mm (``G2 X.. Y.. I-0.25 J0``, ending where it starts)."""
     rng = np.random.default_rng(seed)
-    head = ["%", "(generated throughput program)", "G21 G90 G17 G94", "G0 X50.0000 Y50.0000 Z5.0000",
-            "G1 Z-0.5000 F800"]
+    head = [
+        "%",
+        "(generated throughput program)",
+        "G21 G90 G17 G94",
+        "G0 X50.0000 Y50.0000 Z5.0000",
+        "G1 Z-0.5000 F800",
+    ]
     tail = ["G0 Z5.0000", "M30", "%"]
     n = n_lines - len(head) - len(tail)
     steps = rng.uniform(-2.5, 2.5, size=(n, 2))
@@ -188,8 +199,17 @@ def part1() -> None:
         print("generating 1,000,000-line throughput program ...", flush=True)
         generate_circles(circles, 1_000_000, seed=1)
     n_c = sum(1 for _ in open(circles, "rb"))
-    cmd = [ncadapt, "correct", str(circles), "--field", str(grid), "--max-segment", "5",
-           "-o", str(OUT / "bench_1m_circles_c.ngc")]
+    cmd = [
+        ncadapt,
+        "correct",
+        str(circles),
+        "--field",
+        str(grid),
+        "--max-segment",
+        "5",
+        "-o",
+        str(OUT / "bench_1m_circles_c.ngc"),
+    ]
     rs = shutil.which("rs274")
     rs_cmd = [rs, "-g", str(circles), str(OUT / "bench_1m_circles.canon")] if rs else None
     # the two commands take turns, so a change in the machine's load falls on both
@@ -200,7 +220,9 @@ def part1() -> None:
             rs_runs.append(timed(rs_cmd))
     t_nc, mem_nc = min(r[0] for r in runs), max(r[1] for r in runs)
     print(f"\n1. {n_c:,} lines (10 % full circles r 0.25 mm), 101x101 grid field, --max-segment 5")
-    print(f"   ncadapt correct (read+correct+write): {t_nc:7.2f} s  {n_c / t_nc:>12,.0f} lines/s  peak {mem_nc:,.0f} MiB")
+    print(
+        f"   ncadapt correct (read+correct+write): {t_nc:7.2f} s  {n_c / t_nc:>12,.0f} lines/s  peak {mem_nc:,.0f} MiB"
+    )
     if rs:
         t_rs = min(r[0] for r in rs_runs)
         print(f"   rs274 -g (read only):                 {t_rs:7.2f} s  {n_c / t_rs:>12,.0f} lines/s")
@@ -233,13 +255,33 @@ def part3() -> None:
     n_huge = sum(1 for _ in open(huge, "rb"))
     out_huge = OUT / "bench_50m_c.ngc"
     t = time.perf_counter()
-    proc = subprocess.run(["/usr/bin/time", "-f", "%M", ncadapt, "correct", str(huge), "--shift", "0,0,0.01",
-                           "--max-segment", "5", "-o", str(out_huge)], check=True, stdout=subprocess.DEVNULL,
-                          stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
+    proc = subprocess.run(
+        [
+            "/usr/bin/time",
+            "-f",
+            "%M",
+            ncadapt,
+            "correct",
+            str(huge),
+            "--shift",
+            "0,0,0.01",
+            "--max-segment",
+            "5",
+            "-o",
+            str(out_huge),
+        ],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        stdin=subprocess.DEVNULL,
+    )
     t_huge = time.perf_counter() - t
     peak = int(proc.stderr.strip().splitlines()[-1]) / 1024
     print(f"\n3. {n_huge:,} lines, --shift 0,0,0.01 --max-segment 5")
-    print(f"   ncadapt correct: {t_huge:7.1f} s  {n_huge / t_huge:>12,.0f} lines/s  peak {peak:,.0f} MiB (target < 500 MiB)")
+    print(
+        f"   ncadapt correct: {t_huge:7.1f} s  {n_huge / t_huge:>12,.0f} lines/s  peak {peak:,.0f} MiB (target < 500 MiB)"
+    )
     out_huge.unlink()
 
 
@@ -263,8 +305,11 @@ def part2() -> None:
         script = OUT / "bcnc_autolevel.py"
         script.write_text(BCNC_SCRIPT)
         t = time.perf_counter()
-        subprocess.run([sys.executable, str(script), str(mid), str(probe), str(OUT / "bench_200k_bcnc.ngc")],
-                       check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [sys.executable, str(script), str(mid), str(probe), str(OUT / "bench_200k_bcnc.ngc")],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
         t_bc = time.perf_counter() - t
         print(f"   bCNC autolevel (load+level+write):    {t_bc:7.2f} s  {n_mid / t_bc:>12,.0f} lines/s")
         print(f"   ratio ncadapt / bCNC (lines/s):       {t_bc / t_nc2:7.1f} x")

@@ -84,15 +84,22 @@ def commands(n_side: int = 1000) -> None:
         rng = np.random.default_rng(3)
         x, y = np.meshgrid(np.arange(n_side) * 0.1, np.arange(n_side) * 0.1, indexing="ij")
         dev = 0.01 * np.sin(x / 9) * np.cos(y / 7) + rng.normal(0, 0.002, x.shape)
-        rows = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size), np.zeros(x.size), np.zeros(x.size),
-                                np.ones(x.size), dev.ravel()])
-        np.savetxt(f, rows, fmt=["%.1f", "%.1f", "%g", "%g", "%g", "%g", "%.6f"], delimiter=",",
-                   header="x,y,z,i,j,k,dev", comments="")
+        rows = np.column_stack(
+            [x.ravel(), y.ravel(), np.zeros(x.size), np.zeros(x.size), np.zeros(x.size), np.ones(x.size), dev.ravel()]
+        )
+        np.savetxt(
+            f,
+            rows,
+            fmt=["%.1f", "%.1f", "%g", "%g", "%g", "%g", "%.6f"],
+            delimiter=",",
+            header="x,y,z,i,j,k,dev",
+            comments="",
+        )
     exe = str(Path(sys.executable).with_name("ncadapt"))
     print(f"\n{n_side * n_side:,} measured points (a grid 0.1 mm apart), whole commands")
     total = 0.0
     for cmd in (["analyze", str(f)], ["compensate", str(f)]):
-        t, _ = timed(lambda: subprocess.run([exe, *cmd], check=True, stdout=subprocess.DEVNULL))
+        t, _ = timed(lambda cmd=cmd: subprocess.run([exe, *cmd], check=True, stdout=subprocess.DEVNULL))
         total += t
         print(f"   ncadapt {cmd[0]:10s} {t:6.2f} s")
     print(f"   together           {total:6.2f} s  (target < 30 s)")
@@ -111,8 +118,10 @@ def commands(n_side: int = 1000) -> None:
 
         t_esda, _ = timed(peer)
         t_ours, _ = timed(lambda: stats.moran(xy, v, weights="knn", neighbors=8))
-        print(f"   Moran's I alone on {m:,} points, 8 nearest: esda {t_esda:.2f} s, ncadapt {t_ours:.2f} s "
-              f"(ratio {t_esda / t_ours:.1f} x)")
+        print(
+            f"   Moran's I alone on {m:,} points, 8 nearest: esda {t_esda:.2f} s, ncadapt {t_ours:.2f} s "
+            f"(ratio {t_esda / t_ours:.1f} x)"
+        )
     except ImportError:
         print("   esda not installed (make test installs it)")
 
@@ -128,8 +137,10 @@ def gate(seeds: int = 200, alpha: float = 0.05) -> None:
 
     part = ff.demo_part()
     p, n = ff.probe_points(part, demo.PROBE_BORDER, demo.PROBE_SPACING)
-    print(f"\nthe gate on the demo's {len(p)} probe points, alpha = {alpha:g} (Moran's I and the offset test "
-          f"each at {alpha / 2:g})")
+    print(
+        f"\nthe gate on the demo's {len(p)} probe points, alpha = {alpha:g} (Moran's I and the offset test "
+        f"each at {alpha / 2:g})"
+    )
     try:
         import esda
         import libpysal
@@ -140,13 +151,23 @@ def gate(seeds: int = 200, alpha: float = 0.05) -> None:
         lo, hi = wilson(k, seeds)
         return f"{k:3d}/{seeds} = {k / seeds:5.1%} (95 % CI {lo:.1%}-{hi:.1%})"
 
-    for kind, opts in (("1/d, all pairs", {}), ("1/d within 6 mm", {"threshold": 6.0}),
-                       ("8 nearest", {"weights": "knn", "neighbors": 8})):
+    for kind, opts in (
+        ("1/d, all pairs", {}),
+        ("1/d within 6 mm", {"threshold": 6.0}),
+        ("8 nearest", {"weights": "knn", "neighbors": 8}),
+    ):
         w = None
         if esda is not None:
             if opts:
-                wm = stats.weights_matrix(p[:, :2], stats.Weights(opts.get("weights", "idw"), 1.0 if "neighbors" not in opts
-                                                                  else None, opts.get("threshold"), opts.get("neighbors")))
+                wm = stats.weights_matrix(
+                    p[:, :2],
+                    stats.Weights(
+                        opts.get("weights", "idw"),
+                        1.0 if "neighbors" not in opts else None,
+                        opts.get("threshold"),
+                        opts.get("neighbors"),
+                    ),
+                )
             else:  # all pairs, 1/d
                 from scipy import sparse
                 from scipy.spatial.distance import cdist
@@ -168,16 +189,24 @@ def gate(seeds: int = 200, alpha: float = 0.05) -> None:
                     ref = esda.Moran(e, w, permutations=0, two_tailed=False)
                 peer += ref.z_rand > 0 and ref.p_rand < alpha / 2
         peer_txt = f"; esda's normal approximation {peer / seeds:5.1%}" if w is not None else ""
-        print(f"   noise only, {kind:16s} gate {rate(gate_hits)}; Moran alone (permutation) "
-              f"{moran_hits / seeds:5.1%}{peer_txt}")
-    offset = sum(pf.analyze(measure.from_arrays(p, n, deviation=0.015 + np.random.default_rng(s).normal(0, 0.005, len(p))))
-                 .systematic for s in range(seeds))
+        print(
+            f"   noise only, {kind:16s} gate {rate(gate_hits)}; Moran alone (permutation) "
+            f"{moran_hits / seeds:5.1%}{peer_txt}"
+        )
+    offset = sum(
+        pf.analyze(
+            measure.from_arrays(p, n, deviation=0.015 + np.random.default_rng(s).normal(0, 0.005, len(p)))
+        ).systematic
+        for s in range(seeds)
+    )
     print(f"   a uniform offset of 15 um (3 sigma) + 5 um noise: found in {rate(offset)}")
     prog = nc.parse(demo.program_text())
     err = ff.ErrorModel(part, (("curvature", demo.CURVATURE_AMPLITUDE), ("polynomial", demo.POLYNOMIAL)))
     first = ff.machine(prog, part, err, demo.TOOL_RADIUS)
-    found = sum(pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=demo.NOISE, seed=s)))
-                .systematic for s in range(seeds))
+    found = sum(
+        pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=demo.NOISE, seed=s))).systematic
+        for s in range(seeds)
+    )
     print(f"   the demo's systematic error + 5 um noise: found in {rate(found)}")
 
 
@@ -196,8 +225,10 @@ def border(seeds=(1, 2, 3)) -> None:
     inner = (allp[:, 0] >= b) & (allp[:, 0] <= 80 - b) & (allp[:, 1] >= b) & (allp[:, 1] <= 60 - b)
     print(f"\nthe unmeasured {b:g} mm border after one compensation (RMS at 1 mm spacing, seeds {list(seeds)})")
     rms = lambda v: float(np.sqrt(np.mean(v * v)))  # noqa: E731
-    for name, model in (("demo error", (("curvature", demo.CURVATURE_AMPLITUDE), ("polynomial", demo.POLYNOMIAL))),
-                        ("bench error", (("curvature", 0.10), ("polynomial", {(1, 0): 0.02, (0, 2): -0.015})))):
+    for name, model in (
+        ("demo error", (("curvature", demo.CURVATURE_AMPLITUDE), ("polynomial", demo.POLYNOMIAL))),
+        ("bench error", (("curvature", 0.10), ("polynomial", {(1, 0): 0.02, (0, 2): -0.015}))),
+    ):
         err = ff.ErrorModel(part, model)
         first = ff.machine(prog, part, err, demo.TOOL_RADIUS)
         before = np.einsum("ij,ij->i", ff.measure(first, allp, alln) - allp, alln)
@@ -210,11 +241,15 @@ def border(seeds=(1, 2, 3)) -> None:
                 second = ff.machine(prog.correct(c.field(demo.TOOL_RADIUS, "clamp")), part, err, demo.TOOL_RADIUS)
                 after = np.einsum("ij,ij->i", ff.measure(second, allp, alln) - allp, alln)
                 left[mode].append((rms(after[inner]), rms(after[~inner])))
-        print(f"   {name}: before {rms(before[inner]) * 1e3:.1f} um inside, {rms(before[~inner]) * 1e3:.1f} um in the border")
+        print(
+            f"   {name}: before {rms(before[inner]) * 1e3:.1f} um inside, {rms(before[~inner]) * 1e3:.1f} um in the border"
+        )
         for mode, v in left.items():
             a = np.array(v) * 1e3
-            print(f"     --border {mode:5s} inside {a[:, 0].mean():.2f} um, border {a[:, 1].mean():.2f} um "
-                  f"({a[:, 1].min():.2f}-{a[:, 1].max():.2f})")
+            print(
+                f"     --border {mode:5s} inside {a[:, 0].mean():.2f} um, border {a[:, 1].mean():.2f} um "
+                f"({a[:, 1].min():.2f}-{a[:, 1].max():.2f})"
+            )
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

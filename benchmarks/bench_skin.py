@@ -25,29 +25,40 @@ def main() -> int:
     print(f"machine: {machine()}")
     print("\nthe paper's protocol (noise-free, 13 checkpoints): max |error| after the second compensation")
     m, s = sk.protocol("mirror")["max_abs_error"], sk.protocol("secant")["max_abs_error"]
-    print(f"   mirror {m * 1000:.3f} µm   secant {s * 1000:.4f} µm   ratio {m / s:.0f} x   (paper: 32.2 vs 0.213 µm, 151 x)")
+    print(
+        f"   mirror {m * 1000:.3f} µm   secant {s * 1000:.4f} µm   ratio {m / s:.0f} x   (paper: 32.2 vs 0.213 µm, 151 x)"
+    )
 
     print("\n20 seeds, 5 µm noise, 45 ms dead time: |error| at the 13 checkpoints (mean over seeds)")
     rows, runs = {}, {}
     for method in ("none", "mirror", "secant", "kalman"):
         rs = runs[method] = [sk.run(method, seed=k).as_dict() for k in range(1, 21)]
-        rows[method] = (np.mean([r["max_abs_error"] for r in rs]), np.mean([r["mean_abs_error"] for r in rs]),
-                        np.mean([r["fallbacks"] for r in rs]))
+        rows[method] = (
+            np.mean([r["max_abs_error"] for r in rs]),
+            np.mean([r["mean_abs_error"] for r in rs]),
+            np.mean([r["fallbacks"] for r in rs]),
+        )
         mx, mn, fb = rows[method]
         print(f"   {method:7s} max {mx * 1000:6.1f} µm   mean {mn * 1000:5.1f} µm   fallbacks {fb:7.1f}")
-    print(f"   secant / mirror, max: {rows['secant'][0] / rows['mirror'][0]:.2f} (paper 0.58)   "
-          f"kalman / secant, max: {rows['kalman'][0] / rows['secant'][0]:.2f}, mean: {rows['kalman'][1] / rows['secant'][1]:.2f}")
+    print(
+        f"   secant / mirror, max: {rows['secant'][0] / rows['mirror'][0]:.2f} (paper 0.58)   "
+        f"kalman / secant, max: {rows['kalman'][0] / rows['secant'][0]:.2f}, mean: {rows['kalman'][1] / rows['secant'][1]:.2f}"
+    )
 
     # the paper compared one pocket per method, once: how far can one such experiment stray?
     def pocket1(r):
         return max(abs(c["error"]) for c in r["checkpoints"] if c["pocket"] == 1)
 
     one = np.sort([pocket1(runs["secant"][(k + 1) % 20]) / pocket1(runs["mirror"][k]) for k in range(20)])
-    print(f"   one experiment per method (pocket 1, secant seed k+1 against mirror seed k, 20 pairs): "
-          f"secant / mirror, max {one[0]:.2f} .. {one[-1]:.2f}, median {np.median(one):.2f}")
+    print(
+        f"   one experiment per method (pocket 1, secant seed k+1 against mirror seed k, 20 pairs): "
+        f"secant / mirror, max {one[0]:.2f} .. {one[-1]:.2f}, median {np.median(one):.2f}"
+    )
 
-    print("\ntestbed variants, 20 seeds, 5 µm noise: max / mean |error| at the 13 checkpoints (mean over seeds),"
-          " worst seed's max")
+    print(
+        "\ntestbed variants, 20 seeds, 5 µm noise: max / mean |error| at the 13 checkpoints (mean over seeds),"
+        " worst seed's max"
+    )
     for variant in sk.VARIANTS:
         gauge = "fixed-rate" if variant == "fixed-rate" else "fresh"
         cells = []
@@ -75,15 +86,19 @@ def main() -> int:
     ms = sk.machines(seed=1)
     url = "opc.tcp://127.0.0.1:48412/ncadapt/"
     ready = threading.Event()
-    th = threading.Thread(target=lambda: asyncio.run(lp.serve_machine(ms, sk.A_G, endpoint=url, ready=ready)), daemon=True)
+    th = threading.Thread(
+        target=lambda: asyncio.run(lp.serve_machine(ms, sk.A_G, endpoint=url, ready=ready)), daemon=True
+    )
     th.start()
     ready.wait(20)
     lat: list = []
     asyncio.run(lp.run_opcua(url, lambda: sk.compensator("kalman"), sk.T_TARGET, pockets=len(ms), latencies=lat))
     th.join(20)
     lat_ms = np.array(lat) * 1000
-    print(f"   {len(lat_ms)} readings: median {np.median(lat_ms):.2f} ms, p99 {np.percentile(lat_ms, 99):.2f} ms "
-          f"(the machine's own dead time: 30-60 ms)")
+    print(
+        f"   {len(lat_ms)} readings: median {np.median(lat_ms):.2f} ms, p99 {np.percentile(lat_ms, 99):.2f} ms "
+        f"(the machine's own dead time: 30-60 ms)"
+    )
     return 0
 
 

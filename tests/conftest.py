@@ -9,8 +9,10 @@ from rs274 import RS274  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
-needs_rs274 = pytest.mark.skipif(RS274 is None and not __import__("os").environ.get("CI"),
-                                 reason="LinuxCNC's rs274 is not installed (make test installs it)")
+needs_rs274 = pytest.mark.skipif(
+    RS274 is None and not __import__("os").environ.get("CI"),
+    reason="LinuxCNC's rs274 is not installed (make test installs it)",
+)
 
 
 @pytest.fixture

@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -35,10 +33,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
-
 from ncadapt import fields, nc  # noqa: E402
 from ncadapt.errors import InputError, RefusedError  # noqa: E402
+from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
 
 CORPUS = Path(__file__).resolve().parents[1].parent / "shared" / "corpus" / "nc"
 
@@ -164,19 +161,20 @@ def densify(canon: Canon, sel: np.ndarray, step: float = _STEP, chord: float = _
         r = max(r0, r1, 1e-9)
         da = 2 * math.acos(max(-1.0, 1 - chord / r)) if chord < r else math.pi / 2
         arc_len = math.hypot(abs(sweep) * r, e[i, an] - s[i, an])
-        n[i] = max(1, math.ceil(abs(sweep) / min(da, math.pi / 2)),
-                   math.ceil(arc_len / step) if np.isfinite(step) else 1)
+        n[i] = max(
+            1, math.ceil(abs(sweep) / min(da, math.pi / 2)), math.ceil(arc_len / step) if np.isfinite(step) else 1
+        )
         arc_info[i] = (a1, a2, an, c1, c2, r0, r1, t0, sweep)
     off = np.zeros(len(sel) + 1, dtype=np.int64)
     off[1:] = np.cumsum(n + 1)
     move = np.repeat(np.arange(len(sel)), n + 1)
     t = (np.arange(off[-1]) - off[move]) / n[move]
     pts = s[move] + t[:, None] * (e[move] - s[move])
-    for i, (a1, a2, an, c1, c2, r0, r1, t0, sweep) in arc_info.items():
-        tt = t[off[i]:off[i + 1]]
+    for i, (a1, a2, _an, c1, c2, r0, r1, t0, sweep) in arc_info.items():
+        tt = t[off[i] : off[i + 1]]
         ang = t0 + tt * sweep
         rr = r0 + tt * (r1 - r0)
-        q = pts[off[i]:off[i + 1]]
+        q = pts[off[i] : off[i + 1]]
         q[:, a1] = c1 + rr * np.cos(ang)
         q[:, a2] = c2 + rr * np.sin(ang)
         q[0], q[-1] = s[i], e[i]  # exact ends, as rs274 printed them
@@ -186,8 +184,15 @@ def densify(canon: Canon, sel: np.ndarray, step: float = _STEP, chord: float = _
     return pts, off, arclen
 
 
-def _near(pts: np.ndarray, grp: np.ndarray, poly: np.ndarray, off: np.ndarray, arclen: np.ndarray, k: int = 4,
-          chunk: int = 200_000):
+def _near(
+    pts: np.ndarray,
+    grp: np.ndarray,
+    poly: np.ndarray,
+    off: np.ndarray,
+    arclen: np.ndarray,
+    k: int = 4,
+    chunk: int = 200_000,
+):
     """Distance from every point to the polyline of its group (``poly[off[g]:off[g+1]]``), and the
     arc length along that polyline of the nearest place.
 
@@ -231,8 +236,16 @@ def _near(pts: np.ndarray, grp: np.ndarray, poly: np.ndarray, off: np.ndarray, a
 
 
 # ------------------------------------------------------------------------------------------ comparison
-def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: float, lines=None,
-                   max_piece: float | None = None, start_known: np.ndarray | None = None) -> list[str]:
+def compare_motion(
+    inp: Canon,
+    out: Canon,
+    displaced: np.ndarray,
+    field,
+    tol: float,
+    lines=None,
+    max_piece: float | None = None,
+    start_known: np.ndarray | None = None,
+) -> list[str]:
     """Compare rs274's motion of a corrected program (``out``) with its motion of the input
     (``inp``): the rapids must be the input's, and each cutting move ``k`` must follow the input's
     path, displaced by ``field`` where ``displaced[k]`` (the moves the engine can correct), as it
@@ -252,6 +265,7 @@ def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: fl
     ``lines`` (the source line of every input move) names the moves in the problems. Returns the
     problems found, each with how often it occurs and its first occurrence (empty: the motions agree).
     """
+
     def where(k):
         return f"line {lines[k]}" if lines is not None else f"move {k}"
 
@@ -308,13 +322,17 @@ def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: fl
                 continue
             nxt = "a rapid" if j < n_out else "the end of the motion"
             what = "displaced " if displaced[k] else ""
-            return [f"{where(k)}: the corrected motion reaches {nxt} without passing the {what}end "
-                    f"{xyz(target[k])} of this {inp.kinds[k]} move"
-                    + (f" (first output move after the previous: to {xyz(oe6[j0])})" if j0 < n_out else "")]
+            return [
+                f"{where(k)}: the corrected motion reaches {nxt} without passing the {what}end "
+                f"{xyz(target[k])} of this {inp.kinds[k]} move"
+                + (f" (first output move after the previous: to {xyz(oe6[j0])})" if j0 < n_out else "")
+            ]
         groups[k] = (j0, j)
     if j < n_out:
-        return [f"the corrected motion has {n_out - j} move(s) more after the input's last, first a "
-                f"{okind[j]} move to {xyz(oe6[j])}"]
+        return [
+            f"the corrected motion has {n_out - j} move(s) more after the input's last, first a "
+            f"{okind[j]} move to {xyz(oe6[j])}"
+        ]
     # rapids end where they did: every axis they move; an axis a rapid does not move (to rs274's
     # printed resolution) may also stay where the corrected motion left it (the engine keeps the
     # axes a rapid names, and leaves the others where they are, as the machine does)
@@ -331,15 +349,18 @@ def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: fl
             why = ""
             if c >= 0 and displaced[c] and np.abs(oe6[jj, :3] - ie6[k, :3] - (target[c] - ie6[c, :3])).max() <= tol:
                 why = f" (moved by the displacement of {where(c)}, the cutting move before it)"
-            problems.append(f"{len(bad)} rapid(s) moved, first {where(k)}: the rapid to {xyz(ie6[k])} ends at "
-                            f"{xyz(oe6[jj])}{why}")
+            problems.append(
+                f"{len(bad)} rapid(s) moved, first {where(k)}: the rapid to {xyz(ie6[k])} ends at {xyz(oe6[jj])}{why}"
+            )
     # rotary axes end where they did
     gk = np.flatnonzero(groups[:, 1] > groups[:, 0])
     bad = np.flatnonzero(np.abs(oe6[groups[gk, 1] - 1, 3:] - ie6[gk, 3:]).max(axis=1) > 1e-3) if len(gk) else []
     if len(bad):
         k = gk[bad[0]]
-        problems.append(f"{len(bad)} rotary end(s) changed, first {where(k)}: "
-                        f"{oe6[groups[k, 1] - 1, 3:].round(4).tolist()}, not {ie6[k, 3:].round(4).tolist()}")
+        problems.append(
+            f"{len(bad)} rotary end(s) changed, first {where(k)}: "
+            f"{oe6[groups[k, 1] - 1, 3:].round(4).tolist()}, not {ie6[k, 3:].round(4).tolist()}"
+        )
 
     # 2. the path of every cutting move: expected points (input densified, displaced) against the
     # output pieces (arcs densified)
@@ -375,9 +396,11 @@ def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: fl
     def report(what, idx, moves, pts, dist):
         if len(idx):
             k = ks[moves[idx[0]]]
-            problems.append(f"{len(idx)} point(s) {what}, first {where(k)} ({inp.kinds[k]}"
-                            f"{', displaced' if displaced[k] else ''}): {xyz(pts[idx[0]])}, "
-                            f"{dist[idx[0]] * 1000:.1f} µm off")
+            problems.append(
+                f"{len(idx)} point(s) {what}, first {where(k)} ({inp.kinds[k]}"
+                f"{', displaced' if displaced[k] else ''}): {xyz(pts[idx[0]])}, "
+                f"{dist[idx[0]] * 1000:.1f} µm off"
+            )
 
     # (a) every output point on the expected path, in order (of a connecting piece: its end only)
     check = ~piece_start & (~conn | piece_end)
@@ -390,8 +413,10 @@ def compare_motion(inp: Canon, out: Canon, displaced: np.ndarray, field, tol: fl
     back = back[[not _retraces(inp, ks[ga[b + 1]]) for b in back]] if len(back) else back
     if len(back):
         k = ks[ga[back[0] + 1]]
-        problems.append(f"{len(back)} point(s) of the corrected motion go back along the path, first {where(k)} "
-                        f"({inp.kinds[k]}) at {xyz(pa[back[0] + 1])}")
+        problems.append(
+            f"{len(back)} point(s) of the corrected motion go back along the path, first {where(k)} "
+            f"({inp.kinds[k]}) at {xyz(pa[back[0] + 1])}"
+        )
     # (b) every expected point near the output, but for the start of a move after an uncorrected point
     conn_end = np.flatnonzero(conn[check] & piece_end[check])
     free = np.zeros(len(ks))  # the length of each move, from its start, the output need not follow
@@ -442,9 +467,16 @@ def displaced_moves(prog: nc.Program, canon: Canon):
     bad |= (kinds != "") & (kinds != np.array(canon.kinds[:m], dtype="<U8"))
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        return None, None, None, (f"line {b.line[k]}: the engine reads a {nc.MOTIONS[b.motion[k]]} move to "
-                            f"{np.round(ours[k, :3], 4).tolist()}, rs274 a {canon.kinds[k]} to "
-                            f"{canon.ends[k, :3].round(4).tolist()} (move {k})")
+        return (
+            None,
+            None,
+            None,
+            (
+                f"line {b.line[k]}: the engine reads a {nc.MOTIONS[b.motion[k]]} move to "
+                f"{np.round(ours[k, :3], 4).tolist()}, rs274 a {canon.kinds[k]} to "
+                f"{canon.ends[k, :3].round(4).tolist()} (move {k})"
+            ),
+        )
     if len(b) != n:
         return None, None, None, f"the engine reads {len(b)} moves, rs274 {n}"
     displaced = b.supported & (b.motion >= 1) & (b.motion <= 3)
@@ -556,8 +588,10 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         if not r.identity:
             r.identity_detail = _first_difference(prog.data, zero.data)
         grid = gentle_field(prog.inspect()["extents"]["feed"])
-        outs = {"shift": prog.correct(fields.Shift(SHIFT), max_segment=MAX_SEGMENT),
-                "grid": prog.correct(grid, max_segment=MAX_SEGMENT)}
+        outs = {
+            "shift": prog.correct(fields.Shift(SHIFT), max_segment=MAX_SEGMENT),
+            "grid": prog.correct(grid, max_segment=MAX_SEGMENT),
+        }
     except RefusedError as e:
         r.outcome = f"refused: {_first_line(e)}"
         r.reason, r.refusal_line = _generic(e.message), _refusal_line(e)
@@ -587,8 +621,9 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
             said = re.findall(r"([\d,]+) cutting move\(s\) not corrected", " ".join(out.correction.warnings))
             warned = sum(int(n.replace(",", "")) for n in said)
             if warned != r.uncorrected:
-                details.append(f"{name}: {r.uncorrected} cutting move(s) left as written, "
-                               f"the correction warns of {warned}")
+                details.append(
+                    f"{name}: {r.uncorrected} cutting move(s) left as written, the correction warns of {warned}"
+                )
             p = out.write(work / (f"out-{name}" + entry.path.suffix))
             p.write_bytes(adjust(p.read_bytes(), used))
             canon_out = run_rs274(p, tools)
@@ -596,8 +631,9 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
                 why = canon_out.error.replace("\n", " | ")
                 details.append(f"{name}: rs274 rejects the corrected program: {why}")
                 continue
-            problems = compare_motion(canon_in, canon_out, displaced, fieldof[name], tol, lines, MAX_SEGMENT,
-                                      start_known)
+            problems = compare_motion(
+                canon_in, canon_out, displaced, fieldof[name], tol, lines, MAX_SEGMENT, start_known
+            )
             if problems:
                 details.append(f"{name}: " + "; ".join(problems))
     r.motion = "mismatch" if details else "matched"
@@ -624,8 +660,10 @@ def run_all(entries=None, workers: int = 2) -> list[Result]:
 
 
 def tables(results: list[Result]) -> str:
-    out = ["| dialect | programs | accepted | refused (top reasons) | identity | motion matched / compared |",
-           "|---|---|---|---|---|---|"]
+    out = [
+        "| dialect | programs | accepted | refused (top reasons) | identity | motion matched / compared |",
+        "|---|---|---|---|---|---|",
+    ]
     by: dict[str, list[Result]] = {}
     for r in results:
         by.setdefault(r.dialect, []).append(r)
@@ -644,19 +682,24 @@ def tables(results: list[Result]) -> str:
     tot = [r for r in results]
     acc = [r for r in tot if r.accepted]
     compared = [r for r in acc if r.motion in ("matched", "mismatch")]
-    out.append(f"| **all** | {len(tot)} | {len(acc)} | {sum(r.refused for r in tot)} | "
-               f"{sum(1 for r in acc if r.identity)}/{len(acc)} | "
-               f"{sum(r.motion == 'matched' for r in compared)}/{len(compared)} |")
+    out.append(
+        f"| **all** | {len(tot)} | {len(acc)} | {sum(r.refused for r in tot)} | "
+        f"{sum(1 for r in acc if r.identity)}/{len(acc)} | "
+        f"{sum(r.motion == 'matched' for r in compared)}/{len(compared)} |"
+    )
     out += ["", "| program | dialect | lines | outcome | identity | motion | s |", "|---|---|---|---|---|---|---|"]
     for r in sorted(results, key=lambda r: (r.dialect, r.file)):
         ident = "" if r.identity is None else ("yes" if r.identity else f"no ({r.identity_detail})")
-        notes = ([f"rs274: {', '.join(r.adjusted)}"] if r.adjusted else []) + \
-            ([f"{r.uncorrected} cutting move(s) left as written, position unknown"] if r.uncorrected else [])
+        notes = ([f"rs274: {', '.join(r.adjusted)}"] if r.adjusted else []) + (
+            [f"{r.uncorrected} cutting move(s) left as written, position unknown"] if r.uncorrected else []
+        )
         motion = r.motion + (f" ({'; '.join(notes)})" if notes else "")
         motion += f": {r.motion_detail}" if r.motion_detail else ""
         cell = lambda s: s.replace("|", "\\|").replace("\n", " ")  # noqa: E731
-        out.append(f"| {r.file} | {r.dialect} | {r.lines} | {cell(r.outcome)} | {cell(ident)} | "
-                   f"{cell(motion)} | {r.seconds:.1f} |")
+        out.append(
+            f"| {r.file} | {r.dialect} | {r.lines} | {cell(r.outcome)} | {cell(ident)} | "
+            f"{cell(motion)} | {r.seconds:.1f} |"
+        )
     return "\n".join(out)
 
 

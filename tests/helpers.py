@@ -11,8 +11,13 @@ import numpy as np
 def skin_server(*args, env=None) -> subprocess.Popen:
     """``ncadapt skin serve ARGS`` in a process of its own (the controller of the OPC UA pair);
     its first line on stderr says where it serves."""
-    return subprocess.Popen([sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve",
-                             *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-c", "from ncadapt.cli import main; main()", "skin", "serve", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
 
 
 def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol: float) -> None:
@@ -42,7 +47,8 @@ def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol:
             j += 1
         assert last is not None and np.abs(predicted[last] - b).max() <= tol, (
             f"segment {i} {a.round(5)} -> {b.round(5)} does not end on the predicted path "
-            f"(next predicted {predicted[min(j, n - 1)].round(5)})")
+            f"(next predicted {predicted[min(j, n - 1)].round(5)})"
+        )
     assert j == n, f"{n - j} predicted point(s) not reached, first {predicted[j].round(5)}"
 
 
@@ -59,5 +65,6 @@ def endpoints_agree(blocks, canon, what: str) -> int:
     bad = np.argwhere(diff > tol)
     assert not len(bad), (
         f"{what}: line {blocks.line[bad[0][0]]} axis {'XYZABC'[bad[0][1]]}: engine {ours[tuple(bad[0])]:.6f}, "
-        f"rs274 {canon.ends[tuple(bad[0])]:.6f}")
+        f"rs274 {canon.ends[tuple(bad[0])]:.6f}"
+    )
     return int(known.any(axis=1).sum())

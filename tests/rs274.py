@@ -45,8 +45,15 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     out = Path(str(path) + ".canon")
     cmd = [RS274] + (["-t", str(tools)] if tools is not None else []) + ["-g", str(path), str(out)]
     with tempfile.TemporaryDirectory(prefix="rs274-home-") as home:
-        proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout,
-                              errors="replace", env={**os.environ, "HOME": home})
+        proc = subprocess.run(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            errors="replace",
+            env={**os.environ, "HOME": home},
+        )
     text = out.read_text(errors="replace") if out.exists() else ""
     out.unlink(missing_ok=True)
     scale = 25.4  # rs274 without an ini file works in inches until the program says otherwise
@@ -79,7 +86,12 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             arcs.append((int(v[4]), v[2] * scale, v[3] * scale, plane))
             res = max(res, 0.00005 * scale)
     err = None
-    if proc.returncode != 0 or "error" in proc.stderr.lower() or "executing" in proc.stderr and len(proc.stderr.splitlines()) > 1:
+    if (
+        proc.returncode != 0
+        or "error" in proc.stderr.lower()
+        or "executing" in proc.stderr
+        and len(proc.stderr.splitlines()) > 1
+    ):
         tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
     return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err)

@@ -10,8 +10,8 @@ import re
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import needs_rs274
 
+from conftest import needs_rs274
 from ncadapt import InputError
 from ncadapt.cli import main
 from ncadapt.processes import bore as pb
@@ -66,7 +66,9 @@ def _probe_csv(tmp_path, diameters, zs=(55, 30, 5), name="probe.csv", centre=(0.
     phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
     rows = ["plane,x,y,z"]
     for label, d, z in zip("AMB", diameters, zs):
-        rows += [f"{label},{centre[0] + d / 2 * math.cos(f):.7f},{centre[1] + d / 2 * math.sin(f):.7f},{z}" for f in phi]
+        rows += [
+            f"{label},{centre[0] + d / 2 * math.cos(f):.7f},{centre[1] + d / 2 * math.sin(f):.7f},{z}" for f in phi
+        ]
     p = tmp_path / name
     p.write_text("\n".join(rows) + "\n")
     return p
@@ -135,8 +137,29 @@ def test_hardened_identifies_the_stiffness_ratio():
 
 def test_cli_plan_next_simulate(tmp_path):
     run = CliRunner().invoke
-    res = run(main, ["bore", "plan", "--diameter", "40", "--final", "H6", "--prefinish", "H9", "--t0", "0.5",
-                     "--allowance", "0.1", "--delta-a", "0.03", "--delta-b", "0.02", "--json", str(tmp_path / "plan.json")])
+    res = run(
+        main,
+        [
+            "bore",
+            "plan",
+            "--diameter",
+            "40",
+            "--final",
+            "H6",
+            "--prefinish",
+            "H9",
+            "--t0",
+            "0.5",
+            "--allowance",
+            "0.1",
+            "--delta-a",
+            "0.03",
+            "--delta-b",
+            "0.02",
+            "--json",
+            str(tmp_path / "plan.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     d = json.loads((tmp_path / "plan.json").read_text())
     assert d["it_final"] == 0.016 and d["it_prefinish"] == 0.062 and d["passes"] == 4 and d["applicable"] is True
@@ -144,21 +167,68 @@ def test_cli_plan_next_simulate(tmp_path):
     assert d["t_max"] == pytest.approx(0.5 * 0.25 * 0.016 / 0.062)
     aim0 = 40.008 - 0.2
     probe = _probe_csv(tmp_path, (aim0 - 0.060, aim0 - 0.050, aim0 - 0.040))
-    res = run(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--measured", str(probe),
-                     "--json", str(tmp_path / "plan2.json")])
+    res = run(
+        main,
+        [
+            "bore",
+            "plan",
+            "--diameter",
+            "40",
+            "--t0",
+            "0.5",
+            "--allowance",
+            "0.1",
+            "--measured",
+            str(probe),
+            "--json",
+            str(tmp_path / "plan2.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     d2 = json.loads((tmp_path / "plan2.json").read_text())
     assert d2["delta_a"] == pytest.approx(0.030, abs=1e-6) and d2["delta_b"] == pytest.approx(0.020, abs=1e-6)
-    res = run(main, ["bore", "next", "--plan", str(tmp_path / "plan.json"), "--measured", str(probe), "--pass", "0",
-                     "--controller", "linuxcnc", "--tool-radius", "6", "--json", str(tmp_path / "next.json")])
+    res = run(
+        main,
+        [
+            "bore",
+            "next",
+            "--plan",
+            str(tmp_path / "plan.json"),
+            "--measured",
+            str(probe),
+            "--pass",
+            "0",
+            "--controller",
+            "linuxcnc",
+            "--tool-radius",
+            "6",
+            "--json",
+            str(tmp_path / "next.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     n = json.loads((tmp_path / "next.json").read_text())
     assert n["correction"] == pytest.approx(0.030, abs=1e-6) and n["block"] == "G10 L1 P1 R5.9700"
     # the plan saved by an editor that writes a byte-order mark reads the same; a broken one is located
     bom = tmp_path / "plan_bom.json"
     bom.write_bytes(b"\xef\xbb\xbf" + (tmp_path / "plan2.json").read_bytes())
-    res = run(main, ["bore", "next", "--plan", str(bom), "--measured", str(probe), "--pass", "0",
-                     "--controller", "linuxcnc", "--tool-radius", "6"])
+    res = run(
+        main,
+        [
+            "bore",
+            "next",
+            "--plan",
+            str(bom),
+            "--measured",
+            str(probe),
+            "--pass",
+            "0",
+            "--controller",
+            "linuxcnc",
+            "--tool-radius",
+            "6",
+        ],
+    )
     assert res.exit_code == 0 and "G10 L1 P1 R5.9700" in res.output, res.output
     bom.write_text('{\n  "diameter": 40,\n  oops\n}\n')
     res = run(main, ["bore", "next", "--plan", str(bom), "--measured", str(probe), "--pass", "0"])
@@ -177,8 +247,23 @@ def test_condition_3_is_two_sided():
     p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.0, 0.05)
     assert p.form_before == pytest.approx(0.05) and not p.applicable
     assert any("condition (3) does not hold" in w for w in p.warnings)
-    r = CliRunner().invoke(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
-                                  "--delta-a", "0", "--delta-b", "0.05"])
+    r = CliRunner().invoke(
+        main,
+        [
+            "bore",
+            "plan",
+            "--diameter",
+            "40",
+            "--t0",
+            "0.5",
+            "--allowance",
+            "0.1",
+            "--delta-a",
+            "0",
+            "--delta-b",
+            "0.05",
+        ],
+    )
     assert r.exit_code == 0 and "|δA − δB| = 50.0 µm ≤ 15.5 µm: NO" in r.stdout, r.output
 
 
@@ -259,14 +344,29 @@ def test_pass_state_is_recorded_in_the_plan(tmp_path):
     """`bore next` reads the correction each pass was made with from the plan and records the new
     pass: forgetting --applied no longer turns the correction around; a wrong one is refused."""
     plan = tmp_path / "plan.json"
-    r = _cli("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--delta-a", "0.03",
-             "--delta-b", "0.02", "--json", str(plan))
+    r = _cli(
+        "bore",
+        "plan",
+        "--diameter",
+        "40",
+        "--t0",
+        "0.5",
+        "--allowance",
+        "0.1",
+        "--delta-a",
+        "0.03",
+        "--delta-b",
+        "0.02",
+        "--json",
+        str(plan),
+    )
     assert r.exit_code == 0, r.output
     p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
     aim0 = p.nominal_diameter_after(0)
     m0 = _probe_csv(tmp_path, (aim0 - 0.060, aim0 - 0.050, aim0 - 0.040), name="m0.csv")
-    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m0), "--controller", "linuxcnc",
-             "--tool-radius", "6")
+    r = _cli(
+        "bore", "next", "--plan", str(plan), "--measured", str(m0), "--controller", "linuxcnc", "--tool-radius", "6"
+    )
     assert r.exit_code == 0 and "G10 L1 P1 R5.9700" in r.stdout, r.output
     d = json.loads(plan.read_text())
     assert [h["pass"] for h in d["history"]] == [0] and d["history"][0]["correction"] == pytest.approx(0.030, abs=1e-6)
@@ -275,8 +375,9 @@ def test_pass_state_is_recorded_in_the_plan(tmp_path):
     m1 = _probe_csv(tmp_path, (aim1 - 0.002,), zs=(55,), name="m1.csv")  # plane A only
     r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m1), "--applied", "0.01")
     assert r.exit_code == 2 and "--applied" in r.output and "0.03" in r.output, r.output
-    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(m1), "--controller", "linuxcnc",
-             "--tool-radius", "6")
+    r = _cli(
+        "bore", "next", "--plan", str(plan), "--measured", str(m1), "--controller", "linuxcnc", "--tool-radius", "6"
+    )
     assert r.exit_code == 0, r.output
     # the block sets nominal − δK2 = 6 − 0.031, not (6 − 0.030) − 0.031
     assert "G10 L1 P1 R5.9690" in r.stdout and "+31.0 µm" in r.stdout, r.output
@@ -289,8 +390,25 @@ def test_pass_state_is_recorded_in_the_plan(tmp_path):
 
 def test_finished_bore_from_the_cli_with_a_report(tmp_path):
     plan = tmp_path / "plan.json"
-    assert _cli("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--delta-a", "0.03",
-                "--delta-b", "0.02", "--json", str(plan)).exit_code == 0
+    assert (
+        _cli(
+            "bore",
+            "plan",
+            "--diameter",
+            "40",
+            "--t0",
+            "0.5",
+            "--allowance",
+            "0.1",
+            "--delta-a",
+            "0.03",
+            "--delta-b",
+            "0.02",
+            "--json",
+            str(plan),
+        ).exit_code
+        == 0
+    )
     p = pb.plan(40, "H6", "H9", 0.5, 0.1, 0.03, 0.02)
     for n in range(p.passes):
         aim = p.nominal_diameter_after(n)
@@ -298,8 +416,18 @@ def test_finished_bore_from_the_cli_with_a_report(tmp_path):
         r = _cli("bore", "next", "--plan", str(plan), "--measured", str(f))
         assert r.exit_code == 0, r.output
     fin = _probe_csv(tmp_path, (40.008, 40.0085, 40.0088), name="fin.csv")
-    r = _cli("bore", "next", "--plan", str(plan), "--measured", str(fin), "--report", str(tmp_path / "r.html"),
-             "--json", str(tmp_path / "f.json"))
+    r = _cli(
+        "bore",
+        "next",
+        "--plan",
+        str(plan),
+        "--measured",
+        str(fin),
+        "--report",
+        str(tmp_path / "r.html"),
+        "--json",
+        str(tmp_path / "f.json"),
+    )
     assert r.exit_code == 0 and "the bore is GOOD" in r.stdout, r.output
     f = json.loads((tmp_path / "f.json").read_text())
     assert f["inside"] and f["form_ok"] and f["form"] == pytest.approx(0.0004, abs=1e-6)
@@ -315,8 +443,7 @@ def test_probe_files_as_measured(tmp_path):
     phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
     rows = ["x,y,z"]
     for d, z in ((39.9, 55), (39.95, 30), (39.92, 5)):
-        rows += [f"{d / 2 * math.cos(f):.6f},{d / 2 * math.sin(f):.6f},{z + rng.uniform(-0.01, 0.01):.4f}"
-                 for f in phi]
+        rows += [f"{d / 2 * math.cos(f):.6f},{d / 2 * math.sin(f):.6f},{z + rng.uniform(-0.01, 0.01):.4f}" for f in phi]
     f = tmp_path / "xyz.csv"
     f.write_text("\n".join(rows) + "\n")
     m = pb.read_probe(f)
@@ -342,11 +469,14 @@ def test_offset_blocks_for_real_controllers():
         pb.offset_block(0.001, controller="fanuc-geometry")
 
 
-@pytest.mark.parametrize("args,says", [
-    (("--delta-a", "-1e300", "--delta-b", "0.02"), "--delta-a"),
-    (("--delta-a", "0.03", "--delta-b", "0.02", "--k", "5e-324"), "--k"),
-    (("--delta-a", "0.03", "--delta-b", "0.02", "--t0", "5e-324"), "--t0"),
-])
+@pytest.mark.parametrize(
+    "args,says",
+    [
+        (("--delta-a", "-1e300", "--delta-b", "0.02"), "--delta-a"),
+        (("--delta-a", "0.03", "--delta-b", "0.02", "--k", "5e-324"), "--k"),
+        (("--delta-a", "0.03", "--delta-b", "0.02", "--t0", "5e-324"), "--t0"),
+    ],
+)
 def test_fuzz_findings_plan_options(args, says):
     base = ["bore", "plan", "--diameter", "40", "--allowance", "0.1"]
     if "--t0" not in args:
@@ -355,15 +485,24 @@ def test_fuzz_findings_plan_options(args, says):
     assert r.exit_code == 2 and says in r.output and "Traceback" not in r.output, r.output
 
 
-@pytest.mark.parametrize("text,says", [
-    ("0", "expected a JSON object, got int"),
-    ("[]", "expected a JSON object, got list"),
-    ('{"diameter": NaN, "final": "H6", "prefinish": "H9", "t0": 0.5, "allowance": 0.1, "delta_a": 0.03, '
-     '"delta_b": 0.02, "k": 0.25}', "'diameter' must be a finite number"),
-    ('{"diameter": ' + "1" * 5000 + "}", "not a plan (JSON)"),
-    ('{"diameter": 40, "final": 6, "prefinish": "H9", "t0": 0.5, "allowance": 0.1, "delta_a": 0.03, '
-     '"delta_b": 0.02, "k": 0.25}', "'final' must be a class"),
-])
+@pytest.mark.parametrize(
+    "text,says",
+    [
+        ("0", "expected a JSON object, got int"),
+        ("[]", "expected a JSON object, got list"),
+        (
+            '{"diameter": NaN, "final": "H6", "prefinish": "H9", "t0": 0.5, "allowance": 0.1, "delta_a": 0.03, '
+            '"delta_b": 0.02, "k": 0.25}',
+            "'diameter' must be a finite number",
+        ),
+        ('{"diameter": ' + "1" * 5000 + "}", "not a plan (JSON)"),
+        (
+            '{"diameter": 40, "final": 6, "prefinish": "H9", "t0": 0.5, "allowance": 0.1, "delta_a": 0.03, '
+            '"delta_b": 0.02, "k": 0.25}',
+            "'final' must be a class",
+        ),
+    ],
+)
 def test_fuzz_findings_plan_file(tmp_path, text, says):
     plan = tmp_path / "plan.json"
     plan.write_text(text)
@@ -399,25 +538,32 @@ def test_measurement_formats(tmp_path):
     t.write_text("plane;z;diameter;x;y\nB;5;39.82;0.01;0\nM;30;39.81;0;0\nA;55;39.80;0;0.002\n")
     _expect_planes(pb.read_measurement(t), (39.80, 39.81, 39.82), [(0, 0.002), (0, 0), (0.01, 0)])
     d = tmp_path / "bore.dms"
-    d.write_text("DMISMN/'bore',05.0\nF(CA)=FEAT/CIRCLE,INNER,CART,0,0,55,0,0,1,40.0\n"
-                 "FA(CA)=FEAT/CIRCLE,INNER,CART,0,0.002,55,0,0,1,39.80\n"
-                 "FA(CM)=FEAT/CIRCLE,INNER,CART,0,0,30,0,0,1,$\n39.81\n"
-                 "FA(CB)=FEAT/CIRCLE,INNER,CART,0.01,0,5,0,0,-1,39.82\nENDFIL\n")
+    d.write_text(
+        "DMISMN/'bore',05.0\nF(CA)=FEAT/CIRCLE,INNER,CART,0,0,55,0,0,1,40.0\n"
+        "FA(CA)=FEAT/CIRCLE,INNER,CART,0,0.002,55,0,0,1,39.80\n"
+        "FA(CM)=FEAT/CIRCLE,INNER,CART,0,0,30,0,0,1,$\n39.81\n"
+        "FA(CB)=FEAT/CIRCLE,INNER,CART,0.01,0,5,0,0,-1,39.82\nENDFIL\n"
+    )
     _expect_planes(pb.read_measurement(d), (39.80, 39.81, 39.82), [(0, 0.002), (0, 0), (0.01, 0)])
     r = tmp_path / "report.txt"
     blocks = []
     for name, z, dia in (("CIR_A", 55, 39.80), ("CIR_M", 30, 39.81), ("CIR_B", 5, 39.82)):
-        blocks.append(f"DIM LOC{name[-1]}= LOCATION OF CIRCLE {name}  UNITS=MM ,$\n"
-                      "AX    NOMINAL       +TOL       -TOL       MEAS        DEV     OUTTOL\n"
-                      f"X       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
-                      f"Y       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
-                      f"Z      {z:.4f}     0.0100     0.0100    {z:.4f}     0.0000     0.0000 ----#----\n"
-                      f"D      40.0000     0.0160     0.0000    {dia:.4f}    -0.1900     0.1900 #--------\n")
+        blocks.append(
+            f"DIM LOC{name[-1]}= LOCATION OF CIRCLE {name}  UNITS=MM ,$\n"
+            "AX    NOMINAL       +TOL       -TOL       MEAS        DEV     OUTTOL\n"
+            f"X       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
+            f"Y       0.0000     0.0100     0.0100     0.0000     0.0000     0.0000 ----#----\n"
+            f"Z      {z:.4f}     0.0100     0.0100    {z:.4f}     0.0000     0.0000 ----#----\n"
+            f"D      40.0000     0.0160     0.0000    {dia:.4f}    -0.1900     0.1900 #--------\n"
+        )
     r.write_text("PART NAME  : bore\n" + "\n".join(blocks))
     _expect_planes(pb.read_measurement(r), (39.80, 39.81, 39.82))
     phi = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    lines = [f"{d / 2 * math.cos(f):.6f} {d / 2 * math.sin(f):.6f} {z + 0.003 * math.sin(3 * f):.6f} 0 0 0 0 0 0"
-             for d, z in ((39.80, 55), (39.81, 30), (39.82, 5)) for f in phi]
+    lines = [
+        f"{d / 2 * math.cos(f):.6f} {d / 2 * math.sin(f):.6f} {z + 0.003 * math.sin(3 * f):.6f} 0 0 0 0 0 0"
+        for d, z in ((39.80, 55), (39.81, 30), (39.82, 5))
+        for f in phi
+    ]
     log = tmp_path / "bore_probe.txt"
     log.write_text("\n".join(lines) + "\n")
     m = pb.read_measurement(log)
@@ -435,10 +581,16 @@ def test_measurement_formats(tmp_path):
 def test_a_plan_from_a_dmis_report_through_the_cli(tmp_path):
     d = tmp_path / "bore.dms"
     aim0 = 40.008 - 0.2
-    d.write_text("".join(f"FA(C{z})=FEAT/CIRCLE,INNER,CART,0,0,{z},0,0,1,{aim0 - 2 * dev:.4f}\n"
-                         for z, dev in ((55, 0.03), (30, 0.025), (5, 0.02))))
-    r = CliRunner().invoke(main, ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
-                                  "--measured", str(d), "--json", "-"])
+    d.write_text(
+        "".join(
+            f"FA(C{z})=FEAT/CIRCLE,INNER,CART,0,0,{z},0,0,1,{aim0 - 2 * dev:.4f}\n"
+            for z, dev in ((55, 0.03), (30, 0.025), (5, 0.02))
+        )
+    )
+    r = CliRunner().invoke(
+        main,
+        ["bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--measured", str(d), "--json", "-"],
+    )
     assert r.exit_code == 0, r.output
     p = json.loads(r.stdout)
     assert p["delta_a"] == pytest.approx(0.03, abs=1e-9) and p["delta_b"] == pytest.approx(0.02, abs=1e-9)
@@ -447,8 +599,9 @@ def test_a_plan_from_a_dmis_report_through_the_cli(tmp_path):
 @pytest.mark.parametrize("dialect", ["linuxcnc", "fanuc"])
 def test_probing_program(tmp_path, dialect):
     out = tmp_path / "probe.ngc"
-    r = CliRunner().invoke(main, ["bore", "probe-program", "--diameter", "40", "--planes", "55,30,5", "--dialect",
-                                  dialect, "-o", str(out)])
+    r = CliRunner().invoke(
+        main, ["bore", "probe-program", "--diameter", "40", "--planes", "55,30,5", "--dialect", dialect, "-o", str(out)]
+    )
     assert r.exit_code == 0, r.output
     text = out.read_text()
     touch = "G38.2" if dialect == "linuxcnc" else "G31"
@@ -480,9 +633,9 @@ def _profile_x(y):
     r(1 − cos κ), then the straight edge at κ)."""
     y = np.asarray(y, dtype=float)
     yk = R_EPS * (1 - math.cos(KAPPA))
-    arc = np.sqrt(np.clip(R_EPS ** 2 - (R_EPS - np.minimum(y, yk)) ** 2, 0, None))
+    arc = np.sqrt(np.clip(R_EPS**2 - (R_EPS - np.minimum(y, yk)) ** 2, 0, None))
     right = np.where(y <= yk, arc, R_EPS * math.sin(KAPPA) + (y - yk) / math.tan(KAPPA))
-    return -np.sqrt(np.clip(R_EPS ** 2 - (R_EPS - np.minimum(y, R_EPS)) ** 2, 0, None)), right
+    return -np.sqrt(np.clip(R_EPS**2 - (R_EPS - np.minimum(y, R_EPS)) ** 2, 0, None)), right
 
 
 def _chip_numerically(ap, n=400_001):
@@ -532,7 +685,7 @@ def test_single_pass_deflection_by_hand():
     """Ø16 steel bar, 100 mm overhang: c = L³/(3EI) = 10⁶ / (3 · 210000 · π·16⁴/64) = 4.9341e-4 mm/N.
     A pass set 0.5 mm deep on a straight bore cuts 0.5 − d with d = c F_p(0.5 − d); with the chuck
     (20 N/µm at face A, x² from the jaws) the wall adds 5e-5 (x/80)² mm/N."""
-    c_bar = 100 ** 3 / (3 * 210_000 * math.pi * 16 ** 4 / 64)
+    c_bar = 100**3 / (3 * 210_000 * math.pi * 16**4 / 64)
     assert sb.bar_compliance() == pytest.approx(4.9341e-4, rel=1e-4)
     part = sb.BeamPart(c_bar, 1 / 20_000, 2000.0, 2000.0, 0.25)
     r_prev = np.full_like(sb.ZETA, 19.5)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 import shutil
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -24,8 +24,16 @@ def run(*args):
 
 
 def test_correct_writes_program_and_json(plate):
-    r = run("correct", plate / "plate.ngc", "--field", plate / "plate_probe.csv", "-o", plate / "out.ngc",
-            "--json", plate / "out.json")
+    r = run(
+        "correct",
+        plate / "plate.ngc",
+        "--field",
+        plate / "plate_probe.csv",
+        "-o",
+        plate / "out.ngc",
+        "--json",
+        plate / "out.json",
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((plate / "out.json").read_text())
     for key in ("lines_in", "lines_out", "blocks_changed", "max_displacement", "mean_displacement"):
@@ -100,9 +108,12 @@ def test_plate_example(tmp_path):
     assert (tmp_path / "c.ngc").read_text() != (ex / "plate.ngc").read_text()
 
 
-_EX = {"nc": ("plate.ngc", "plate_probe.csv"), "skin": ("pocket1_finish.ngc", "pocket1_thickness.csv"),
-       "waffle": ("cell_r1c1.ngc", "tracking.csv", "thickness_r1c1.csv", "backlash_signals.csv"),
-       "turning": ("shaft_d20_l430.toml",)}
+_EX = {
+    "nc": ("plate.ngc", "plate_probe.csv"),
+    "skin": ("pocket1_finish.ngc", "pocket1_thickness.csv"),
+    "waffle": ("cell_r1c1.ngc", "tracking.csv", "thickness_r1c1.csv", "backlash_signals.csv"),
+    "turning": ("shaft_d20_l430.toml",),
+}
 
 # every command with an input file: (arguments, the input given again as an output, what the message calls it)
 _GUARDED = [
@@ -110,18 +121,73 @@ _GUARDED = [
     (("correct", "plate.ngc", "--field", "plate_probe.csv", "-o", "o.ngc", "--json"), "plate_probe.csv", "field file"),
     (("inspect", "plate.ngc", "--json"), "plate.ngc", "program"),
     (("analyze", "plate_probe.csv", "--report"), "plate_probe.csv", "measurements"),
-    (("compensate", "plate_probe.csv", "--program", "plate.ngc", "-o", "o.ngc", "--points-out"), "plate.ngc",
-     "input program"),
-    (("skin", "correct", "pocket1_finish.ngc", "--thickness", "pocket1_thickness.csv", "--target", "1.5", "-o", "o.ngc",
-      "--json"), "pocket1_thickness.csv", "thickness map"),
-    (("waffle", "tilt", "--tracking", "tracking.csv", "--tool-radius", "5", "--diameter", "2000", "--json"),
-     "tracking.csv", "tracking log"),
-    (("waffle", "correct", "cell_r1c1.ngc", "--tracking", "tracking.csv", "--tool-radius", "5", "--diameter", "2000",
-      "--thickness", "thickness_r1c1.csv", "--target", "2", "-o", "o.ngc", "--json"), "thickness_r1c1.csv", "thickness map"),
+    (
+        ("compensate", "plate_probe.csv", "--program", "plate.ngc", "-o", "o.ngc", "--points-out"),
+        "plate.ngc",
+        "input program",
+    ),
+    (
+        (
+            "skin",
+            "correct",
+            "pocket1_finish.ngc",
+            "--thickness",
+            "pocket1_thickness.csv",
+            "--target",
+            "1.5",
+            "-o",
+            "o.ngc",
+            "--json",
+        ),
+        "pocket1_thickness.csv",
+        "thickness map",
+    ),
+    (
+        ("waffle", "tilt", "--tracking", "tracking.csv", "--tool-radius", "5", "--diameter", "2000", "--json"),
+        "tracking.csv",
+        "tracking log",
+    ),
+    (
+        (
+            "waffle",
+            "correct",
+            "cell_r1c1.ngc",
+            "--tracking",
+            "tracking.csv",
+            "--tool-radius",
+            "5",
+            "--diameter",
+            "2000",
+            "--thickness",
+            "thickness_r1c1.csv",
+            "--target",
+            "2",
+            "-o",
+            "o.ngc",
+            "--json",
+        ),
+        "thickness_r1c1.csv",
+        "thickness map",
+    ),
     (("waffle", "backlash", "--signals", "backlash_signals.csv", "--json"), "backlash_signals.csv", "signals"),
     (("turning", "plan", "shaft_d20_l430.toml", "--report"), "shaft_d20_l430.toml", "configuration"),
-    (("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--measured", "plate_probe.csv", "--json"),
-     "plate_probe.csv", "probe file"),
+    (
+        (
+            "bore",
+            "plan",
+            "--diameter",
+            "40",
+            "--t0",
+            "0.5",
+            "--allowance",
+            "0.1",
+            "--measured",
+            "plate_probe.csv",
+            "--json",
+        ),
+        "plate_probe.csv",
+        "probe file",
+    ),
     (("turning", "simulate", "shaft_d20_l430.toml", "plate.ngc", "--json"), "plate.ngc", "program"),
 ]
 
@@ -150,29 +216,56 @@ def test_no_output_replaces_an_input(inputs, monkeypatch, args, victim, what):
 
 def test_a_hard_link_to_an_input_is_the_input(inputs):
     (inputs / "link.csv").hardlink_to(inputs / "tracking.csv")
-    r = run("waffle", "tilt", "--tracking", inputs / "tracking.csv", "--tool-radius", 5, "--diameter", 2000,
-            "--json", inputs / "link.csv")
+    r = run(
+        "waffle",
+        "tilt",
+        "--tracking",
+        inputs / "tracking.csv",
+        "--tool-radius",
+        5,
+        "--diameter",
+        2000,
+        "--json",
+        inputs / "link.csv",
+    )
     assert r.exit_code == 2 and "refusing to overwrite the tracking log with --json" in r.stderr
-    assert (inputs / "link.csv").read_bytes() == (inputs / "tracking.csv").read_bytes() == \
-        (Path(__file__).parent.parent / "examples" / "waffle" / "tracking.csv").read_bytes()
+    assert (
+        (inputs / "link.csv").read_bytes()
+        == (inputs / "tracking.csv").read_bytes()
+        == (Path(__file__).parent.parent / "examples" / "waffle" / "tracking.csv").read_bytes()
+    )
 
 
 def test_two_outputs_naming_one_file_is_a_usage_error(tmp_path):
-    r = run("skin", "simulate", "--protocol", "--method", "mirror", "--json", tmp_path / "r", "--report", tmp_path / "r")
+    r = run(
+        "skin", "simulate", "--protocol", "--method", "mirror", "--json", tmp_path / "r", "--report", tmp_path / "r"
+    )
     assert r.exit_code == 2 and "--json and --report name the same file" in r.stderr
     assert list(tmp_path.iterdir()) == []
 
 
 # every kind of text input, with one byte that is not UTF-8 (Latin-1 'é') at a known line and column
 _NOT_UTF8 = [
-    ("map.csv", b"x,y,thickness\n0,0,1.6\n10,0,1.5\n0,10,1.\xe95\n",
-     ("skin", "correct", "pocket1_finish.ngc", "--thickness", "map.csv", "--target", "1.5", "-o", "o.ngc"), (4, 8)),
+    (
+        "map.csv",
+        b"x,y,thickness\n0,0,1.6\n10,0,1.5\n0,10,1.\xe95\n",
+        ("skin", "correct", "pocket1_finish.ngc", "--thickness", "map.csv", "--target", "1.5", "-o", "o.ngc"),
+        (4, 8),
+    ),
     ("m.csv", b"x,y,z,i,j,k,dev\n0,0,0,0,0,1,0.01 \xe9\n", ("analyze", "m.csv"), (2, 18)),
-    ("t.csv", b"B,Z,V\n\xe90,0,1\n", ("waffle", "tilt", "--tracking", "t.csv", "--tool-radius", "5", "--diameter", "2000"),
-     (2, 1)),
+    (
+        "t.csv",
+        b"B,Z,V\n\xe90,0,1\n",
+        ("waffle", "tilt", "--tracking", "t.csv", "--tool-radius", "5", "--diameter", "2000"),
+        (2, 1),
+    ),
     ("c.toml", b"# r\xe9glage\n", ("turning", "plan", "c.toml"), (1, 4)),
-    ("p.csv", b"plane,x,y,z\nA,1,0,5\xe9\n", ("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1",
-                                         "--measured", "p.csv"), (2, 8)),
+    (
+        "p.csv",
+        b"plane,x,y,z\nA,1,0,5\xe9\n",
+        ("bore", "plan", "--diameter", "40", "--t0", "0.5", "--allowance", "0.1", "--measured", "p.csv"),
+        (2, 8),
+    ),
 ]
 
 
@@ -182,12 +275,16 @@ def test_an_input_that_is_not_utf8_is_located(inputs, monkeypatch, name, data, a
     (inputs / name).write_bytes(data)
     r = run(*args)
     assert r.exit_code == 2, r.output
-    assert r.stderr == f"{name}:{where[0]}:{where[1]}: error: not UTF-8 text: byte 0xe9 (invalid continuation byte); " \
-                       "save the file as UTF-8\n"
+    assert (
+        r.stderr == f"{name}:{where[0]}:{where[1]}: error: not UTF-8 text: byte 0xe9 (invalid continuation byte); "
+        "save the file as UTF-8\n"
+    )
 
 
-@pytest.mark.parametrize("option, value", [("--chord-tol", "nan"), ("--chord-tol", "1e-300"),
-                                           ("--max-segment", "1e-9"), ("--max-segment", "nan")])
+@pytest.mark.parametrize(
+    "option, value",
+    [("--chord-tol", "nan"), ("--chord-tol", "1e-300"), ("--max-segment", "1e-9"), ("--max-segment", "nan")],
+)
 def test_sampling_options_out_of_range_are_usage_errors(tmp_path, option, value):
     src = tmp_path / "p.ngc"
     src.write_text("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM2\n")

@@ -132,8 +132,11 @@ def test_sigterm_mid_write_leaves_no_file(tmp_path):
     big.write_text("G21 G90 G0 X0 Y0 Z1\nG1 Z-1 F100\n" + body * 5 + "M30\n")
     out = tmp_path / "out.ngc"
     exe = Path(sys.executable).with_name("ncadapt")
-    proc = subprocess.Popen([str(exe), "correct", str(big), "--shift", "0,0,0.01", "--max-segment", "0.01",
-                             "-o", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [str(exe), "correct", str(big), "--shift", "0,0,0.01", "--max-segment", "0.01", "-o", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     t0 = time.monotonic()
     while not temporaries(tmp_path) and proc.poll() is None and time.monotonic() - t0 < 30:
         time.sleep(0.01)
@@ -155,8 +158,10 @@ def test_an_internal_error_is_exit_3_in_one_line(prog, tmp_path, monkeypatch):
     monkeypatch.setattr(ncmod, "correct_file", boom)
     r = correct(prog, tmp_path / "out.ngc")
     assert r.exit_code == 3
-    assert r.stderr == ("error: internal error in ncadapt correct: RuntimeError: boom; this is a bug; "
-                        "rerun with --debug for the traceback\n")
+    assert r.stderr == (
+        "error: internal error in ncadapt correct: RuntimeError: boom; this is a bug; "
+        "rerun with --debug for the traceback\n"
+    )
     r = run("--debug", "correct", prog, "--shift", "0,0,0.01", "-o", tmp_path / "out.ngc")
     assert r.exit_code == 3 and "Traceback" in r.stderr and "RuntimeError: boom" in r.stderr
     r = run("correct", prog, "--shift", "0,0,0.01", "-o", tmp_path / "out.ngc", env={"NCADAPT_DEBUG": "1"})
@@ -192,10 +197,13 @@ def test_every_option_has_help_and_numbers_are_finite_and_bounded():
 
     missing = [f"{c} {p.opts[0]}" for c, p in _options() if not p.help]
     assert missing == []
-    loose = [f"{c} {p.opts[0]}" for c, p in _options()
-             if type(p.type) in (click.types.FloatParamType, click.types.IntParamType, click.FloatRange)]
+    loose = [
+        f"{c} {p.opts[0]}"
+        for c, p in _options()
+        if type(p.type) in (click.types.FloatParamType, click.types.IntParamType, click.FloatRange)
+    ]
     assert loose == [], "number options without bounds or a finiteness check"
-    for c, p in _options():
+    for _c, p in _options():
         if isinstance(p.type, FiniteRange):
             for bad in ("nan", "inf", "-inf"):
                 with pytest.raises(click.BadParameter):
@@ -224,8 +232,11 @@ def test_a_reader_that_goes_away_ends_the_printing_not_the_command(tmp_path, pro
     # its output and exits 0, without an internal error
     exe = Path(sys.executable).with_name("ncadapt")
     out = tmp_path / "o.ngc"
-    proc = subprocess.Popen([str(exe), "correct", str(prog), "--shift", "0,0,0.01", "-o", str(out), "--json", "-"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [str(exe), "correct", str(prog), "--shift", "0,0,0.01", "-o", str(out), "--json", "-"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.readline()
     proc.stdout.close()
     with proc.stderr:
@@ -234,10 +245,13 @@ def test_a_reader_that_goes_away_ends_the_printing_not_the_command(tmp_path, pro
     assert out.stat().st_size > 0
 
 
-@pytest.mark.parametrize("module, args, extra", [
-    ("OCP", ["compensate", "{m}", "--surface", "{tmp}/s.step"], "cad"),
-    ("matplotlib", ["analyze", "{m}", "--report", "{tmp}/r.html"], "report"),
-])
+@pytest.mark.parametrize(
+    "module, args, extra",
+    [
+        ("OCP", ["compensate", "{m}", "--surface", "{tmp}/s.step"], "cad"),
+        ("matplotlib", ["analyze", "{m}", "--report", "{tmp}/r.html"], "report"),
+    ],
+)
 def test_a_missing_optional_part_is_named_with_its_extra(tmp_path, monkeypatch, module, args, extra):
     import sys as _sys
 
@@ -246,8 +260,10 @@ def test_a_missing_optional_part_is_named_with_its_extra(tmp_path, monkeypatch, 
     from ncadapt.cli import main
 
     m = tmp_path / "m.csv"
-    m.write_text("x,y,z,i,j,k,dev\n" + "".join(f"{x},{y},0,0,0,1,{0.01 + 0.0003 * x:.5f}\n"
-                                               for x in range(0, 50, 5) for y in range(0, 50, 5)))
+    m.write_text(
+        "x,y,z,i,j,k,dev\n"
+        + "".join(f"{x},{y},0,0,0,1,{0.01 + 0.0003 * x:.5f}\n" for x in range(0, 50, 5) for y in range(0, 50, 5))
+    )
     for name in [n for n in _sys.modules if n == module or n.startswith(module + ".")]:
         monkeypatch.delitem(_sys.modules, name)
     monkeypatch.setitem(_sys.modules, module, None)  # import raises ModuleNotFoundError

@@ -15,8 +15,7 @@ from rs274 import RS274, Canon
 ENTRIES = corpus.manifest()
 
 
-@pytest.mark.parametrize("entry", [pytest.param(e, id=e.file) for e in ENTRIES]
-                         or [pytest.param(None, id="no-corpus")])
+@pytest.mark.parametrize("entry", [pytest.param(e, id=e.file) for e in ENTRIES] or [pytest.param(None, id="no-corpus")])
 def test_program(entry, tmp_path):
     if entry is None:
         pytest.skip(f"no corpus of NC programs at {corpus.CORPUS}")
@@ -49,15 +48,21 @@ def _canon(moves) -> Canon:
 
 
 # a rapid above the start, a plunge, a line, a clockwise half circle, a line, a rapid up
-INPUT = [("traverse", (0, 0, 5)), ("feed", (0, 0, -1)), ("feed", (10, 0, -1)),
-         ("arc", (20, 0, -1), (-1, 15.0, 0.0, "CANON_PLANE_XY")), ("feed", (20, 10, -1)),
-         ("traverse", (20, 10, 5))]
+INPUT = [
+    ("traverse", (0, 0, 5)),
+    ("feed", (0, 0, -1)),
+    ("feed", (10, 0, -1)),
+    ("arc", (20, 0, -1), (-1, 15.0, 0.0, "CANON_PLANE_XY")),
+    ("feed", (20, 10, -1)),
+    ("traverse", (20, 10, 5)),
+]
 DISPLACED = np.array([False, True, True, True, True, False])
 
 
 def _corrected(arc_points=8):
     """What an exact correction of INPUT by _field writes: cutting moves displaced, pieces of them
     (the arc as straight pieces), rapids as they were."""
+
     def d(x, y, z):
         return (x, y, z + 0.01 + 0.002 * x)
 
@@ -79,12 +84,18 @@ def test_comparison_accepts_an_exact_correction():
 def test_comparison_accepts_a_shifted_arc_and_a_move_left_as_written():
     """A shift keeps the arc an arc; a move whose position the engine does not know (here the
     plunge) is left as written, and the next move starts from its uncorrected end."""
+
     def shift(p):
         return np.broadcast_to([0.0, 0.0, 0.03], p.shape).copy()
 
-    out = [("traverse", (0, 0, 5)), ("feed", (0, 0, -1)), ("feed", (10, 0, -0.97)),
-           ("arc", (20, 0, -0.97), (-1, 15.0, 0.0, "CANON_PLANE_XY")), ("feed", (20, 10, -0.97)),
-           ("traverse", (20, 10, 5))]
+    out = [
+        ("traverse", (0, 0, 5)),
+        ("feed", (0, 0, -1)),
+        ("feed", (10, 0, -0.97)),
+        ("arc", (20, 0, -0.97), (-1, 15.0, 0.0, "CANON_PLANE_XY")),
+        ("feed", (20, 10, -0.97)),
+        ("traverse", (20, 10, 5)),
+    ]
     displaced = np.array([False, False, True, True, True, False])
     assert corpus.compare_motion(_canon(INPUT), _canon(out), displaced, shift, 0.005) == []
     # ... but not a move it should have corrected
@@ -106,8 +117,9 @@ WRONG = {
     # the last line left at its programmed depth
     "not_displaced": lambda: _off(_corrected(64), -2, -(0.01 + 0.04)),
     # the arc turned the other way (counter-clockwise, through y < 0)
-    "arc_reversed": lambda: _corrected()[:4] + [("arc", (20, 0, -1 + 0.05), (1, 15.0, 0.0, "CANON_PLANE_XY"))]
-    + _corrected()[-3:],
+    "arc_reversed": lambda: (
+        _corrected()[:4] + [("arc", (20, 0, -1 + 0.05), (1, 15.0, 0.0, "CANON_PLANE_XY"))] + _corrected()[-3:]
+    ),
     # a rapid that no longer ends where it did
     "rapid_moved": lambda: _off(_corrected(64), -1, 0.05),
     # a piece of the line missing and another added (the line goes 10 mm back and forth)
@@ -115,8 +127,9 @@ WRONG = {
     # pieces of the arc out of order
     "out_of_order": lambda: (lambda m: m[:10] + [m[11], m[10]] + m[12:])(_corrected(64)),
     # the corrected field is not the field: a constant 0.01 mm
-    "wrong_field": lambda: [(k, (x, y, z - 0.002 * x) if k != "traverse" else (x, y, z), *r)
-                            for k, (x, y, z), *r in _corrected(64)],
+    "wrong_field": lambda: [
+        (k, (x, y, z - 0.002 * x) if k != "traverse" else (x, y, z), *r) for k, (x, y, z), *r in _corrected(64)
+    ],
 }
 
 
@@ -129,6 +142,7 @@ def test_comparison_detects_a_wrong_correction(name):
 def test_comparison_bounds_the_piece_that_leaves_an_uncorrected_point():
     """After a rapid the first piece goes from an uncorrected point to the corrected path: beyond the
     correction's max_segment the path must be followed all the same."""
+
     def shift(p):
         return np.broadcast_to([0.0, 0.0, 0.05], p.shape).copy()
 

@@ -44,8 +44,9 @@ def test_a_cutting_move_after_a_return_to_reference_is_reported_not_guessed():
     assert out.text.splitlines()[:4] == ["G21 G90 G0 X1 Y2 Z3", "G91 G28 Z0", "G90 G1 X5 F100", "G0 Z5"]
     assert out.text.splitlines()[4:6] == ["G1 Z-0.98", "X10"]
     (w,) = out.correction.warnings
-    assert w.startswith("1 cutting move(s) not corrected because the position is unknown (first at line 3: "
-                        "the end of Z unknown")
+    assert w.startswith(
+        "1 cutting move(s) not corrected because the position is unknown (first at line 3: the end of Z unknown"
+    )
 
 
 def test_an_axis_unknown_at_its_start_is_named_as_such():
@@ -97,7 +98,9 @@ def test_write_refuses_the_input_and_is_atomic(tmp_path):
 def test_rapid_clearance_warning():
     f = fields.GridField([-5, 25], [-5, 5], np.zeros((2, 2)))
     out = nc.parse("G0 X0 Y0 Z5\nG0 Z0.5\nG1 Z-1 F10\nX10\nG0 Z5\n").correct(f, clearance=1.0)
-    assert out.correction.warnings == ("line 2: rapid ends at Z0.5000, below the clearance Z1 inside the field's area, and is not corrected",)
+    assert out.correction.warnings == (
+        "line 2: rapid ends at Z0.5000, below the clearance Z1 inside the field's area, and is not corrected",
+    )
 
 
 def test_grid_lines_split_moves():
@@ -115,7 +118,7 @@ def _bowl(p):
 def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, piece, from_file):
     """Reading and writing in pieces (of any size, from memory or from the file) gives the bytes
     and figures of the program corrected in one piece."""
-    src = (tmp_path / "p.ngc")
+    src = tmp_path / "p.ngc"
     src.write_text(PART.replace("G0 Z5\nM30", "G91 G1 X2 Y1\nG3 X-4 Y0 I-2 J0\nG90 G0 Z5\nM30"))
     prog = nc.read(src)
     monkeypatch.setattr(nc, "_PIECE_BYTES", 1 << 30)

@@ -43,15 +43,18 @@ def test_csv_deviation_sign_and_probe_radius(tmp_path):
     np.testing.assert_allclose(r.deviation, DEV - 0.5, atol=1e-12)
 
 
-@pytest.mark.parametrize("bad, line, what", [
-    (lambda r: r.__setitem__(2, r[2].replace("0.9", "nan", 1)), 4, "not a number"),
-    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0,0,0,1,0,1.1"), 3, "zero"),
-    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.9,1,0,1.1"), 3, "not a unit vector"),
-    (lambda r: r.__setitem__(3, r[3].replace("P3", "P0")), 5, "duplicate id"),
-    (lambda r: r.__setitem__(0, r[0] + ",7"), 2, "fields"),
-    (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.8,1,0,1.7e308"), 3, "beyond ±1e\\+06 mm"),
-    (lambda r: r.__setitem__(2, "P2,0,2e6,0.9,0,0,1,0,1,0.9"), 4, "nominal point 2e\\+06 mm"),
-])
+@pytest.mark.parametrize(
+    "bad, line, what",
+    [
+        (lambda r: r.__setitem__(2, r[2].replace("0.9", "nan", 1)), 4, "not a number"),
+        (lambda r: r.__setitem__(1, "P1,1,0,1.1,0,0,0,1,0,1.1"), 3, "zero"),
+        (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.9,1,0,1.1"), 3, "not a unit vector"),
+        (lambda r: r.__setitem__(3, r[3].replace("P3", "P0")), 5, "duplicate id"),
+        (lambda r: r.__setitem__(0, r[0] + ",7"), 2, "fields"),
+        (lambda r: r.__setitem__(1, "P1,1,0,1.1,0.6,0,0.8,1,0,1.7e308"), 3, "beyond ±1e\\+06 mm"),
+        (lambda r: r.__setitem__(2, "P2,0,2e6,0.9,0,0,1,0,1,0.9"), 4, "nominal point 2e\\+06 mm"),
+    ],
+)
 def test_csv_errors_name_the_line(tmp_path, bad, line, what):
     rows = _rows()
     bad(rows)
@@ -65,7 +68,9 @@ def test_dev_column_and_xyzijk(tmp_path):
     m = measure.read(_csv(tmp_path, rows, "x,y,z,i,j,k,dev"))
     np.testing.assert_allclose(m.deviation, DEV)
     p = tmp_path / "pts.txt"
-    p.write_text("PC-DMIS XYZIJK export\n" + "\n".join(" ".join(map(str, (*NOM[k], *NRM[k], *MEAS[k]))) for k in range(4)) + "\n")
+    p.write_text(
+        "PC-DMIS XYZIJK export\n" + "\n".join(" ".join(map(str, (*NOM[k], *NRM[k], *MEAS[k]))) for k in range(4)) + "\n"
+    )
     np.testing.assert_allclose(measure.read(p).deviation, DEV, atol=1e-12)
     p.write_text(p.read_text() + "1 2 3 0 0 1\n")
     with pytest.raises(InputError, match="7 .* or 9") as e:
@@ -97,16 +102,25 @@ def test_dmis_with_continuations(tmp_path):
 def test_qif_results(tmp_path):
     nominals = "".join(
         f'<PointFeatureNominal id="{10 + k}"><Location>{" ".join(map(str, NOM[k]))}</Location>'
-        f'<Normal>{" ".join(map(str, NRM[k]))}</Normal></PointFeatureNominal>' for k in range(4))
-    items = "".join(f'<PointFeatureItem id="{20 + k}"><FeatureNominalId>{10 + k}</FeatureNominalId></PointFeatureItem>'
-                    for k in range(4))
-    meas = "".join(f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{20 + k}</FeatureItemId>'
-                   f'<Location>{" ".join(map(str, MEAS[k]))}</Location></PointFeatureMeasurement>' for k in (3, 1, 0, 2))
+        f"<Normal>{' '.join(map(str, NRM[k]))}</Normal></PointFeatureNominal>"
+        for k in range(4)
+    )
+    items = "".join(
+        f'<PointFeatureItem id="{20 + k}"><FeatureNominalId>{10 + k}</FeatureNominalId></PointFeatureItem>'
+        for k in range(4)
+    )
+    meas = "".join(
+        f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{20 + k}</FeatureItemId>'
+        f"<Location>{' '.join(map(str, MEAS[k]))}</Location></PointFeatureMeasurement>"
+        for k in (3, 1, 0, 2)
+    )
     p = tmp_path / "r.qif"
-    p.write_text(f'<?xml version="1.0"?>\n<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">\n'
-                 f"<Features><FeatureNominals>{nominals}</FeatureNominals><FeatureItems>{items}</FeatureItems>\n"
-                 f"</Features><MeasurementsResults><FeatureMeasurements>{meas}</FeatureMeasurements>"
-                 f"</MeasurementsResults></QIFDocument>\n")
+    p.write_text(
+        f'<?xml version="1.0"?>\n<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">\n'
+        f"<Features><FeatureNominals>{nominals}</FeatureNominals><FeatureItems>{items}</FeatureItems>\n"
+        f"</Features><MeasurementsResults><FeatureMeasurements>{meas}</FeatureMeasurements>"
+        f"</MeasurementsResults></QIFDocument>\n"
+    )
     m = measure.read(p)
     np.testing.assert_allclose(m.deviation, DEV, atol=1e-12)
     assert m.ids == ("10", "11", "12", "13")
@@ -235,7 +249,9 @@ def test_a_wall_seen_from_x_gives_the_same_compensation(bench):
     """The testbed's measurement turned so the part faces +x: (u, v) = (y, z) are the old (x, y),
     so every number is the same and the surfaces are the same, turned."""
     part, *_, p, n = bench
-    m = measure.from_arrays(p, n, deviation=0.02 * np.sin(p[:, 0] / 9) + np.random.default_rng(4).normal(0, 0.005, len(p)))
+    m = measure.from_arrays(
+        p, n, deviation=0.02 * np.sin(p[:, 0] / 9) + np.random.default_rng(4).normal(0, 0.005, len(p))
+    )
     perm = np.eye(3)[[2, 0, 1]]  # (x, y, z) -> (z, x, y)
     w = _rotated(m, perm)
     f = pf.frame_of(w)
@@ -260,19 +276,34 @@ def test_a_wall_is_compensated_end_to_end(tmp_path):
     rng = np.random.default_rng(3)
     yz = np.array([(y, z) for y in np.arange(0, 81, 2.5) for z in np.arange(-40, 0.1, 2.5)])
     df = 0.02 * np.sin(yz[:, 0] / 9)
-    rows = ["x,y,z,i,j,k,dev"] + [f"0,{y},{z},1,0,0,{d:.6f}" for (y, z), d in zip(yz, df + rng.normal(0, 0.002, len(yz)))]
+    rows = ["x,y,z,i,j,k,dev"] + [
+        f"0,{y},{z},1,0,0,{d:.6f}" for (y, z), d in zip(yz, df + rng.normal(0, 0.002, len(yz)))
+    ]
     (tmp_path / "wall.csv").write_text("\n".join(rows) + "\n")
     lines = ["G21 G90 G17", "G0 X20 Y0 Z0", "G0 X4 Y0 Z-10"]
     for i, z in enumerate(np.arange(-10, -35, -5.0)):
         lines += [f"G1 Z{z:g} F500", f"G1 Y{80 if i % 2 == 0 else 0} F500"]
     lines += ["G0 X20", "M2"]
     (tmp_path / "wall.ngc").write_text("\n".join(lines) + "\n")
-    r = CliRunner().invoke(main, ["compensate", str(tmp_path / "wall.csv"), "--program", str(tmp_path / "wall.ngc"),
-                                  "-o", str(tmp_path / "c.ngc"), "--tool-radius", "4"])
+    r = CliRunner().invoke(
+        main,
+        [
+            "compensate",
+            str(tmp_path / "wall.csv"),
+            "--program",
+            str(tmp_path / "wall.ngc"),
+            "-o",
+            str(tmp_path / "c.ngc"),
+            "--tool-radius",
+            "4",
+        ],
+    )
     assert r.exit_code == 0, r.output
     # every cutting point moved along x only, by −dF at its contact point (y, z + 4 - 4) = (y, z)
-    moves = [(float(m.group(1)), float(m.group(2))) for m in
-             re.finditer(r"X(-?[\d.]+) Y(-?[\d.]+)", (tmp_path / "c.ngc").read_text())]
+    moves = [
+        (float(m.group(1)), float(m.group(2)))
+        for m in re.finditer(r"X(-?[\d.]+) Y(-?[\d.]+)", (tmp_path / "c.ngc").read_text())
+    ]
     got = np.array([(x - 4, y) for x, y in moves if 3.9 < x < 4.1])
     assert len(got) > 100
     np.testing.assert_allclose(got[:, 0], -0.02 * np.sin(got[:, 1] / 9), atol=0.004)
@@ -282,7 +313,9 @@ def test_a_tilted_part_is_analysed_in_its_own_plane(bench):
     """Turned 40° about y, the part is seen along its mean normal: the same Moran's I and the same
     systematic part as the upright part seen along its own mean normal (an isometry of (u, v))."""
     part, *_, p, n = bench
-    m = measure.from_arrays(p, n, deviation=0.02 * np.cos(p[:, 1] / 7) + np.random.default_rng(5).normal(0, 0.005, len(p)))
+    m = measure.from_arrays(
+        p, n, deviation=0.02 * np.cos(p[:, 1] / 7) + np.random.default_rng(5).normal(0, 0.005, len(p))
+    )
     c, s = np.cos(0.7), np.sin(0.7)
     rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
     t = _rotated(m, rot)
@@ -316,13 +349,39 @@ def test_analyze_and_compensate_cli(tmp_path, bench):
     assert r.exit_code == 0, r.output
     a = json.loads((tmp_path / "a.json").read_text())
     assert a["n_points"] == len(p) and a["moran"]["systematic"] is True
-    assert set(a["moran"]) >= {"I", "expected", "variance_normality", "variance_randomization", "z_normality",
-                               "z_randomization", "p_value", "systematic", "weights"}
-    assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None,
-                                     "chosen": False}
-    args = ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "c.ngc"),
-            "--tool-radius", "4", "--extent", "0,80,0,60", "--extrapolate-nominal", "--surface", str(tmp_path / "c.step"),
-            "--points-out", str(tmp_path / "pts.csv"), "--json", str(tmp_path / "c.json"), "--weights", "knn"]
+    assert set(a["moran"]) >= {
+        "I",
+        "expected",
+        "variance_normality",
+        "variance_randomization",
+        "z_normality",
+        "z_randomization",
+        "p_value",
+        "systematic",
+        "weights",
+    }
+    assert a["moran"]["weights"] == {"kind": "idw", "power": 1.0, "threshold": None, "neighbors": None, "chosen": False}
+    args = [
+        "compensate",
+        str(tmp_path / "m.csv"),
+        "--program",
+        str(tmp_path / "p.ngc"),
+        "-o",
+        str(tmp_path / "c.ngc"),
+        "--tool-radius",
+        "4",
+        "--extent",
+        "0,80,0,60",
+        "--extrapolate-nominal",
+        "--surface",
+        str(tmp_path / "c.step"),
+        "--points-out",
+        str(tmp_path / "pts.csv"),
+        "--json",
+        str(tmp_path / "c.json"),
+        "--weights",
+        "knn",
+    ]
     # the program plunges at X0 Y0, a tool radius beyond the tips of the compensated surface: by
     # default refused, nothing written
     r = CliRunner().invoke(main, args)
@@ -375,9 +434,21 @@ def test_demo_report_renders_in_chromium(demo_out, tmp_path):
         pytest.skip("chromium not installed (make test installs it)")
     out, _ = demo_out
     shot = tmp_path / "report.png"
-    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                    "--window-size=1200,2400", f"--screenshot={shot}", (out / "report.html").as_uri()],
-                   check=True, capture_output=True, timeout=120)
+    subprocess.run(
+        [
+            browser,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            "--window-size=1200,2400",
+            f"--screenshot={shot}",
+            (out / "report.html").as_uri(),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
     from matplotlib.image import imread
 
     img = imread(shot)
@@ -410,8 +481,11 @@ def test_the_surface_grid_and_its_extent_are_checked():
         pf.fit_height_surface(pts, extent=(1000, 1100, 1000, 1100))
     # a single scan line, along an axis or diagonal, or two lines closer than half the spacing
     k = np.arange(40.0)
-    for line in (np.column_stack([k, 0 * k, 0 * k]), np.column_stack([k, k, 0 * k]),
-                 np.column_stack([k, 0.3 * (k % 2), 0 * k])):
+    for line in (
+        np.column_stack([k, 0 * k, 0 * k]),
+        np.column_stack([k, k, 0 * k]),
+        np.column_stack([k, 0.3 * (k % 2), 0 * k]),
+    ):
         with pytest.raises(InputError, match="40 measured points lie along one line"):
             pf.fit_height_surface(line)
     # two scan lines 5 mm apart, points 1 mm apart along them: an area
@@ -422,8 +496,10 @@ def test_the_surface_grid_and_its_extent_are_checked():
 def test_extreme_moran_and_filter_options_give_finite_results_or_located_errors(tmp_path):
     from ncadapt import stats
 
-    rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,{0.01 + 0.0004 * x - 0.0003 * y + 0.002 * np.sin(1.7 * k):.5f}"
-                                  for k, (x, y) in enumerate((x, y) for y in range(0, 41, 10) for x in range(0, 81, 10))]
+    rows = ["x,y,z,i,j,k,dev"] + [
+        f"{x},{y},0,0,0,1,{0.01 + 0.0004 * x - 0.0003 * y + 0.002 * np.sin(1.7 * k):.5f}"
+        for k, (x, y) in enumerate((x, y) for y in range(0, 41, 10) for x in range(0, 81, 10))
+    ]
     m = tmp_path / "m.csv"
     m.write_text("\n".join(rows) + "\n")
     meas = measure.read(m)
@@ -456,9 +532,11 @@ def test_qif_xml_errors_are_located_and_entities_not_expanded(tmp_path):
     secret = tmp_path / "secret.txt"
     secret.write_text("1 2 3")
     xxe = tmp_path / "xxe.qif"
-    xxe.write_text(f'<?xml version="1.0"?>\n<!DOCTYPE q [<!ENTITY e SYSTEM "file://{secret}">]>\n<QIFDocument><Features>'
-                   '<FeatureNominals><PointFeatureNominal id="1"><Location>&e;</Location><Normal>0 0 1</Normal>'
-                   '</PointFeatureNominal></FeatureNominals></Features></QIFDocument>\n')
+    xxe.write_text(
+        f'<?xml version="1.0"?>\n<!DOCTYPE q [<!ENTITY e SYSTEM "file://{secret}">]>\n<QIFDocument><Features>'
+        '<FeatureNominals><PointFeatureNominal id="1"><Location>&e;</Location><Normal>0 0 1</Normal>'
+        "</PointFeatureNominal></FeatureNominals></Features></QIFDocument>\n"
+    )
     with pytest.raises(InputError, match="Location needs 3 numbers, got 0"):
         measure.read(xxe)
 
@@ -490,8 +568,10 @@ def test_the_gate_sees_a_uniform_offset():
 
 def test_the_gate_sees_the_demo_error(bench):
     part, prog, err, first, clean, p, n = bench
-    hits = sum(pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=0.005, seed=s))).systematic
-               for s in SEEDS)
+    hits = sum(
+        pf.analyze(measure.from_arrays(p, n, measured=ff.measure(first, p, n, noise=0.005, seed=s))).systematic
+        for s in SEEDS
+    )
     assert hits >= 190
 
 
@@ -507,8 +587,10 @@ def test_a_checkerboard_is_not_a_systematic_pattern():
 @pytest.mark.parametrize("method", ["bilateral", "spline"])
 def test_the_residual_check_passes_an_ideal_separation(method):
     # a flat systematic error plus white noise: the random part is the noise, smoothed a little
-    passed = sum(pf.decompose(_on_grid(0.02 + np.random.default_rng(s).normal(0, 0.005, len(GRID))), method).noise.passed
-                 for s in SEEDS)
+    passed = sum(
+        pf.decompose(_on_grid(0.02 + np.random.default_rng(s).normal(0, 0.005, len(GRID))), method).noise.passed
+        for s in SEEDS
+    )
     assert passed >= 180  # ≥ 90 %
 
 
@@ -531,7 +613,9 @@ def test_auto_chooses_the_smoothest_passing_setting_or_says_none_passed(tmp_path
     assert d.auto == {"passed": False, "setting": {"p": pytest.approx(1 / (1 + 5.0**3 / 9))}} and not d.noise.passed
     m = tmp_path / "stripes.csv"
     m.write_text("x,y,z,i,j,k,dev\n" + "".join(f"{x},{y},0,0,0,1,{e:.6f}\n" for (x, y, _), e in zip(GRID, stripes)))
-    r = CliRunner().invoke(main, ["compensate", str(m), "--filter", "spline", "--auto", "--json", str(tmp_path / "c.json")])
+    r = CliRunner().invoke(
+        main, ["compensate", str(m), "--filter", "spline", "--auto", "--json", str(tmp_path / "c.json")]
+    )
     assert r.exit_code == 0, r.output
     assert "warning: --auto found no spline setting" in r.stdout
     j = json.loads((tmp_path / "c.json").read_text())
@@ -545,8 +629,10 @@ def test_units_of_dmis_qif_and_unitless_files(tmp_path):
     nom_in, meas_in = NOM / 25.4, MEAS / 25.4
     dmis = ["DMISMN/'inch part',05.0", "UNITS/INCH,ANGDEC"]
     for k in range(4):
-        dmis += [f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*nom_in[k], *NRM[k])))}",
-                 f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*meas_in[k], *NRM[k])))}"]
+        dmis += [
+            f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*nom_in[k], *NRM[k])))}",
+            f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*meas_in[k], *NRM[k])))}",
+        ]
     (tmp_path / "in.dmo").write_text("\n".join(dmis + ["ENDFIL"]) + "\n")
     m = measure.read(tmp_path / "in.dmo")
     np.testing.assert_allclose(m.nominal, NOM, atol=1e-12)
@@ -555,27 +641,44 @@ def test_units_of_dmis_qif_and_unitless_files(tmp_path):
         measure.read(tmp_path / "in.dmo", units="mm")
     assert e.value.line == 2
     # a change of units mid-file applies to what follows it; polar points are refused
-    (tmp_path / "mixed.dmo").write_text("\n".join(dmis[:4] + ["UNITS/MM,ANGDEC"] + [
-        f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*NOM[k], *NRM[k])))}\n"
-        f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*MEAS[k], *NRM[k])))}" for k in (1, 2, 3)]) + "\n")
+    (tmp_path / "mixed.dmo").write_text(
+        "\n".join(
+            dmis[:4]
+            + ["UNITS/MM,ANGDEC"]
+            + [
+                f"F(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*NOM[k], *NRM[k])))}\n"
+                f"FA(P{k})=FEAT/POINT,CART,{','.join(map(_r, (*MEAS[k], *NRM[k])))}"
+                for k in (1, 2, 3)
+            ]
+        )
+        + "\n"
+    )
     np.testing.assert_allclose(measure.read(tmp_path / "mixed.dmo").deviation, DEV, atol=1e-12)
     (tmp_path / "pol.dmo").write_text("DMISMN/'p',05.0\nF(P1)=FEAT/POINT,POL,10,45,0,0,0,1\n")
     with pytest.raises(InputError, match="only Cartesian"):
         measure.read(tmp_path / "pol.dmo")
     # QIF with FileUnits in inches
-    nominals = "".join(f'<PointFeatureNominal id="{10 + k}"><Location>{" ".join(map(_r, nom_in[k]))}</Location>'
-                       f'<Normal>{" ".join(map(str, NRM[k]))}</Normal></PointFeatureNominal>' for k in range(4))
-    meas = "".join(f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{10 + k}</FeatureItemId>'
-                   f'<Location>{" ".join(map(_r, meas_in[k]))}</Location></PointFeatureMeasurement>' for k in range(4))
+    nominals = "".join(
+        f'<PointFeatureNominal id="{10 + k}"><Location>{" ".join(map(_r, nom_in[k]))}</Location>'
+        f"<Normal>{' '.join(map(str, NRM[k]))}</Normal></PointFeatureNominal>"
+        for k in range(4)
+    )
+    meas = "".join(
+        f'<PointFeatureMeasurement id="{30 + k}"><FeatureItemId>{10 + k}</FeatureItemId>'
+        f"<Location>{' '.join(map(_r, meas_in[k]))}</Location></PointFeatureMeasurement>"
+        for k in range(4)
+    )
     (tmp_path / "in.qif").write_text(
         '<?xml version="1.0"?>\n<QIFDocument xmlns="http://qifstandards.org/xsd/qif3">\n<FileUnits><PrimaryUnits>'
         "<LinearUnit><SIUnitName>metre</SIUnitName><UnitName>in</UnitName></LinearUnit></PrimaryUnits></FileUnits>\n"
         f"<Features><FeatureNominals>{nominals}</FeatureNominals></Features>\n<MeasurementsResults>"
-        f"<FeatureMeasurements>{meas}</FeatureMeasurements></MeasurementsResults></QIFDocument>\n")
+        f"<FeatureMeasurements>{meas}</FeatureMeasurements></MeasurementsResults></QIFDocument>\n"
+    )
     np.testing.assert_allclose(measure.read(tmp_path / "in.qif").deviation, DEV, atol=1e-12)
     # unitless files: --units inch
-    (tmp_path / "in.txt").write_text("".join(" ".join(map(_r, (*nom_in[k], *NRM[k], *meas_in[k]))) + "\n"
-                                             for k in range(4)))
+    (tmp_path / "in.txt").write_text(
+        "".join(" ".join(map(_r, (*nom_in[k], *NRM[k], *meas_in[k]))) + "\n" for k in range(4))
+    )
     np.testing.assert_allclose(measure.read(tmp_path / "in.txt", units="inch").deviation, DEV, atol=1e-12)
     r = CliRunner().invoke(main, ["analyze", str(tmp_path / "in.dmo"), "--units", "mm"])
     assert r.exit_code == 2 and "in.dmo:2:1: error: UNITS/INCH disagrees" in r.output
@@ -589,8 +692,10 @@ def test_a_program_needs_the_tool_radius(tmp_path):
     rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,0.01" for x in range(0, 50, 5) for y in range(0, 50, 5)]
     (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
     (tmp_path / "p.ngc").write_text("G0 X0 Y0 Z1\nG1 Z0 F100\nG1 X40\nM2\n")
-    r = CliRunner().invoke(main, ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"),
-                                  "-o", str(tmp_path / "o.ngc")])
+    r = CliRunner().invoke(
+        main,
+        ["compensate", str(tmp_path / "m.csv"), "--program", str(tmp_path / "p.ngc"), "-o", str(tmp_path / "o.ngc")],
+    )
     assert r.exit_code == 2 and "--program needs --tool-radius" in r.output and not (tmp_path / "o.ngc").exists()
 
 
@@ -603,15 +708,26 @@ def test_a_surface_beyond_the_measured_points_is_refused_unless_accepted(tmp_pat
     assert pf.nominal_extrapolation(pf.fit_height_surface(pts), pts).max_distance == 0.0
     rows = ["x,y,z,i,j,k,dev"] + [f"{x},{y},0,0,0,1,{0.01 + 0.0002 * x:.5f}" for x, y, _ in pts]
     (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
-    args = ["compensate", str(tmp_path / "m.csv"), "--extent", "0,80,0,60", "--json", str(tmp_path / "c.json"),
-            "--report", str(tmp_path / "r.html")]
+    args = [
+        "compensate",
+        str(tmp_path / "m.csv"),
+        "--extent",
+        "0,80,0,60",
+        "--json",
+        str(tmp_path / "c.json"),
+        "--report",
+        str(tmp_path / "r.html"),
+    ]
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 2 and "would reach 7.07 mm beyond the measured points (25% of its grid" in r.output
     assert not (tmp_path / "c.json").exists()
     r = CliRunner().invoke(main, args + ["--extrapolate-nominal"])
     assert r.exit_code == 0, r.output
     j = json.loads((tmp_path / "c.json").read_text())
-    assert j["extrapolation"] == {"max_distance": pytest.approx(np.hypot(5, 5)), "area_fraction": pytest.approx(56 / 221)}
+    assert j["extrapolation"] == {
+        "max_distance": pytest.approx(np.hypot(5, 5)),
+        "area_fraction": pytest.approx(56 / 221),
+    }
     assert "Extrapolated nominal" in (tmp_path / "r.html").read_text()
     # a scatter: the corners of its bounding box are beyond its hull
     rng = np.random.default_rng(0)
@@ -633,8 +749,10 @@ def test_the_border_holds_the_nearest_measured_value():
 
 def test_the_plain_csv_path_reads_what_the_row_by_row_reader_reads(tmp_path):
     # a plain file is parsed at once; the same rows with a quoted id go row by row: equal results
-    rows = [f"P{k},{x},{y},{0.1 * x},0,0,1,{0.001 * (x - y):.4f}" for k, (x, y) in
-            enumerate((x, y) for x in range(12) for y in range(9))]
+    rows = [
+        f"P{k},{x},{y},{0.1 * x},0,0,1,{0.001 * (x - y):.4f}"
+        for k, (x, y) in enumerate((x, y) for x in range(12) for y in range(9))
+    ]
     plain, quoted = tmp_path / "plain.csv", tmp_path / "quoted.csv"
     plain.write_text("id,x,y,z,i,j,k,dev\r\n" + "\r\n".join(rows) + "\r\n")
     quoted.write_text("id,x,y,z,i,j,k,dev\n" + "\n".join(['"' + r.replace(",", '",', 1) for r in rows]) + "\n")
@@ -644,7 +762,9 @@ def test_the_plain_csv_path_reads_what_the_row_by_row_reader_reads(tmp_path):
     assert a.ids == b.ids == tuple(f"P{k}" for k in range(108))
     # an error in a plain file is still located at its line and column
     bad = tmp_path / "bad.csv"
-    bad.write_text("id,x,y,z,i,j,k,dev\n" + "\n".join(rows[:5] + [rows[5].replace(",0,0,1,", ",0,0,x,")] + rows[6:]) + "\n")
+    bad.write_text(
+        "id,x,y,z,i,j,k,dev\n" + "\n".join(rows[:5] + [rows[5].replace(",0,0,1,", ",0,0,x,")] + rows[6:]) + "\n"
+    )
     with pytest.raises(InputError, match="k: expected a number") as e:
         measure.read(bad)
     assert e.value.line == 7

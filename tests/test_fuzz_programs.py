@@ -43,8 +43,8 @@ from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 
 from conftest import needs_rs274
-from ncadapt import fields, nc
 from helpers import endpoints_agree
+from ncadapt import fields, nc
 from rs274 import Canon, canonical
 
 EXAMPLES = int(os.environ.get("NCADAPT_FUZZ_EXAMPLES", "25"))
@@ -238,7 +238,7 @@ class _Writer:
         r_ticks = d(st.integers(rlo, rhi))
         phi0 = math.radians(d(st.integers(0, 3599)) / 10)
         start = (self.pos[a1], self.pos[a2])
-        centre_words, turns, full = [], 1, False
+        centre_words, full = [], False
         if form == "ijk":
             ci = -round(r_ticks * math.cos(phi0))
             cj = -round(r_ticks * math.sin(phi0))
@@ -251,7 +251,6 @@ class _Writer:
             full = self.maybe(6)
             sweep = 0.0 if full else math.radians(d(st.integers(30, 3570)) / 10)
             if self.maybe(8):
-                turns = 2
                 centre_words.append("P2")
         else:
             rs = self.fmt(r_ticks * self.tick, self.grid_decimals)
@@ -265,7 +264,10 @@ class _Writer:
         words = []
         if full:
             if self.inc and d(st.booleans()):  # zero increments name the plane's axes
-                words += [self.axis_word(a1, 0, self.grid_decimals, True), self.axis_word(a2, 0, self.grid_decimals, True)]
+                words += [
+                    self.axis_word(a1, 0, self.grid_decimals, True),
+                    self.axis_word(a2, 0, self.grid_decimals, True),
+                ]
         else:
             for k, v in ((a1, end[0]), (a2, end[1])):
                 value = (v - self.pos[k]) / self.unit if self.inc else v / self.unit
@@ -307,8 +309,13 @@ class _Writer:
             what = d(st.sampled_from(["straight", "straight", "arc", "arc", "stray"]))
             getattr(self, what)()
         end = d(st.sampled_from(["M2", "M30", "same"]))
-        if end == "same" and self.lines and self.lines[-1].strip() and not self.lines[-1].lstrip().startswith(("(", ";")) \
-                and ";" not in self.lines[-1]:
+        if (
+            end == "same"
+            and self.lines
+            and self.lines[-1].strip()
+            and not self.lines[-1].lstrip().startswith(("(", ";"))
+            and ";" not in self.lines[-1]
+        ):
             self.lines[-1] += self.sep + "M2"
         else:
             self.lines.append(end if end != "same" else "M2")
@@ -327,13 +334,17 @@ def smooth_a(p):
 
 def smooth_b(p):
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    return np.column_stack([0.003 * np.cos(y / 3), -0.002 * np.sin(x / 4) + 0.001 * np.cos(z / 2),
-                            0.02 * np.sin(x / 7) * np.cos(y / 5) + 0.0004 * x])
+    return np.column_stack(
+        [
+            0.003 * np.cos(y / 3),
+            -0.002 * np.sin(x / 4) + 0.001 * np.cos(z / 2),
+            0.02 * np.sin(x / 7) * np.cos(y / 5) + 0.0004 * x,
+        ]
+    )
 
 
 SMOOTH = {"smooth_a": smooth_a, "smooth_b": smooth_b}
-shifts = st.one_of(st.just((0.0, 0.0, 0.05)),
-                   st.tuples(*[st.integers(-50, 50).map(lambda v: v / 1000)] * 3))
+shifts = st.one_of(st.just((0.0, 0.0, 0.05)), st.tuples(*[st.integers(-50, 50).map(lambda v: v / 1000)] * 3))
 
 # ============================================================================= rs274's motion as geometry
 _CANON_PLANES = {"CANON_PLANE_XY": (0, 1, 2), "CANON_PLANE_XZ": (2, 0, 1), "CANON_PLANE_YZ": (1, 2, 0)}
@@ -439,7 +450,11 @@ def match_moves(predicted: np.ndarray, mv: list[Move], tol: float, tol_arc: floa
     in order and every move ends on one of them (an arc: at its last turn)."""
     j, n = 0, len(predicted)
     for i, m in enumerate(mv):
-        if np.abs(m.end[:3] - m.start[:3]).max() <= tol and m.arc is None and (j == n or np.abs(predicted[j] - m.end[:3]).max() > tol):
+        if (
+            np.abs(m.end[:3] - m.start[:3]).max() <= tol
+            and m.arc is None
+            and (j == n or np.abs(predicted[j] - m.end[:3]).max() > tol)
+        ):
             continue  # a move that goes nowhere need not be predicted (its start was checked)
         last, t = None, 0.0
         while j < n:
@@ -457,7 +472,8 @@ def match_moves(predicted: np.ndarray, mv: list[Move], tol: float, tol_arc: floa
         assert last is not None and np.abs(predicted[last] - m.end[:3]).max() <= tol, (
             f"{names(i)}: rs274's {m.kind} {m.start[:3].round(5)} -> {m.end[:3].round(5)} does not end on the "
             f"predicted path (next predicted {predicted[min(j, n - 1)].round(5)}, "
-            f"{m.dist(predicted[min(j, n - 1)]):.6f} mm off the move)")
+            f"{m.dist(predicted[min(j, n - 1)]):.6f} mm off the move)"
+        )
     assert j == n, f"{n - j} predicted point(s) not reached by rs274's motion, first {predicted[j].round(5)}"
 
 
@@ -466,7 +482,7 @@ def _locate(P: np.ndarray, e: np.ndarray, s0: int, u0: float, tol: float):
     """First place at or after (segment s0, fraction u0) of polyline P within tol of e."""
     if len(P) == 1:
         return (0, 0.0) if np.linalg.norm(P[0] - e) <= tol else None
-    A, B = P[s0:-1], P[s0 + 1:]
+    A, B = P[s0:-1], P[s0 + 1 :]
     AB = B - A
     L2 = np.einsum("ij,ij->i", AB, AB)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -502,8 +518,9 @@ def _kept_rapid_ends(inp: Move, m: Move, tol: float, res: float) -> bool:
     return bool(np.all(at_target | stays))
 
 
-def align(inp: list[Move], paths: list[np.ndarray], kept: list[bool], out: list[Move], tol: float, res: float,
-          rotary: bool):
+def align(
+    inp: list[Move], paths: list[np.ndarray], kept: list[bool], out: list[Move], tol: float, res: float, rotary: bool
+):
     """Assign rs274's moves of the corrected program to the input's moves, in order: each output
     move end on its input move's displaced path at or after the previous one, the last output move
     of each input move at its displaced end (an uncorrected rapid: see ``_kept_rapid_ends``).
@@ -517,7 +534,11 @@ def align(inp: list[Move], paths: list[np.ndarray], kept: list[bool], out: list[
         new = {}
         for (k, closed), (place, trail) in states.items():
             kk, (s0, u0) = (k + 1, (0, 0.0)) if closed else (k, place)
-            if kk >= N or (m.kind == "traverse") != (inp[kk].kind == "traverse") or (m.kind == "arc" and inp[kk].kind != "arc"):
+            if (
+                kk >= N
+                or (m.kind == "traverse") != (inp[kk].kind == "traverse")
+                or (m.kind == "arc" and inp[kk].kind != "arc")
+            ):
                 continue
             rot_ok = not rotary or np.abs(m.end[3:6] - rot_end[kk]).max() <= TOL_ROTARY
             if kept[kk]:  # one move, not split
@@ -529,8 +550,11 @@ def align(inp: list[Move], paths: list[np.ndarray], kept: list[bool], out: list[
             if loc is None:
                 continue
             r0, r1 = inp[kk].start[3:6], inp[kk].end[3:6]
-            inside = not rotary or bool(np.all((m.end[3:6] >= np.minimum(r0, r1) - TOL_ROTARY)
-                                               & (m.end[3:6] <= np.maximum(r0, r1) + TOL_ROTARY)))
+            inside = not rotary or bool(
+                np.all(
+                    (m.end[3:6] >= np.minimum(r0, r1) - TOL_ROTARY) & (m.end[3:6] <= np.maximum(r0, r1) + TOL_ROTARY)
+                )
+            )
             ends = np.linalg.norm(P[-1] - e) <= tol and rot_ok
             if inside and ((kk, False) not in new or loc < new[(kk, False)][0]):
                 new[(kk, False)] = (loc, (o, kk, False, trail))
@@ -572,23 +596,30 @@ def check_follows_input(inp_canon: Canon, out_canon: Canon, field, rapids: bool,
             if closes and np.abs(ro - ri1).max() > TOL_ROTARY:
                 raise AssertionError(
                     f"output line {out_lines(o)} ends input line {in_lines(k)} with A B C {ro.tolist()}, "
-                    f"rs274 runs the input to {ri1.tolist()} there")
-            if not closes and not np.all((ro >= np.minimum(ri0, ri1) - TOL_ROTARY) & (ro <= np.maximum(ri0, ri1) + TOL_ROTARY)):
+                    f"rs274 runs the input to {ri1.tolist()} there"
+                )
+            if not closes and not np.all(
+                (ro >= np.minimum(ri0, ri1) - TOL_ROTARY) & (ro <= np.maximum(ri0, ri1) + TOL_ROTARY)
+            ):
                 raise AssertionError(
                     f"output line {out_lines(o)} (a piece of input line {in_lines(k)}) has A B C {ro.tolist()}, "
-                    f"outside the input's {ri0.tolist()} -> {ri1.tolist()}")
+                    f"outside the input's {ri0.tolist()} -> {ri1.tolist()}"
+                )
         raise AssertionError("rotary positions differ (alignment ambiguous)")
     o, states = geo_fail
     if o == len(out):
-        raise AssertionError(f"rs274's run of the corrected program stops before the end of input line "
-                             f"{in_lines(len(inp) - 1)}; states {sorted(states)}")
+        raise AssertionError(
+            f"rs274's run of the corrected program stops before the end of input line "
+            f"{in_lines(len(inp) - 1)}; states {sorted(states)}"
+        )
     e = out[o].end[:3]
     near = []
     for kk in sorted({kk for k, _ in states for kk in (k, k + 1) if 0 <= kk < len(inp)}):
         near.append(f"input line {in_lines(kk)} ({inp[kk].kind}) {_distance(paths[kk], e) * 1000:.2f} µm")
     raise AssertionError(
         f"output line {out_lines(o)}: rs274's {out[o].kind} ends at {e.round(5).tolist()}, not on the displaced "
-        f"input path where expected (tol {tol * 1000:g} µm): " + "; ".join(near))
+        f"input path where expected (tol {tol * 1000:g} µm): " + "; ".join(near)
+    )
 
 
 # ============================================================================= the checks
@@ -617,8 +648,15 @@ def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) ->
     back = nc.read(outp)
     endpoints_agree(back.blocks, out_canon, "corrected")
     # property 3 (first: a wrong path is named as such, a wrong prediction by property 2)
-    check_follows_input(in_canon, out_canon, field, rapids, TOL_PATH_INCH if has_inch else TOL_PATH_MM,
-                        lambda k: prog.blocks.line[k], lambda o: back.blocks.line[o])
+    check_follows_input(
+        in_canon,
+        out_canon,
+        field,
+        rapids,
+        TOL_PATH_INCH if has_inch else TOL_PATH_MM,
+        lambda k: prog.blocks.line[k],
+        lambda o: back.blocks.line[o],
+    )
     c = out.correction
     predicted = c.points + c.displacements
     out_moves = moves(out_canon)
@@ -633,8 +671,9 @@ def check_corrected(src: str, field, rapids: bool, has_inch: bool, tmp: Path) ->
     ours = 0.5e-5 * 25.4 if prog.units in ("inch", "mixed") else 0.5e-4
     tol = res + ours + 1e-6
     # an arc's centre is printed rounded too
-    match_moves(predicted, [out_moves[i] for i in sel], tol, tol + 2 * res,
-                lambda i: f"output line {back.blocks.line[sel[i]]}")
+    match_moves(
+        predicted, [out_moves[i] for i in sel], tol, tol + 2 * res, lambda i: f"output line {back.blocks.line[sel[i]]}"
+    )
 
 
 # ============================================================================= tests

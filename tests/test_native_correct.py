@@ -40,8 +40,12 @@ def _grids():
     irregular = rng.normal(0, 0.01, (len(irregular_y), len(irregular_x)))
     # a uniform grid whose spacing is not a binary fraction (steps equal to 1e-12, not exactly)
     thirds = np.linspace(0, 10, 31)
-    return [(xs, ys, uniform), (irregular_x, irregular_y, irregular),
-            (thirds, thirds, rng.normal(0, 0.01, (31, 31))), (np.array([0, 10.0]), np.array([0, 10.0]), irregular[:2, :2])]
+    return [
+        (xs, ys, uniform),
+        (irregular_x, irregular_y, irregular),
+        (thirds, thirds, rng.normal(0, 0.01, (31, 31))),
+        (np.array([0, 10.0]), np.array([0, 10.0]), irregular[:2, :2]),
+    ]
 
 
 def _points(xs, ys):
@@ -54,8 +58,16 @@ def _points(xs, ys):
     for d in (0.0, 5e-10, -5e-10, 2e-9, -2e-9, 0.5, -0.5, 1e3, -1e3):
         e = np.array([x0 - d, x1 + d, x0 + d, x1 - d])
         pts.append(np.column_stack([np.repeat(e, 4), np.tile([y0 - d, y1 + d, y0, y1], 4), np.zeros(16)]))
-    pts.append(np.array([[np.nextafter(x1, np.inf), y0, 0.0], [np.nextafter(x0, -np.inf), y1, 0.0],
-                         [-0.0, -0.0, 0.0], [x0, np.nextafter(y1, -np.inf), 0.0]]))
+    pts.append(
+        np.array(
+            [
+                [np.nextafter(x1, np.inf), y0, 0.0],
+                [np.nextafter(x0, -np.inf), y1, 0.0],
+                [-0.0, -0.0, 0.0],
+                [x0, np.nextafter(y1, -np.inf), 0.0],
+            ]
+        )
+    )
     return np.concatenate(pts)
 
 
@@ -71,8 +83,12 @@ def test_grid_displacements_are_numpys_to_the_bit(outside, k):
     xs, ys, dz = _grids()[k]
     field = fields.GridField(xs, ys, dz, outside=outside)
     pts = _points(xs, ys)
-    inside = ~((pts[:, 0] < xs[0] - 1e-9) | (pts[:, 0] > xs[-1] + 1e-9)
-               | (pts[:, 1] < ys[0] - 1e-9) | (pts[:, 1] > ys[-1] + 1e-9))
+    inside = ~(
+        (pts[:, 0] < xs[0] - 1e-9)
+        | (pts[:, 0] > xs[-1] + 1e-9)
+        | (pts[:, 1] < ys[0] - 1e-9)
+        | (pts[:, 1] > ys[-1] + 1e-9)
+    )
     sets = [pts, pts[inside]] if outside == "error" else [pts]
     for p in sets:
         got = _nc.eval_field(_spec(field), np.ascontiguousarray(p).tobytes())
@@ -119,10 +135,12 @@ def _run(tmp_path, field, src=PROGRAM, name="out.ngc", **options):
 FIELDS = [
     fields.Shift((0.0, 0.0, 0.0)),
     fields.Shift((0.003, -0.001, 0.05)),
-    fields.GridField(np.linspace(0, 12, 13), np.linspace(0, 12, 7),
-                     0.01 * np.sin(np.arange(91.0)).reshape(7, 13), outside="error"),
-    fields.GridField([0, 0.5, 2, 2.1, 6, 12.0], [0, 3, 3.3, 12.0],
-                     0.01 * np.cos(np.arange(24.0)).reshape(4, 6), outside="clamp"),
+    fields.GridField(
+        np.linspace(0, 12, 13), np.linspace(0, 12, 7), 0.01 * np.sin(np.arange(91.0)).reshape(7, 13), outside="error"
+    ),
+    fields.GridField(
+        [0, 0.5, 2, 2.1, 6, 12.0], [0, 3, 3.3, 12.0], 0.01 * np.cos(np.arange(24.0)).reshape(4, 6), outside="clamp"
+    ),
     fields.GridField([2, 5, 8], [2, 5, 8], 0.01 * np.arange(9.0).reshape(3, 3), outside="extrapolate"),
     fields.GridField([2, 5, 8], [2, 5, 8], 0.01 * np.arange(9.0).reshape(3, 3), outside="error"),
     fields.GridField([0, 12], [0, 12], [[0, 0.2], [0.3, 0.6]], outside="error"),
@@ -144,17 +162,20 @@ def test_outputs_figures_and_refusals_are_the_python_evaluations(tmp_path, monke
         assert native[1] == python[1]
 
 
-@pytest.mark.parametrize("src", [
-    # unknown positions (a warning) and an unsupported construct kept
-    "G21 G90 G0 X1 Y1\nG1 X5 Y5 F100\nG0 Z5\nG1 Z-1\nG92 X0\nG1 X4 Y4\nG92.1\nG0 X2 Y2\nG1 X6\nM30\n",
-    # a later piece writes more decimals and keeps trailing zeros: the output is written in the
-    # whole program's style, which the first piece does not show (a second pass)
-    "G21 G90 G0 X1 Y1 Z5\nG1 Z-1 F100\nG1 X7 Y3\nG1 X2 Y9\n" + "G1 X3 Y3\n" * 20 + "G1 X4.12500 Y4.50000\nM30\n",
-    # CRLF in the later pieces only, and compact words
-    "G21G90G0X1Y1Z5\nG1Z-1F100\nG1X7Y3\n" + "G1X3Y3\r\n" * 30 + "M30\r\n",
-    # a parse error after the first pieces
-    "G21 G90 G0 X1 Y1 Z5\nG1 Z-1 F100\n" + "G1 X3 Y3\n" * 20 + "G1 X\nM30\n",
-])
+@pytest.mark.parametrize(
+    "src",
+    [
+        # unknown positions (a warning) and an unsupported construct kept
+        "G21 G90 G0 X1 Y1\nG1 X5 Y5 F100\nG0 Z5\nG1 Z-1\nG92 X0\nG1 X4 Y4\nG92.1\nG0 X2 Y2\nG1 X6\nM30\n",
+        # a later piece writes more decimals and keeps trailing zeros: the output is written in the
+        # whole program's style, which the first piece does not show (a second pass)
+        "G21 G90 G0 X1 Y1 Z5\nG1 Z-1 F100\nG1 X7 Y3\nG1 X2 Y9\n" + "G1 X3 Y3\n" * 20 + "G1 X4.12500 Y4.50000\nM30\n",
+        # CRLF in the later pieces only, and compact words
+        "G21G90G0X1Y1Z5\nG1Z-1F100\nG1X7Y3\n" + "G1X3Y3\r\n" * 30 + "M30\r\n",
+        # a parse error after the first pieces
+        "G21 G90 G0 X1 Y1 Z5\nG1 Z-1 F100\n" + "G1 X3 Y3\n" * 20 + "G1 X\nM30\n",
+    ],
+)
 @pytest.mark.parametrize("keep", [False, True])
 def test_style_warnings_and_errors_as_in_python(tmp_path, monkeypatch, src, keep):
     monkeypatch.setattr(nc, "_PIECE_BYTES", 16)

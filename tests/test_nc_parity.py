@@ -53,7 +53,9 @@ def test_zero_shift_with_another_axis_is_byte_identical(tmp_path, axis):
 def test_a_field_moves_xyz_and_keeps_a_interpolated(tmp_path):
     """A field that varies along the move: pieces are not merged, A follows X linearly."""
     src = "G21 G90 G0 X0 Y0 Z0 A0\nG1 X10 A90 F100\nM2\n"
-    out = nc.read(_write(tmp_path, src)).correct(lambda p: np.column_stack([0 * p[:, 0], 0 * p[:, 0], 0.001 * p[:, 0] ** 2]))
+    out = nc.read(_write(tmp_path, src)).correct(
+        lambda p: np.column_stack([0 * p[:, 0], 0 * p[:, 0], 0.001 * p[:, 0] ** 2])
+    )
     canon = canonical(out.write(tmp_path / "c.ngc"))
     assert canon.error is None
     feeds = canon.ends[[k == "feed" for k in canon.kinds]]
@@ -74,11 +76,14 @@ def test_another_axis_from_an_unknown_start_is_kept_and_warned(tmp_path):
 
 
 # ----------------------------------------------------------------------------- unknown starts
-@pytest.mark.parametrize("src", [
-    "G21 G0 X0 Y0\nG2 X10 Y0 Z-1 R5 F100\nM2\n",                   # Z never set
-    "G21 G0 X0 Y0 Z5\nG53 G0 Z0\nG2 X10 Y0 Z-1 R5 F100\nM2\n",      # Z unknown after G53
-    "G21 G0 X0 Y0 Z5\nG28 Z1\nG3 X10 Y0 Z-1 I5 J0 F100\nM2\n",       # Z unknown after G28
-])
+@pytest.mark.parametrize(
+    "src",
+    [
+        "G21 G0 X0 Y0\nG2 X10 Y0 Z-1 R5 F100\nM2\n",  # Z never set
+        "G21 G0 X0 Y0 Z5\nG53 G0 Z0\nG2 X10 Y0 Z-1 R5 F100\nM2\n",  # Z unknown after G53
+        "G21 G0 X0 Y0 Z5\nG28 Z1\nG3 X10 Y0 Z-1 I5 J0 F100\nM2\n",  # Z unknown after G28
+    ],
+)
 @pytest.mark.parametrize("shift", [(0, 0, 0), (0, 0, 0.05)])
 def test_an_arc_from_an_unknown_start_stays_the_arc_it_was(tmp_path, src, shift):
     prog = nc.read(_write(tmp_path, src))
@@ -89,14 +94,17 @@ def test_an_arc_from_an_unknown_start_stays_the_arc_it_was(tmp_path, src, shift)
 
 
 # ------------------------------------------------------------------------ only moves move
-@pytest.mark.parametrize("src, construct", [
-    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM205 X10.00 Y10.00 Z0.20\nG1 X2\nM2\n", "M code M205"),
-    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM201 X500 Y500\nM2\n", "M code M201"),
-    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM203 X100 Y100 Z5\nM2\n", "M code M203"),
-    ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nG50 X100 Z50\nG1 X3\nM2\n", "coordinate setting G50"),
-    ("G21 G0 X0 Y0 Z0\nG1 X99.853 Y103.192 E0.33188 F100\nM2\n", "E word"),
-    ("G21 G0 X0 Y0 Z0\nG43.1 Z5\nG1 X1 F100\nM2\n", "G43.1"),
-])
+@pytest.mark.parametrize(
+    "src, construct",
+    [
+        ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM205 X10.00 Y10.00 Z0.20\nG1 X2\nM2\n", "M code M205"),
+        ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM201 X500 Y500\nM2\n", "M code M201"),
+        ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nM203 X100 Y100 Z5\nM2\n", "M code M203"),
+        ("G21 G0 X0 Y0 Z0\nG1 X1 F100\nG50 X100 Z50\nG1 X3\nM2\n", "coordinate setting G50"),
+        ("G21 G0 X0 Y0 Z0\nG1 X99.853 Y103.192 E0.33188 F100\nM2\n", "E word"),
+        ("G21 G0 X0 Y0 Z0\nG43.1 Z5\nG1 X1 F100\nM2\n", "G43.1"),
+    ],
+)
 def test_axis_words_of_other_codes_are_not_moves(tmp_path, src, construct):
     """rs274 refuses each of these (an M code above 199, G50, an E word) or moves the spindle
     rather than the tip (G43.1): the engine names the construct and writes nothing."""
@@ -121,14 +129,17 @@ def test_an_extruder_reset_alone_moves_nothing(tmp_path):
 
 
 # ------------------------------------------------------------------------ malformed programs
-@pytest.mark.parametrize("src, where, message", [
-    (b"G21 G0 X0 Y0 Z0\nG1 X1 X2 F100\nM2\n", ":2:7:", "more than one X word"),
-    (b"G21 G0 X0 Y0 Z0\nG0 G1 X5 F100\nM2\n", ":2:4:", "G0 and G1 are of one modal group"),
-    (b"G21 G0 X0 Y0 Z0\nG1 X1e3 F100\nM2\n", ":2:6:", "exponent"),
-    (b"G21 G0 X0 Y0 Z0\rG1 X5 F100\rM2\r", ":1:16:", "carriage return"),
-    (b"G21 G0 X0 Y0 Z0\nM3 M4 S100\nM2\n", ":2:4:", "M3 and M4 are of one modal group"),
-    (b"G21 G0 X0 Y0 Z0\nM7 M8\nM2\n", ":2:4:", "M7 and M8 are of one modal group"),
-])
+@pytest.mark.parametrize(
+    "src, where, message",
+    [
+        (b"G21 G0 X0 Y0 Z0\nG1 X1 X2 F100\nM2\n", ":2:7:", "more than one X word"),
+        (b"G21 G0 X0 Y0 Z0\nG0 G1 X5 F100\nM2\n", ":2:4:", "G0 and G1 are of one modal group"),
+        (b"G21 G0 X0 Y0 Z0\nG1 X1e3 F100\nM2\n", ":2:6:", "exponent"),
+        (b"G21 G0 X0 Y0 Z0\rG1 X5 F100\rM2\r", ":1:16:", "carriage return"),
+        (b"G21 G0 X0 Y0 Z0\nM3 M4 S100\nM2\n", ":2:4:", "M3 and M4 are of one modal group"),
+        (b"G21 G0 X0 Y0 Z0\nM7 M8\nM2\n", ":2:4:", "M7 and M8 are of one modal group"),
+    ],
+)
 def test_programs_rs274_rejects_are_refused_at_their_line(tmp_path, src, where, message):
     p = _write(tmp_path, src)
     assert canonical(p).error is not None
@@ -156,12 +167,19 @@ def test_text_after_the_program_end_is_copied(tmp_path):
 
 
 # ------------------------------------------------------------------------------- arc radius
-@pytest.mark.parametrize("units, r, limit", [
-    # (program units, radius, the largest start/end radius difference rs274 accepts) — the limit
-    # is LinuxCNC 2.9's: 0.0283 mm (0.00283 in), or 0.1 % of the radius, up to 100 × 0.0283
-    ("G21", 0.5, 0.02828), ("G21", 5, 0.02828), ("G21", 100, 0.1001), ("G21", 10000, 2.8284),
-    ("G20", 0.5, 0.002828), ("G20", 5, 0.005005),
-])
+@pytest.mark.parametrize(
+    "units, r, limit",
+    [
+        # (program units, radius, the largest start/end radius difference rs274 accepts) — the limit
+        # is LinuxCNC 2.9's: 0.0283 mm (0.00283 in), or 0.1 % of the radius, up to 100 × 0.0283
+        ("G21", 0.5, 0.02828),
+        ("G21", 5, 0.02828),
+        ("G21", 100, 0.1001),
+        ("G21", 10000, 2.8284),
+        ("G20", 0.5, 0.002828),
+        ("G20", 5, 0.005005),
+    ],
+)
 def test_centre_arc_radius_tolerance_is_linuxcnc_s(tmp_path, units, r, limit):
     for factor, accepted in ((0.97, True), (1.03, False)):
         d = limit * factor
@@ -178,11 +196,14 @@ def test_centre_arc_radius_tolerance_is_linuxcnc_s(tmp_path, units, r, limit):
 
 
 # -------------------------------------------------------------------------------- bounds
-@pytest.mark.parametrize("src, kw", [
-    ("G21 G0 X0 Y0 Z0\nG1 X100000000000000000000 F100\nM2\n", {}),
-    ("G21 G0 X0 Y0 Z0\nG2 X0 Y0 I1 J0 P999999999 F100\nM2\n", {}),
-    ("G21 G0 X0 Y0 Z0\nG1 X2000 F100\nM2\n", {"max_segment": 0.001}),
-])
+@pytest.mark.parametrize(
+    "src, kw",
+    [
+        ("G21 G0 X0 Y0 Z0\nG1 X100000000000000000000 F100\nM2\n", {}),
+        ("G21 G0 X0 Y0 Z0\nG2 X0 Y0 I1 J0 P999999999 F100\nM2\n", {}),
+        ("G21 G0 X0 Y0 Z0\nG1 X2000 F100\nM2\n", {"max_segment": 0.001}),
+    ],
+)
 def test_a_block_that_would_make_too_many_pieces_is_refused(tmp_path, src, kw):
     prog = nc.read(_write(tmp_path, src))
     with pytest.raises(InputError, match=r":2:1: this move would be cut into .* pieces, more than the 1000000"):

@@ -13,8 +13,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_one_version_in_cargo_python_and_the_metadata():
-    versions = {tomllib.loads((ROOT / c / "Cargo.toml").read_text())["package"]["version"]
-                for c in ("crates/nc", "crates/nc-py")}
+    versions = {
+        tomllib.loads((ROOT / c / "Cargo.toml").read_text())["package"]["version"]
+        for c in ("crates/nc", "crates/nc-py")
+    }
     assert versions == {ncadapt.__version__} == {version("ncadapt")}
     assert re.fullmatch(r"\d+\.\d+\.\d+", ncadapt.__version__)
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from ncadapt import fields, heightmaps, measure, probing
+from ncadapt import fields, measure, probing
 from ncadapt.cli import main
 from ncadapt.errors import InputError
 
@@ -28,8 +28,9 @@ def run(args, cwd=None):
 def rs274(path: Path) -> list[tuple[str, tuple[float, ...]]]:
     """The canonical calls of a program as LinuxCNC's interpreter reads it; fails on its errors."""
     out = path.with_suffix(".canon")
-    r = subprocess.run([RS274, "-g", str(path), str(out)], stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run(
+        [RS274, "-g", str(path), str(out)], stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60
+    )
     text = out.read_text()
     assert r.returncode == 0 and "error" not in (r.stdout + r.stderr).lower(), r.stdout + r.stderr
     calls = []
@@ -42,9 +43,46 @@ def rs274(path: Path) -> list[tuple[str, tuple[float, ...]]]:
 
 # ------------------------------------------------------------------------------------ grammars
 # grbl 1.1's G-code (gcode.c, gc_execute_line): the words it knows, the G and M codes it accepts.
-GRBL_G = {"0", "1", "2", "3", "4", "10", "17", "18", "19", "20", "21", "28", "28.1", "30", "30.1", "38.2", "38.3",
-          "38.4", "38.5", "40", "43.1", "49", "53", "54", "55", "56", "57", "58", "59", "61", "80", "90", "91",
-          "91.1", "92", "92.1", "93", "94"}
+GRBL_G = {
+    "0",
+    "1",
+    "2",
+    "3",
+    "4",
+    "10",
+    "17",
+    "18",
+    "19",
+    "20",
+    "21",
+    "28",
+    "28.1",
+    "30",
+    "30.1",
+    "38.2",
+    "38.3",
+    "38.4",
+    "38.5",
+    "40",
+    "43.1",
+    "49",
+    "53",
+    "54",
+    "55",
+    "56",
+    "57",
+    "58",
+    "59",
+    "61",
+    "80",
+    "90",
+    "91",
+    "91.1",
+    "92",
+    "92.1",
+    "93",
+    "94",
+}
 GRBL_M = {"0", "1", "2", "30", "3", "4", "5", "7", "8", "9", "56"}
 GRBL_MOTION = {"0", "1", "2", "3", "38.2", "38.3", "38.4", "38.5", "80"}
 
@@ -92,7 +130,7 @@ def fanuc_errors(text: str) -> list[str]:
         m = re.match(r"N(\d+)\s*", s)
         if m:
             targets.add(int(m.group(1)))
-            s = s[m.end():]
+            s = s[m.end() :]
         if s in ("%", "POPEN", "PCLOS") or re.fullmatch(r"O\d{1,4}", s) or re.fullmatch(r"\([^()a-z]*\)", s):
             continue
         if re.fullmatch(r"#3000=\d+\([A-Z0-9 ]*\)", s) or re.fullmatch(r"DPRNT\[[A-Z#0-9\[\]*]*\]", s):
@@ -111,7 +149,12 @@ def sinumerik_errors(text: str) -> list[str]:
     errs, labels, jumps = [], set(), []
     for n, raw in enumerate(text.splitlines(), 1):
         s = raw.strip()
-        if not s or s.startswith(";") or s in ("DEF INT _ERR", "STOPRE", "M0", "M30") or re.fullmatch(r"SETAL\(\d+\)", s):
+        if (
+            not s
+            or s.startswith(";")
+            or s in ("DEF INT _ERR", "STOPRE", "M0", "M30")
+            or re.fullmatch(r"SETAL\(\d+\)", s)
+        ):
             continue
         m = re.fullmatch(r"([A-Z_][A-Z0-9_]*):", s)
         if m:
@@ -142,8 +185,24 @@ def test_grid_is_serpentine_with_the_spacing_asked():
 @needs_rs274
 def test_linuxcnc_grid_runs_in_rs274_as_planned(tmp_path):
     out = tmp_path / "grid.ngc"
-    r = run(["probe", "grid", "--extent", "0,40,0,30", "--step", "10", "--safe-z", "5", "--depth", "-2", "--feed",
-             "100", "-o", out])
+    r = run(
+        [
+            "probe",
+            "grid",
+            "--extent",
+            "0,40,0,30",
+            "--step",
+            "10",
+            "--safe-z",
+            "5",
+            "--depth",
+            "-2",
+            "--feed",
+            "100",
+            "-o",
+            out,
+        ]
+    )
     assert r.exit_code == 0, r.output
     text = out.read_text()
     assert "(PROBEOPEN probe-log.txt)" in text and "(PROBECLOSE)" in text
@@ -155,7 +214,7 @@ def test_linuxcnc_grid_runs_in_rs274_as_planned(tmp_path):
     # between two probes the probe goes back up to the safe height, and moves only there
     k = [i for i, (kind, _) in enumerate(calls) if kind == "STRAIGHT_PROBE"]
     for a, b in zip(k, k[1:]):
-        between = calls[a + 1:b]
+        between = calls[a + 1 : b]
         assert between[0] == ("STRAIGHT_TRAVERSE", (*probes[k.index(a)][:2], 5.0))
         assert all(c[2] == 5.0 for _, c in between)
 
@@ -163,8 +222,28 @@ def test_linuxcnc_grid_runs_in_rs274_as_planned(tmp_path):
 @needs_rs274
 def test_linuxcnc_second_touch_logs_the_slow_touch_only(tmp_path):
     out = tmp_path / "grid2.ngc"
-    r = run(["probe", "grid", "--extent", "0,10,0,10", "--nx", "2", "--ny", "2", "--safe-z", "5", "--depth", "-2",
-             "--feed", "20", "--fast-feed", "200", "-o", out])
+    r = run(
+        [
+            "probe",
+            "grid",
+            "--extent",
+            "0,10,0,10",
+            "--nx",
+            "2",
+            "--ny",
+            "2",
+            "--safe-z",
+            "5",
+            "--depth",
+            "-2",
+            "--feed",
+            "20",
+            "--fast-feed",
+            "200",
+            "-o",
+            out,
+        ]
+    )
     assert r.exit_code == 0, r.output
     text = out.read_text()
     assert text.count("(LOG,#5061 #5062 #5063)") == 4 and "(LOGOPEN,probe-log.txt)" in text
@@ -178,8 +257,30 @@ def test_grid_from_a_program_takes_its_feed_area(tmp_path):
     prog = tmp_path / "p.ngc"
     prog.write_text("G21 G90\nG0 X-50 Y-50 Z5\nG1 X10 Y5 Z-1 F100\nG1 X30 Y25\nM2\n")
     out = tmp_path / "g.ngc"
-    r = run(["probe", "grid", "--program", prog, "--margin", "2", "--nx", "2", "--ny", "2", "--safe-z", "5",
-             "--depth", "-2", "--feed", "100", "--json", tmp_path / "g.json", "-o", out])
+    r = run(
+        [
+            "probe",
+            "grid",
+            "--program",
+            prog,
+            "--margin",
+            "2",
+            "--nx",
+            "2",
+            "--ny",
+            "2",
+            "--safe-z",
+            "5",
+            "--depth",
+            "-2",
+            "--feed",
+            "100",
+            "--json",
+            tmp_path / "g.json",
+            "-o",
+            out,
+        ]
+    )
     assert r.exit_code == 0, r.output
     import json
 
@@ -211,21 +312,69 @@ def test_every_dialect_stops_without_contact_and_keeps_its_grammar(dialect, fast
         lines = text.splitlines()
         for i, ln in enumerate(lines):
             if ln.startswith("MEAS=1"):
-                assert lines[i + 1:i + 3] == ["STOPRE", "IF $AC_MEA[1]==0 GOTOF NOCONTACT"]
+                assert lines[i + 1 : i + 3] == ["STOPRE", "IF $AC_MEA[1]==0 GOTOF NOCONTACT"]
         assert text.count("WRITE(") == 6 and "SETAL(65000)" in text
 
 
 def test_grid_refusals():
-    r = run(["probe", "grid", "--extent", "0,10,0,10", "--step", "1", "--safe-z", "-3", "--depth", "-2", "--feed", "1",
-             "-o", "x.ngc"])
+    r = run(
+        [
+            "probe",
+            "grid",
+            "--extent",
+            "0,10,0,10",
+            "--step",
+            "1",
+            "--safe-z",
+            "-3",
+            "--depth",
+            "-2",
+            "--feed",
+            "1",
+            "-o",
+            "x.ngc",
+        ]
+    )
     assert r.exit_code == 2 and "error: --depth: -2 must be below --safe-z -3" in r.output
-    r = run(["probe", "grid", "--extent", "0,10,0,10", "--step", "0.001", "--safe-z", "3", "--depth", "-2",
-             "--feed", "1", "-o", "x.ngc"])
+    r = run(
+        [
+            "probe",
+            "grid",
+            "--extent",
+            "0,10,0,10",
+            "--step",
+            "0.001",
+            "--safe-z",
+            "3",
+            "--depth",
+            "-2",
+            "--feed",
+            "1",
+            "-o",
+            "x.ngc",
+        ]
+    )
     assert r.exit_code == 2 and "error: --step: a spacing of 0.001 mm over 10 x 10 mm needs 10001 x 10001" in r.output
     r = run(["probe", "grid", "--extent", "0,10,0,10", "--safe-z", "3", "--depth", "-2", "--feed", "1", "-o", "x.ngc"])
     assert r.exit_code == 2 and "--step MM, or --nx N and --ny N" in r.output
-    r = run(["probe", "grid", "--extent", "0,10,0,10", "--step", "1", "--safe-z", "3", "--depth", "-2", "--feed",
-             "nan", "-o", "x.ngc"])
+    r = run(
+        [
+            "probe",
+            "grid",
+            "--extent",
+            "0,10,0,10",
+            "--step",
+            "1",
+            "--safe-z",
+            "3",
+            "--depth",
+            "-2",
+            "--feed",
+            "nan",
+            "-o",
+            "x.ngc",
+        ]
+    )
     assert r.exit_code == 2
 
 
@@ -237,11 +386,15 @@ def plane(x, y):
 def test_grbl_console_log_in_work_coordinates(tmp_path):
     """UGS-style console: status reports carry WCO; the PRB reports are machine positions."""
     wco = (-100.0, -50.0, -20.0)
-    rows = ["[MSG:'$H'|'$X' to unlock]", "ok", "<Idle|MPos:-100.000,-50.000,-15.000|FS:0,0|WCO:-100.000,-50.000,-20.000>"]
+    rows = [
+        "[MSG:'$H'|'$X' to unlock]",
+        "ok",
+        "<Idle|MPos:-100.000,-50.000,-15.000|FS:0,0|WCO:-100.000,-50.000,-20.000>",
+    ]
     for y in (0.0, 10.0):
-        for x in ((0.0, 10.0, 20.0) if y == 0 else (20.0, 10.0, 0.0)):
+        for x in (0.0, 10.0, 20.0) if y == 0 else (20.0, 10.0, 0.0):
             z = plane(x, y)
-            rows.append(f">>> G38.2 Z-2 F100")
+            rows.append(">>> G38.2 Z-2 F100")
             rows.append(f"[PRB:{x + wco[0]:.3f},{y + wco[1]:.3f},{z + wco[2]:.3f}:1]")
             rows.append("ok")
     log = tmp_path / "console.log"
@@ -255,9 +408,14 @@ def test_grbl_console_log_in_work_coordinates(tmp_path):
 
 def test_grbl_plain_capture_with_the_offsets_report_and_two_touches(tmp_path):
     g54, g92, tlo = (-10.0, -20.0, -30.0), (1.0, 2.0, 3.0), 0.5
-    rows = [f"[G54:{g54[0]:.3f},{g54[1]:.3f},{g54[2]:.3f}]", "[G55:0.000,0.000,0.000]",
-            f"[G92:{g92[0]:.3f},{g92[1]:.3f},{g92[2]:.3f}]", f"[TLO:{tlo:.3f}]",
-            "[PRB:0.000,0.000,0.000:0]", "ok"]  # the `$#` report's last line: no probe since power-up
+    rows = [
+        f"[G54:{g54[0]:.3f},{g54[1]:.3f},{g54[2]:.3f}]",
+        "[G55:0.000,0.000,0.000]",
+        f"[G92:{g92[0]:.3f},{g92[1]:.3f},{g92[2]:.3f}]",
+        f"[TLO:{tlo:.3f}]",
+        "[PRB:0.000,0.000,0.000:0]",
+        "ok",
+    ]  # the `$#` report's last line: no probe since power-up
     off = np.add(g54, g92) + [0, 0, tlo]
     for x, y in ((0, 0), (10, 0), (10, 10), (0, 10)):
         z = plane(x, y)
@@ -272,13 +430,16 @@ def test_grbl_plain_capture_with_the_offsets_report_and_two_touches(tmp_path):
     assert f(q)[0, 2] == pytest.approx(plane(4.0, 7.0), abs=5e-4)
 
 
-@pytest.mark.parametrize("text, line, col, msg", [
-    ("[PRB:1.000,2.000,3.000:1]\n", 1, 1, "holds no work offset"),
-    ("WCO:0,0,0\n[PRB:1.000,2.000,3.000:0]\n", 2, 1, "success flag 0"),
-    ("WCO:0,0,0\n[PRB:1.000,x,3.000:1]\n", 2, 12, "probe position: expected a number, found 'x'"),
-    ("$13=1\nWCO:0,0,0\n[PRB:1,2,3:1]\n", 1, 1, "inches"),
-    ("WCO:0,0,0\n[PRB:1,2:1]\n", 2, 6, "needs x,y,z"),
-])
+@pytest.mark.parametrize(
+    "text, line, col, msg",
+    [
+        ("[PRB:1.000,2.000,3.000:1]\n", 1, 1, "holds no work offset"),
+        ("WCO:0,0,0\n[PRB:1.000,2.000,3.000:0]\n", 2, 1, "success flag 0"),
+        ("WCO:0,0,0\n[PRB:1.000,x,3.000:1]\n", 2, 12, "probe position: expected a number, found 'x'"),
+        ("$13=1\nWCO:0,0,0\n[PRB:1,2,3:1]\n", 1, 1, "inches"),
+        ("WCO:0,0,0\n[PRB:1,2:1]\n", 2, 6, "needs x,y,z"),
+    ],
+)
 def test_grbl_log_errors_are_located(tmp_path, text, line, col, msg):
     p = tmp_path / "g.log"
     p.write_text(text)
@@ -289,8 +450,10 @@ def test_grbl_log_errors_are_located(tmp_path, text, line, col, msg):
 
 def hmap_text(nodes, size=(3, 2), lo=(0.0, 0.0), hi=(20.0, 10.0)):
     pts = "".join(f'  <point X="{i}" Y="{j}">{v}</point>\n' for (i, j), v in nodes.items())
-    return (f'<?xml version="1.0" encoding="utf-8"?>\n<heightmap MinX="{lo[0]}" MinY="{lo[1]}" MaxX="{hi[0]}" '
-            f'MaxY="{hi[1]}" SizeX="{size[0]}" SizeY="{size[1]}">\n{pts}</heightmap>\n')
+    return (
+        f'<?xml version="1.0" encoding="utf-8"?>\n<heightmap MinX="{lo[0]}" MinY="{lo[1]}" MaxX="{hi[0]}" '
+        f'MaxY="{hi[1]}" SizeX="{size[0]}" SizeY="{size[1]}">\n{pts}</heightmap>\n'
+    )
 
 
 def test_opencncpilot_hmap(tmp_path):
@@ -348,7 +511,9 @@ def test_height_maps_correct_a_program_through_the_cli(tmp_path):
     r = run(["correct", prog, "--field", tmp_path / "m.map", "-o", out])
     assert r.exit_code == 0, r.output
     for line in out.read_text().splitlines():
-        m = re.match(r"G1 X([-\d.]+) Y([-\d.]+) Z([-\d.]+)", line) or re.match(r"X([-\d.]+) Y([-\d.]+) Z([-\d.]+)", line)
+        m = re.match(r"G1 X([-\d.]+) Y([-\d.]+) Z([-\d.]+)", line) or re.match(
+            r"X([-\d.]+) Y([-\d.]+) Z([-\d.]+)", line
+        )
         if m:
             x, y, z = map(float, m.groups())
             # Z of the line from (0, 0, 1) to (20, 10, 0) plus the plane
@@ -375,8 +540,28 @@ def plane_step(path: Path, z=5.0, size=(50.0, 30.0)) -> Path:
 def test_points_on_a_plane_face_probed_along_the_normal(tmp_path):
     step = plane_step(tmp_path / "plate.step")
     out, plan = tmp_path / "insp.ngc", tmp_path / "plan.csv"
-    r = run(["probe", "points", "--nominal", step, "--n", "12", "--stylus-radius", "1.5", "--approach", "3",
-             "--overtravel", "1", "--feed", "100", "-o", out, "--plan", plan])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "12",
+            "--stylus-radius",
+            "1.5",
+            "--approach",
+            "3",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "-o",
+            out,
+            "--plan",
+            plan,
+        ]
+    )
     assert r.exit_code == 0, r.output
     p = probing.read_plan(plan)
     assert len(p.nominal) == 12 and p.stylus_radius == 1.5
@@ -412,29 +597,125 @@ def test_points_from_a_file_must_lie_on_the_face(tmp_path):
     step = plane_step(tmp_path / "plate.step")
     pts = tmp_path / "pts.csv"
     pts.write_text("x,y,z\n10,10,5\n20,10,5.5\n")
-    r = run(["probe", "points", "--nominal", step, "--points", pts, "--stylus-radius", "1", "--approach", "2",
-             "--overtravel", "1", "--feed", "100", "-o", tmp_path / "o.ngc"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--points",
+            pts,
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "2",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "-o",
+            tmp_path / "o.ngc",
+        ]
+    )
     assert r.exit_code == 2
     assert f"{pts}:3:1: error: point 20 10 5.5 is 0.5000 mm from face 1" in r.output
     assert not (tmp_path / "o.ngc").exists()
-    r = run(["probe", "points", "--nominal", step, "--n", "4", "--stylus-radius", "2", "--approach", "2",
-             "--overtravel", "1", "--feed", "100", "-o", tmp_path / "o.ngc"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "4",
+            "--stylus-radius",
+            "2",
+            "--approach",
+            "2",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "-o",
+            tmp_path / "o.ngc",
+        ]
+    )
     assert r.exit_code == 2 and "error: --approach: 2 mm must exceed --stylus-radius 2 mm" in r.output
-    r = run(["probe", "points", "--nominal", step, "--face", "2", "--n", "4", "--stylus-radius", "1", "--approach", "2",
-             "--overtravel", "1", "--feed", "100", "-o", tmp_path / "o.ngc"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--face",
+            "2",
+            "--n",
+            "4",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "2",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "-o",
+            tmp_path / "o.ngc",
+        ]
+    )
     assert r.exit_code == 2 and "has 1 face(s)" in r.output
     bad = tmp_path / "bad.step"
     bad.write_text("ISO-10303-21;\nnonsense\n")
-    r = run(["probe", "points", "--nominal", bad, "--n", "4", "--stylus-radius", "1", "--approach", "2",
-             "--overtravel", "1", "--feed", "100", "-o", tmp_path / "o.ngc"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            bad,
+            "--n",
+            "4",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "2",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "-o",
+            tmp_path / "o.ngc",
+        ]
+    )
     assert r.exit_code == 2 and str(bad) in r.output
 
 
 def test_points_grbl_program_keeps_grbl_grammar(tmp_path):
     step = plane_step(tmp_path / "plate.step")
     out = tmp_path / "g.nc"
-    r = run(["probe", "points", "--nominal", step, "--n", "6", "--stylus-radius", "1", "--approach", "2",
-             "--overtravel", "1", "--feed", "100", "--fast-feed", "400", "--dialect", "grbl", "-o", out])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "6",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "2",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "--fast-feed",
+            "400",
+            "--dialect",
+            "grbl",
+            "-o",
+            out,
+        ]
+    )
     assert r.exit_code == 0, r.output
     assert grbl_errors(out.read_text()) == []
 
@@ -444,13 +725,35 @@ def test_plan_pairs_with_the_log(tmp_path):
     """Logged ball centres at p + (r + e) n give the deviations e back, through `analyze PLAN`."""
     step = plane_step(tmp_path / "plate.step")
     plan = tmp_path / "plan.csv"
-    r = run(["probe", "points", "--nominal", step, "--n", "20", "--stylus-radius", "1.5", "--approach", "3",
-             "--overtravel", "1", "--feed", "100", "-o", tmp_path / "o.ngc", "--plan", plan])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "20",
+            "--stylus-radius",
+            "1.5",
+            "--approach",
+            "3",
+            "--overtravel",
+            "1",
+            "--feed",
+            "100",
+            "-o",
+            tmp_path / "o.ngc",
+            "--plan",
+            plan,
+        ]
+    )
     assert r.exit_code == 0, r.output
     p = probing.read_plan(plan)
     e = 0.01 * np.sin(np.arange(20))
     c = p.nominal + (1.5 + e)[:, None] * p.normal
-    (tmp_path / "probe-log.txt").write_text("".join(" ".join(f"{v:f}" for v in (*q, 0, 0, 0, 0, 0, 0)) + "\n" for q in c))
+    (tmp_path / "probe-log.txt").write_text(
+        "".join(" ".join(f"{v:f}" for v in (*q, 0, 0, 0, 0, 0, 0)) + "\n" for q in c)
+    )
     m = measure.read(plan)
     np.testing.assert_allclose(m.deviation, e, atol=2e-6)
     assert m.ids[0] == "P1"
@@ -458,15 +761,20 @@ def test_plan_pairs_with_the_log(tmp_path):
     assert r.exit_code == 0, r.output
     # the log is an input of analyze and compensate: no output may replace it
     log = (tmp_path / "probe-log.txt").read_bytes()
-    for args in (["analyze", plan, "--json", tmp_path / "probe-log.txt"],
-                 ["compensate", plan, "--points-out", tmp_path / "probe-log.txt"]):
+    for args in (
+        ["analyze", plan, "--json", tmp_path / "probe-log.txt"],
+        ["compensate", plan, "--points-out", tmp_path / "probe-log.txt"],
+    ):
         r = run(args)
         assert r.exit_code == 2 and "probe log" in r.output, r.output
         assert (tmp_path / "probe-log.txt").read_bytes() == log
     # a log that stopped early (a probe did not touch) is refused, naming the point
     (tmp_path / "probe-log.txt").write_text("".join(" ".join(f"{v:f}" for v in q) + "\n" for q in c[:7]))
-    with pytest.raises(InputError, match=r"the log has 7 probed point\(s\), the plan 20: the probing stopped before "
-                                         r"point P8 \(plan line 12\)"):
+    with pytest.raises(
+        InputError,
+        match=r"the log has 7 probed point\(s\), the plan 20: the probing stopped before "
+        r"point P8 \(plan line 12\)",
+    ):
         measure.read(plan)
     (tmp_path / "probe-log.txt").unlink()
     r = run(["analyze", plan])
@@ -512,9 +820,34 @@ def test_virtual_probe_stops_the_program_without_contact(tmp_path):
 def test_plan_with_grbl_two_touches_takes_the_slow_one(tmp_path):
     step = plane_step(tmp_path / "plate.step")
     plan = tmp_path / "plan.csv"
-    r = run(["probe", "points", "--nominal", step, "--n", "4", "--stylus-radius", "1", "--approach", "2",
-             "--overtravel", "1", "--feed", "50", "--fast-feed", "500", "--dialect", "grbl", "-o", tmp_path / "o.nc",
-             "--plan", plan, "--log", "grbl.log"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "4",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "2",
+            "--overtravel",
+            "1",
+            "--feed",
+            "50",
+            "--fast-feed",
+            "500",
+            "--dialect",
+            "grbl",
+            "-o",
+            tmp_path / "o.nc",
+            "--plan",
+            plan,
+            "--log",
+            "grbl.log",
+        ]
+    )
     assert r.exit_code == 0, r.output
     p = probing.read_plan(plan)
     assert p.touches == 2
@@ -538,13 +871,53 @@ def test_safe_plane_clears_the_whole_face(tmp_path):
 
     part = ff.demo_part()
     step = cad.write(part, tmp_path / "part.step")
-    r = run(["probe", "points", "--nominal", step, "--n", "3", "--stylus-radius", "1", "--approach", "3",
-             "--overtravel", "1", "--feed", "50", "-o", tmp_path / "o.ngc", "--json", tmp_path / "o.json"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "3",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "3",
+            "--overtravel",
+            "1",
+            "--feed",
+            "50",
+            "-o",
+            tmp_path / "o.ngc",
+            "--json",
+            tmp_path / "o.json",
+        ]
+    )
     assert r.exit_code == 0, r.output
     x, y = np.meshgrid(np.linspace(0, 80, 401), np.linspace(0, 60, 301))
     assert json.loads((tmp_path / "o.json").read_text())["safe_z"] >= part.point(x, y)[..., 2].max() + 3
-    r = run(["probe", "points", "--nominal", step, "--n", "3", "--stylus-radius", "1", "--approach", "3",
-             "--overtravel", "1", "--feed", "50", "--safe-z", "9", "-o", tmp_path / "o.ngc"])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "3",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "3",
+            "--overtravel",
+            "1",
+            "--feed",
+            "50",
+            "--safe-z",
+            "9",
+            "-o",
+            tmp_path / "o.ngc",
+        ]
+    )
     assert r.exit_code == 2 and "error: --safe-z: 9 is below" in r.output
 
 
@@ -552,8 +925,28 @@ def test_safe_plane_clears_the_whole_face(tmp_path):
 def test_points_with_two_touches_run_in_rs274(tmp_path):
     step = plane_step(tmp_path / "plate.step")
     out = tmp_path / "p2.ngc"
-    r = run(["probe", "points", "--nominal", step, "--n", "5", "--stylus-radius", "1", "--approach", "3",
-             "--overtravel", "1", "--feed", "20", "--fast-feed", "200", "-o", out])
+    r = run(
+        [
+            "probe",
+            "points",
+            "--nominal",
+            step,
+            "--n",
+            "5",
+            "--stylus-radius",
+            "1",
+            "--approach",
+            "3",
+            "--overtravel",
+            "1",
+            "--feed",
+            "20",
+            "--fast-feed",
+            "200",
+            "-o",
+            out,
+        ]
+    )
     assert r.exit_code == 0, r.output
     probes = [c for k, c in rs274(out) if k == "STRAIGHT_PROBE"]
     assert len(probes) == 10

@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 from click.testing import CliRunner
 
@@ -41,15 +39,51 @@ def test_the_loop_with_on_machine_probing_reaches_the_freeform_target(tmp_path):
     r_eff = calibrate(RADIUS)
     assert abs(r_eff - (RADIUS - DELAY * FEED / 60)) < 0.0015  # 20 touches: σ/√20 = 0.45 µm
     runner = CliRunner()
-    r = runner.invoke(main, ["probe", "points", "--nominal", str(step), "--n", "609", "--stylus-radius", f"{r_eff:.6f}",
-                             "--edge-margin", "5", "--approach", "4", "--overtravel", "2", "--feed", str(FEED),
-                             "-o", str(tmp_path / "inspect.ngc"), "--plan", str(tmp_path / "plan.csv")])
+    r = runner.invoke(
+        main,
+        [
+            "probe",
+            "points",
+            "--nominal",
+            str(step),
+            "--n",
+            "609",
+            "--stylus-radius",
+            f"{r_eff:.6f}",
+            "--edge-margin",
+            "5",
+            "--approach",
+            "4",
+            "--overtravel",
+            "2",
+            "--feed",
+            str(FEED),
+            "-o",
+            str(tmp_path / "inspect.ngc"),
+            "--plan",
+            str(tmp_path / "plan.csv"),
+        ],
+    )
     assert r.exit_code == 0, r.output
-    run = sp.run((tmp_path / "inspect.ngc").read_text(), first, stylus_radius=RADIUS, noise=NOISE, trigger_delay=DELAY,
-                 seed=3)
+    run = sp.run(
+        (tmp_path / "inspect.ngc").read_text(), first, stylus_radius=RADIUS, noise=NOISE, trigger_delay=DELAY, seed=3
+    )
     (tmp_path / "probe-log.txt").write_text(run.log)
-    r = runner.invoke(main, ["compensate", str(tmp_path / "plan.csv"), "--program", str(program), "--tool-radius",
-                             str(demo.TOOL_RADIUS), "--outside", "clamp", "-o", str(tmp_path / "corrected.ngc")])
+    r = runner.invoke(
+        main,
+        [
+            "compensate",
+            str(tmp_path / "plan.csv"),
+            "--program",
+            str(program),
+            "--tool-radius",
+            str(demo.TOOL_RADIUS),
+            "--outside",
+            "clamp",
+            "-o",
+            str(tmp_path / "corrected.ngc"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     second = ff.machine(nc.read(tmp_path / "corrected.ngc"), part, error, demo.TOOL_RADIUS)
     # the systematic error itself, at the demo's probe points, noise-free
@@ -57,5 +91,7 @@ def test_the_loop_with_on_machine_probing_reaches_the_freeform_target(tmp_path):
     before = np.einsum("ij,ij->i", ff.measure(first, p, n) - p, n)
     after = np.einsum("ij,ij->i", ff.measure(second, p, n) - p, n)
     ratio = np.sqrt((after**2).mean() / (before**2).mean())
-    print(f"systematic RMS {np.sqrt((before**2).mean()) * 1000:.1f} -> {np.sqrt((after**2).mean()) * 1000:.1f} µm, {ratio:.1%}")
+    print(
+        f"systematic RMS {np.sqrt((before**2).mean()) * 1000:.1f} -> {np.sqrt((after**2).mean()) * 1000:.1f} µm, {ratio:.1%}"
+    )
     assert ratio <= 0.10, ratio

@@ -101,8 +101,10 @@ def assert_follows(out, tol):
 
 def as_inch_grid(mv):
     """Round the moves to a 0.0001 inch grid (2.54 µm) so they are exact in both units."""
+
     def q(v):
         return round(v / 2.54) * 2.54
+
     out = []
     for kind, pl, end, centre, turns in mv:
         out.append((kind, pl, [q(v) for v in end], None if centre is None else tuple(q(c) for c in centre), turns))
@@ -153,8 +155,14 @@ def test_inch_and_mm_are_the_same_path(mv):
 
 
 @SETTINGS
-@given(st.sampled_from([17, 18, 19]), st.sampled_from(["G2", "G3"]), st.integers(1000, 20000),
-       st.floats(0.05, math.pi - 0.05), st.floats(0, 2 * math.pi), st.booleans())
+@given(
+    st.sampled_from([17, 18, 19]),
+    st.sampled_from(["G2", "G3"]),
+    st.integers(1000, 20000),
+    st.floats(0.05, math.pi - 0.05),
+    st.floats(0, 2 * math.pi),
+    st.booleans(),
+)
 def test_arc_ijk_and_r_forms_agree(plane, kind, r_um, sweep, phi0, long_way):
     """The same arc written with I/J/K and with R traces the same points."""
     a1, a2, an = PLANES[plane]
@@ -180,7 +188,9 @@ def test_arc_ijk_and_r_forms_agree(plane, kind, r_um, sweep, phi0, long_way):
 
 @needs_rs274
 @pytest.mark.rs274
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+)
 @given(moves(), st.booleans(), st.booleans())
 def test_generated_programs_match_rs274(tmp_path, mv, inc, inch):
     from test_rs274 import _compare_endpoints

@@ -42,8 +42,10 @@ def test_linuxcnc_ncfiles(capsys):
     for _, why in refused:
         reasons[why] = reasons.get(why, 0) + 1
     with capsys.disabled():
-        print(f"\nLinuxCNC ncfiles: {len(accepted)} accepted ({compared} block ends equal to rs274), "
-              f"{len(refused)} refused")
+        print(
+            f"\nLinuxCNC ncfiles: {len(accepted)} accepted ({compared} block ends equal to rs274), "
+            f"{len(refused)} refused"
+        )
         for why, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
             print(f"  refused {n:3d}: {why}")
     assert len(accepted) >= 10 and compared > 1500

@@ -13,12 +13,11 @@ import pytest
 
 from conftest import needs_rs274
 from helpers import skin_server
-from rs274 import canonical
-
 from ncadapt import loop as lp
 from ncadapt.errors import InputError
 from ncadapt.processes import skin as ps
 from ncadapt.sim import skin as sk
+from rs274 import canonical
 
 A_G = 0.5
 
@@ -141,8 +140,10 @@ def test_calibration_and_the_papers_protocol():
 def test_ours_beats_mirror_and_secant_on_the_testbed(noise, latency_ms, seeds):
     """The default (5 µm noise, 45 ms dead time; make bench runs twenty seeds) and the worst
     conditions ours is meant for (10 µm, 60 ms)."""
-    res = {m: [sk.run(m, seed=s, noise=noise, latency_ms=latency_ms).as_dict() for s in range(1, seeds + 1)]
-           for m in ("mirror", "secant", "kalman")}
+    res = {
+        m: [sk.run(m, seed=s, noise=noise, latency_ms=latency_ms).as_dict() for s in range(1, seeds + 1)]
+        for m in ("mirror", "secant", "kalman")
+    }
     mx = {m: np.mean([r["max_abs_error"] for r in v]) for m, v in res.items()}
     mean = {m: np.mean([r["mean_abs_error"] for r in v]) for m, v in res.items()}
     assert mx["kalman"] < min(mx["mirror"], mx["secant"])
@@ -194,8 +195,16 @@ def test_opcua_loop_equals_the_in_process_run():
     th.start()
     assert ready.wait(20)
     lat: list = []
-    steps = asyncio.run(lp.run_opcua(url, lambda: sk.compensator("kalman"), sk.T_TARGET, pockets=len(ms), latencies=lat,
-                                     make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G)))
+    steps = asyncio.run(
+        lp.run_opcua(
+            url,
+            lambda: sk.compensator("kalman"),
+            sk.T_TARGET,
+            pockets=len(ms),
+            latencies=lat,
+            make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G),
+        )
+    )
     th.join(20)
     assert not errors
     assert steps == ref.steps
@@ -234,8 +243,21 @@ def test_skin_correct_constant_map_shifts_every_cut_by_the_excess(tmp_path):
     prog = tmp_path / "finish.ngc"
     prog.write_text(sk.finishing_program(0, 0.5))
     _skin_map(tmp_path / "map.csv", range(300, 601, 50), range(500, 701, 50), lambda x, y: 1.5 + 0.2 + 0.1)
-    r = _cli("skin", "correct", prog, "--thickness", tmp_path / "map.csv", "--target", 1.5, "--allowance", 0.2,
-             "-o", tmp_path / "out.ngc", "--json", tmp_path / "out.json")
+    r = _cli(
+        "skin",
+        "correct",
+        prog,
+        "--thickness",
+        tmp_path / "map.csv",
+        "--target",
+        1.5,
+        "--allowance",
+        0.2,
+        "-o",
+        tmp_path / "out.ngc",
+        "--json",
+        tmp_path / "out.json",
+    )
     assert r.exit_code == 0, r.output
     before, after = canonical(prog), canonical(tmp_path / "out.ngc")
     assert before.error is None and after.error is None
@@ -278,8 +300,18 @@ def test_skin_correct_errors_name_the_file_and_line(tmp_path):
 
 
 def test_simulate_cli_json_and_report(tmp_path):
-    r = _cli("skin", "simulate", "--method", "mirror", "--seed", 2, "--json", tmp_path / "r.json", "--report",
-             tmp_path / "r.html")
+    r = _cli(
+        "skin",
+        "simulate",
+        "--method",
+        "mirror",
+        "--seed",
+        2,
+        "--json",
+        tmp_path / "r.json",
+        "--report",
+        tmp_path / "r.html",
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "r.json").read_text())
     ref = sk.run("mirror", seed=2).as_dict()
@@ -296,8 +328,22 @@ def test_loop_cli_replays_a_recording(tmp_path):
     replayed output's w1_offset column is replaced."""
     gauge = tmp_path / "gauge.csv"
     gauge.write_text('t,thickness,note\n0.00,1.52,"a, b"\n0.05,,\n0.10,1.51,\n0.15,nan,\n0.20,1.495,x\n')
-    r = _cli("skin", "loop", "--method", "mirror", "--target", 1.5, "--depth", A_G, "--replay", gauge,
-             "-o", tmp_path / "w1.csv", "--json", tmp_path / "w1.json")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        "mirror",
+        "--target",
+        1.5,
+        "--depth",
+        A_G,
+        "--replay",
+        gauge,
+        "-o",
+        tmp_path / "w1.csv",
+        "--json",
+        tmp_path / "w1.json",
+    )
     assert r.exit_code == 0, r.output
     rows = list(csv.reader((tmp_path / "w1.csv").read_text().splitlines()))
     assert rows[0] == ["t", "thickness", "note", "w1_offset"]
@@ -305,8 +351,20 @@ def test_loop_cli_replays_a_recording(tmp_path):
     offsets = [r[3] for r in rows[1:]]
     assert offsets[1] == offsets[3] == ""
     assert [float(v) for v in offsets if v] == pytest.approx([0.02, 0.03, 0.025], abs=1e-12)
-    r = _cli("skin", "loop", "--method", "mirror", "--target", 1.49, "--depth", A_G, "--replay", tmp_path / "w1.csv",
-             "-o", tmp_path / "w1b.csv")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        "mirror",
+        "--target",
+        1.49,
+        "--depth",
+        A_G,
+        "--replay",
+        tmp_path / "w1.csv",
+        "-o",
+        tmp_path / "w1b.csv",
+    )
     rows = list(csv.reader((tmp_path / "w1b.csv").read_text().splitlines()))
     assert rows[0] == ["t", "thickness", "note", "w1_offset"]
     assert [float(r[3]) for r in rows[1:] if r[3]] == pytest.approx([0.03, 0.05, 0.055], abs=1e-12)
@@ -329,8 +387,21 @@ def test_serve_and_loop_clis_over_opcua_equal_the_in_process_run(tmp_path):
     try:
         line = srv.stderr.readline()
         assert line.startswith(f"serving the skin testbed at {url}"), line + srv.stderr.read()
-        r = _cli("skin", "loop", "--opcua", url, "--pockets", 2, "--target", sk.T_TARGET, "--depth", sk.A_G,
-                 "--insecure", "--json", tmp_path / "cl.json")
+        r = _cli(
+            "skin",
+            "loop",
+            "--opcua",
+            url,
+            "--pockets",
+            2,
+            "--target",
+            sk.T_TARGET,
+            "--depth",
+            sk.A_G,
+            "--insecure",
+            "--json",
+            tmp_path / "cl.json",
+        )
         assert r.exit_code == 0, r.output
         out, err = srv.communicate(timeout=60)
     finally:

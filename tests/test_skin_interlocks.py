@@ -11,8 +11,8 @@ import threading
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from helpers import skin_server
 
+from helpers import skin_server
 from ncadapt import loop as lp
 from ncadapt.processes import skin as ps
 from ncadapt.sim import skin as sk
@@ -44,8 +44,22 @@ def test_six_readings_of_2mm_command_nothing(tmp_path, method):
     """Issue 21: six readings of 2.0 mm (0.5 mm above the target, outside the gauge's 0.3 mm
     tolerance) used to command W1 +0.5 … +3.0 mm. They are rejected: no command, W1 stays 0."""
     g = _gauge(tmp_path / "g.csv", [2.0] * 6)
-    r = _cli("skin", "loop", "--method", method, "--replay", g, "-o", tmp_path / "w.csv", "--target", T_G,
-             "--depth", A_G, "--json", tmp_path / "w.json")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        method,
+        "--replay",
+        g,
+        "-o",
+        tmp_path / "w.csv",
+        "--target",
+        T_G,
+        "--depth",
+        A_G,
+        "--json",
+        tmp_path / "w.json",
+    )
     assert r.exit_code == 0, r.output
     assert _offsets(tmp_path / "w.csv") == [""] * 6
     d = json.loads((tmp_path / "w.json").read_text())
@@ -57,8 +71,22 @@ def test_negative_and_huge_readings_are_rejected(tmp_path, method):
     """A reading of −1 gave W1 −0.5 mm and one of 100 gave +0.4 mm: both rejected, the command
     in force is held; the good readings step as the mirror would (closed form for the mirror)."""
     g = _gauge(tmp_path / "g.csv", [-1, 1.52, 100, "nan", "inf", 0, 1.51])
-    r = _cli("skin", "loop", "--method", method, "--replay", g, "-o", tmp_path / "w.csv", "--target", T_G,
-             "--depth", A_G, "--json", tmp_path / "w.json")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        method,
+        "--replay",
+        g,
+        "-o",
+        tmp_path / "w.csv",
+        "--target",
+        T_G,
+        "--depth",
+        A_G,
+        "--json",
+        tmp_path / "w.json",
+    )
     assert r.exit_code == 0, r.output
     off = _offsets(tmp_path / "w.csv")
     assert [i for i, v in enumerate(off) if v] == [1, 6]
@@ -73,8 +101,22 @@ def test_negative_and_huge_readings_are_rejected(tmp_path, method):
 def test_stuck_gauge(tmp_path):
     """N identical readings in a row: the N-th and later are rejected (default N = 5)."""
     g = _gauge(tmp_path / "g.csv", [1.6] * 7 + [1.55])
-    r = _cli("skin", "loop", "--method", "mirror", "--replay", g, "-o", tmp_path / "w.csv", "--target", T_G,
-             "--depth", A_G, "--json", tmp_path / "w.json")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        "mirror",
+        "--replay",
+        g,
+        "-o",
+        tmp_path / "w.csv",
+        "--target",
+        T_G,
+        "--depth",
+        A_G,
+        "--json",
+        tmp_path / "w.json",
+    )
     assert r.exit_code == 0, r.output
     off = _offsets(tmp_path / "w.csv")
     assert [float(v) for v in off[:4]] == pytest.approx([0.1, 0.2, 0.3, 0.4])
@@ -87,16 +129,33 @@ def test_w1_and_its_step_are_bounded(tmp_path):
     command 0.29, 0.58, 0.87 … mm; with --w1-step-max 0.1 and --w1-max 0.35 it commands 0.1, 0.2,
     0.3, 0.35, 0.35."""
     g = _gauge(tmp_path / "g.csv", [1.79, 1.789, 1.79, 1.789, 1.79])
-    r = _cli("skin", "loop", "--method", "mirror", "--replay", g, "-o", tmp_path / "w.csv", "--target", T_G,
-             "--depth", A_G, "--w1-max", 0.35, "--w1-step-max", 0.1, "--json", tmp_path / "w.json")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        "mirror",
+        "--replay",
+        g,
+        "-o",
+        tmp_path / "w.csv",
+        "--target",
+        T_G,
+        "--depth",
+        A_G,
+        "--w1-max",
+        0.35,
+        "--w1-step-max",
+        0.1,
+        "--json",
+        tmp_path / "w.json",
+    )
     assert r.exit_code == 0, r.output
     assert [float(v) for v in _offsets(tmp_path / "w.csv")] == pytest.approx([0.1, 0.2, 0.3, 0.35, 0.35])
     d = json.loads((tmp_path / "w.json").read_text())
     # the step bound is the compensator's own (a fallback per bounded step), |W1| the guard's
     assert d["max_abs_w1"] == pytest.approx(0.35) and (d["fallbacks"], d["clamped"]) == (5, 2)
     # the default bound: min(2 a_g, T_g / 2) = 0.75 mm, and a bound that would cut through is refused
-    r = _cli("skin", "loop", "--replay", g, "-o", tmp_path / "w.csv", "--target", T_G, "--depth", A_G,
-             "--w1-max", 1.5)
+    r = _cli("skin", "loop", "--replay", g, "-o", tmp_path / "w.csv", "--target", T_G, "--depth", A_G, "--w1-max", 1.5)
     assert r.exit_code == 2 and "--w1-max" in r.output and "cut through" in r.output
 
 
@@ -117,8 +176,24 @@ def test_persistent_faults_stop_the_loop_and_write_nothing(tmp_path, method):
     the line, W1 held, nothing written."""
     g = _gauge(tmp_path / "g.csv", [1.52, 1.51, 2.0, 2.0, 2.0, 1.5])
     out = tmp_path / "w.csv"
-    r = _cli("skin", "loop", "--method", method, "--replay", g, "-o", out, "--target", T_G, "--depth", A_G,
-             "--max-faults", 3, "--json", tmp_path / "w.json")
+    r = _cli(
+        "skin",
+        "loop",
+        "--method",
+        method,
+        "--replay",
+        g,
+        "-o",
+        out,
+        "--target",
+        T_G,
+        "--depth",
+        A_G,
+        "--max-faults",
+        3,
+        "--json",
+        tmp_path / "w.json",
+    )
     assert r.exit_code == 1, r.output
     assert f"{g}:6: loop stopped after 3 rejected readings in a row" in r.output
     assert "W1 held at +0.0" in r.output
@@ -175,8 +250,16 @@ def test_opcua_fault_reaches_the_controller():
     assert ready.wait(20)
     info: dict = {}
     with pytest.raises(ps.LoopStopped):
-        asyncio.run(lp.run_opcua(url, lambda: sk.compensator("kalman"), sk.T_TARGET, latencies=[],
-                                 make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G, max_faults=4), info=info))
+        asyncio.run(
+            lp.run_opcua(
+                url,
+                lambda: sk.compensator("kalman"),
+                sk.T_TARGET,
+                latencies=[],
+                make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G, max_faults=4),
+                info=info,
+            )
+        )
     th.join(20)
     assert not errors and status.get("fault") is True
     assert info["rejected"] == 4 and info["pockets"] == 2  # the pocket count read from the controller
@@ -197,8 +280,15 @@ def test_connect_retries_until_the_server_is_up():
     th = threading.Thread(target=server, daemon=True)
     th.start()
     t0 = time.monotonic()
-    steps = asyncio.run(lp.run_opcua(url, lambda: sk.compensator("kalman"), sk.T_TARGET, connect_timeout=20,
-                                     make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G)))
+    steps = asyncio.run(
+        lp.run_opcua(
+            url,
+            lambda: sk.compensator("kalman"),
+            sk.T_TARGET,
+            connect_timeout=20,
+            make_guard=lambda: ps.Interlocks(sk.T_TARGET, sk.A_G),
+        )
+    )
     th.join(20)
     assert time.monotonic() - t0 > 1.5
     assert steps == sk.run("kalman", seed=3).steps
@@ -230,14 +320,17 @@ def test_fallbacks_are_counted_once_per_step():
 
 
 # ------------------------------------------------------------------------------ fuzz findings
-@pytest.mark.parametrize("args", [
-    ("loop", "--target", 1.5, "--depth", "1e-245", "--replay", "G", "-o", "O"),
-    ("loop", "--target", "1e308", "--depth", 0.5, "--replay", "G", "-o", "O"),
-    ("loop", "--target", 1.5, "--depth", 0.5, "--noise", "1e-300", "--replay", "G", "-o", "O"),
-    ("simulate", "--latency-ms", "1.8e308"),
-    ("simulate", "--noise", "1e300"),
-    ("correct", "P", "--thickness", "M", "--target", "1e308", "--allowance", "1e308", "-o", "O"),
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("loop", "--target", 1.5, "--depth", "1e-245", "--replay", "G", "-o", "O"),
+        ("loop", "--target", "1e308", "--depth", 0.5, "--replay", "G", "-o", "O"),
+        ("loop", "--target", 1.5, "--depth", 0.5, "--noise", "1e-300", "--replay", "G", "-o", "O"),
+        ("simulate", "--latency-ms", "1.8e308"),
+        ("simulate", "--noise", "1e300"),
+        ("correct", "P", "--thickness", "M", "--target", "1e308", "--allowance", "1e308", "-o", "O"),
+    ],
+)
 def test_physical_bounds_of_the_options(tmp_path, args):
     g = _gauge(tmp_path / "g.csv", [1.5, 1.51])
     (tmp_path / "p.ngc").write_text(sk.finishing_program(0, 0.5))
@@ -252,8 +345,17 @@ def test_physical_bounds_of_the_options(tmp_path, args):
 def test_a_thickness_map_with_a_negative_thickness_is_located(tmp_path):
     (tmp_path / "p.ngc").write_text(sk.finishing_program(0, 0.5))
     (tmp_path / "m.csv").write_text("x,y,thickness\n300,500,1.7\n600,500,-1.7\n300,700,1.7\n")
-    r = _cli("skin", "correct", tmp_path / "p.ngc", "--thickness", tmp_path / "m.csv", "--target", 1.5,
-             "-o", tmp_path / "o.ngc")
+    r = _cli(
+        "skin",
+        "correct",
+        tmp_path / "p.ngc",
+        "--thickness",
+        tmp_path / "m.csv",
+        "--target",
+        1.5,
+        "-o",
+        tmp_path / "o.ngc",
+    )
     assert r.exit_code == 2 and f"{tmp_path / 'm.csv'}:3:" in r.output and "> 0" in r.output
 
 
@@ -304,8 +406,19 @@ def test_skin_correct_says_what_remains(tmp_path):
     (tmp_path / "p.ngc").write_text(sk.finishing_program(0, 0.5))
     m = sk.thickness_map(0.3, seed=1)
     np.savetxt(tmp_path / "m.csv", m, delimiter=",", header="x,y,thickness", comments="", fmt="%.6f")
-    r = _cli("skin", "correct", tmp_path / "p.ngc", "--thickness", tmp_path / "m.csv", "--target", 1.5,
-             "--allowance", 0.2, "-o", tmp_path / "o.ngc")
+    r = _cli(
+        "skin",
+        "correct",
+        tmp_path / "p.ngc",
+        "--thickness",
+        tmp_path / "m.csv",
+        "--target",
+        1.5,
+        "--allowance",
+        0.2,
+        "-o",
+        tmp_path / "o.ngc",
+    )
     assert r.exit_code == 0, r.output
     assert "not corrected: the finishing pass's own deflection" in r.output and "--allowance 0" in r.output
 
@@ -410,7 +523,19 @@ def test_a_killed_server_stops_the_client():
         assert srv.stderr.readline().startswith("serving")
         threading.Timer(1.0, srv.kill).start()
         t0 = time.monotonic()
-        r = _cli("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G, "--stale-timeout", 1, "--insecure")
+        r = _cli(
+            "skin",
+            "loop",
+            "--opcua",
+            url,
+            "--target",
+            sk.T_TARGET,
+            "--depth",
+            sk.A_G,
+            "--stale-timeout",
+            1,
+            "--insecure",
+        )
     finally:
         srv.kill()
         srv.communicate()
@@ -429,10 +554,31 @@ def test_secured_exchange_equals_the_in_process_run(tmp_path, monkeypatch):
     assert (tmp_path / "client.pem").stat().st_mode & 0o077 == 0  # a private key: its owner's only
     url = "opc.tcp://127.0.0.1:48420/ncadapt/"
     env = dict(__import__("os").environ, NCADAPT_OPCUA_PASSWORD="s3cret")
-    srv = skin_server("--endpoint", url, "--seed", "4", "--cert", tmp_path / "controller.der", "--key",
-                      tmp_path / "controller.pem", "--user", "op", "--json", tmp_path / "srv.json", env=env)
-    client = ("--cert", tmp_path / "client.der", "--key", tmp_path / "client.pem", "--server-cert",
-              tmp_path / "controller.der", "--user", "op")
+    srv = skin_server(
+        "--endpoint",
+        url,
+        "--seed",
+        "4",
+        "--cert",
+        tmp_path / "controller.der",
+        "--key",
+        tmp_path / "controller.pem",
+        "--user",
+        "op",
+        "--json",
+        tmp_path / "srv.json",
+        env=env,
+    )
+    client = (
+        "--cert",
+        tmp_path / "client.der",
+        "--key",
+        tmp_path / "client.pem",
+        "--server-cert",
+        tmp_path / "controller.der",
+        "--user",
+        "op",
+    )
     common = ("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G)
     try:
         assert "Basic256Sha256 SignAndEncrypt" in srv.stderr.readline()

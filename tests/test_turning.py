@@ -11,8 +11,8 @@ import re
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import EXAMPLES, needs_rs274
 
+from conftest import EXAMPLES, needs_rs274
 from ncadapt.cli import main
 from ncadapt.processes import turning as tu
 from ncadapt.sim import turning as st
@@ -40,8 +40,18 @@ def _fe_beam(L, EI, kc, kt, a, n=400):
     K = np.zeros((2 * nn, 2 * nn))
     for e in range(nn - 1):
         h = xs[e + 1] - xs[e]
-        k = EI / h ** 3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                                    [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
+        k = (
+            EI
+            / h**3
+            * np.array(
+                [
+                    [12, 6 * h, -12, 6 * h],
+                    [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                    [-12, -6 * h, 12, -6 * h],
+                    [6 * h, 2 * h * h, -6 * h, 4 * h * h],
+                ]
+            )
+        )
         idx = [2 * e, 2 * e + 1, 2 * e + 2, 2 * e + 3]
         K[np.ix_(idx, idx)] += k
     K[0, 0] += kt
@@ -70,7 +80,8 @@ def test_workpiece_compliance_matches_a_finite_element_beam(cfg):
     # mid-span closed form: L³/(48 EI) + (1/kc + 1/kt)/4
     L = c.length
     assert m.workpiece_compliance(L / 2)[0, 0, 0] == pytest.approx(
-        L ** 3 / (48 * m.EI) + (1 / c.chuck[0, 0] + 1 / c.tail[0, 0]) / 4, rel=1e-12)
+        L**3 / (48 * m.EI) + (1 / c.chuck[0, 0] + 1 / c.tail[0, 0]) / 4, rel=1e-12
+    )
 
 
 def test_six_by_six_steady_state_equals_the_closed_form(cfg):
@@ -163,12 +174,31 @@ def test_virtual_lathe_barrel_and_corrections(cfg, feed_plan, tmp_path):
 
 
 def test_plan_cli_json(tmp_path):
-    r = CliRunner().invoke(main, ["turning", "plan", str(CONFIG), "--mode", "feed", "-o", str(tmp_path / "p.ngc"),
-                                  "--json", str(tmp_path / "p.json")], catch_exceptions=False)
+    r = CliRunner().invoke(
+        main,
+        [
+            "turning",
+            "plan",
+            str(CONFIG),
+            "--mode",
+            "feed",
+            "-o",
+            str(tmp_path / "p.ngc"),
+            "--json",
+            str(tmp_path / "p.json"),
+        ],
+        catch_exceptions=False,
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "p.json").read_text())
-    assert {"mode", "diameter_error_max", "diameter_error_constant_feed", "machining_time_s",
-            "machining_time_constant_feed_s", "profile"} <= set(d)
+    assert {
+        "mode",
+        "diameter_error_max",
+        "diameter_error_constant_feed",
+        "machining_time_s",
+        "machining_time_constant_feed_s",
+        "profile",
+    } <= set(d)
     assert {"x3", "feed", "spindle_rpm", "deflection"} <= set(d["profile"][0])
     assert d["diameter_error_max"] <= 0.05 * d["diameter_error_constant_feed"]
     bad = tmp_path / "bad.toml"
@@ -177,26 +207,29 @@ def test_plan_cli_json(tmp_path):
     assert r.exit_code == 2 and "bad.toml" in r.output and "missing" in r.output
 
 
-@pytest.mark.parametrize("old,new,line,says", [
-    ("step = 1.0 ", "step = nan ", 39, "[plan] step must be finite"),
-    ("step = 1.0 ", "step = 1e-9 ", 39, "at most 100,000 stations"),
-    ("speeds = 21 ", "speeds = 100000000000000000000000 ", 40, "[plan] speeds must be within 2..1000"),
-    ("speeds = 21 ", 'speeds = "x" ', 40, "[plan] speeds must be a whole number"),
-    ("diameter = 20.0 ", 'diameter = "twenty" ', 8, "[shaft] diameter must be a number"),
-    ("depth = 2.0 ", "depth = [1, 2] ", 13, "[cut] depth must be a number"),
-    ("depth = 2.0 ", "depth = 12.0 ", 13, "[cut] depth must be < 10 mm, the bar's radius"),
-    ("depth = 2.0 ", "depth = 10.0 ", 13, "[cut] depth must be < 10 mm, the bar's radius"),
-    ("step = 1.0 ", "step = 0 ", 39, "[plan] step must be > 0"),
-    ("step = 1.0 ", "step = -1 ", 39, "[plan] step must be > 0"),
-    ("step = 1.0 ", "step = 500 ", 39, "[plan] step must be at most end - start"),
-    ("diameter = 20.0 ", "diameter = -20.0 ", 8, "[shaft] diameter must be > 0"),
-    ("youngs_modulus = 2.1e5 ", "youngs_modulus = nan ", 10, "[shaft] youngs_modulus must be finite"),
-    ("lambda = [0.4, 1.0, 0.25]", "lambda = [0.0, 1.0, 0.25]", 0, "[cut] lambda must be (radial > 0"),
-    ("lambda = [0.4, 1.0, 0.25]", "lambda = [-0.4, 1.0, 0.25]", 0, "[cut] lambda must be (radial > 0"),
-    ("rho = [290.0, 250.0, 220.0, 210.0]", "rho = [290.0, 250.0, 220.0, 1e25]", 0, "[cut] rho must be <= 5000"),
-    ("feed = [0.05, 0.8]", "feed = [0.05, 80]", 0, "[bounds] feed must be <= 5"),
-    ("feed_change = 0.05 ", "feed_change = -0.05 ", 0, "[bounds] feed_change must be > 0"),
-])
+@pytest.mark.parametrize(
+    "old,new,line,says",
+    [
+        ("step = 1.0 ", "step = nan ", 39, "[plan] step must be finite"),
+        ("step = 1.0 ", "step = 1e-9 ", 39, "at most 100,000 stations"),
+        ("speeds = 21 ", "speeds = 100000000000000000000000 ", 40, "[plan] speeds must be within 2..1000"),
+        ("speeds = 21 ", 'speeds = "x" ', 40, "[plan] speeds must be a whole number"),
+        ("diameter = 20.0 ", 'diameter = "twenty" ', 8, "[shaft] diameter must be a number"),
+        ("depth = 2.0 ", "depth = [1, 2] ", 13, "[cut] depth must be a number"),
+        ("depth = 2.0 ", "depth = 12.0 ", 13, "[cut] depth must be < 10 mm, the bar's radius"),
+        ("depth = 2.0 ", "depth = 10.0 ", 13, "[cut] depth must be < 10 mm, the bar's radius"),
+        ("step = 1.0 ", "step = 0 ", 39, "[plan] step must be > 0"),
+        ("step = 1.0 ", "step = -1 ", 39, "[plan] step must be > 0"),
+        ("step = 1.0 ", "step = 500 ", 39, "[plan] step must be at most end - start"),
+        ("diameter = 20.0 ", "diameter = -20.0 ", 8, "[shaft] diameter must be > 0"),
+        ("youngs_modulus = 2.1e5 ", "youngs_modulus = nan ", 10, "[shaft] youngs_modulus must be finite"),
+        ("lambda = [0.4, 1.0, 0.25]", "lambda = [0.0, 1.0, 0.25]", 0, "[cut] lambda must be (radial > 0"),
+        ("lambda = [0.4, 1.0, 0.25]", "lambda = [-0.4, 1.0, 0.25]", 0, "[cut] lambda must be (radial > 0"),
+        ("rho = [290.0, 250.0, 220.0, 210.0]", "rho = [290.0, 250.0, 220.0, 1e25]", 0, "[cut] rho must be <= 5000"),
+        ("feed = [0.05, 0.8]", "feed = [0.05, 80]", 0, "[bounds] feed must be <= 5"),
+        ("feed_change = 0.05 ", "feed_change = -0.05 ", 0, "[bounds] feed_change must be > 0"),
+    ],
+)
 def test_a_bad_configuration_value_is_located(tmp_path, examples, old, new, line, says):
     from ncadapt.errors import InputError
 
@@ -295,7 +328,9 @@ def test_comparisons_are_diameter_ranges_on_the_model_and_the_lathe(cfg, feed_pl
     w = m.deflection(q.x3, q.feed, q.rpm, q.x1_offset)
     assert feed_plan.diameter_variation_constant_feed == pytest.approx(2 * np.ptp(w), rel=1e-9)
     d = feed_plan.as_dict()
-    assert d["diameter_variation_ratio"] == pytest.approx(d["diameter_variation"] / d["diameter_variation_constant_feed"])
+    assert d["diameter_variation_ratio"] == pytest.approx(
+        d["diameter_variation"] / d["diameter_variation_constant_feed"]
+    )
 
 
 def test_css_keeps_the_planned_speeds(cfg, feed_plan, tmp_path):
@@ -334,22 +369,29 @@ def test_css_program_is_accepted_by_rs274(cfg, feed_plan, tmp_path):
 HEAD = "G18 G21 G90 G7 G95\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F0.2\n"
 
 
-@pytest.mark.parametrize("body,line,says", [
-    (HEAD + "G1 Z-100 F0\n", 5, "feed F0 mm/rev must be > 0"),
-    (HEAD + "G1 Z-100 F-0.2\n", 5, "must be > 0"),
-    ("G18 G21 G90 G7 G98\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F150\nG1 Z-100\n", 1, "G98: feed per minute"),
-    ("G18 G21 G90 G7 G94\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F150\nG1 Z-100\n", 1, "feed per minute (G94)"),
-    ("G18 G21 G90 G7\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F0.2\nG1 Z-100\n", 4, "feed per revolution (G95)"),
-    (HEAD + "G1 Z-500\n", 5, "Z-500 is beyond the chuck face (Z-430)"),
-    ("G18 G21 G90 G95\nG97 S1000 M3\nG0 X30 Z-20\n", 3, "before G7 (diameter) or G8 (radius)"),
-    ("G18 G20 G90 G7 G95\n", 1, "inch units (G20)"),
-    ("G18 G21 G91 G7 G95\n", 1, "incremental distances (G91)"),
-    ("G18 G21 G90 G7 G95\nG96 S100 M3\nG0 X30 Z-20\nG1 X16 F0.2\nG1 Z-100\n", 4, "G96 without a spindle-speed limit (D)"),
-    (HEAD + "G1 Z-400 F0.0001\n", 0, "at most 2,000,000"),
-    ("G18 G21 G90 G7 G95\nG97 S1000 M3\nG0 X16 Z-20\nG1 Z-100 F0.2\n", 3, "a rapid move (G0) into the stock"),
-    (HEAD + "G76 P1\n", 5, "G76 is not simulated"),
-    (HEAD + "G1 X-2\n", 5, "below the axis"),
-])
+@pytest.mark.parametrize(
+    "body,line,says",
+    [
+        (HEAD + "G1 Z-100 F0\n", 5, "feed F0 mm/rev must be > 0"),
+        (HEAD + "G1 Z-100 F-0.2\n", 5, "must be > 0"),
+        ("G18 G21 G90 G7 G98\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F150\nG1 Z-100\n", 1, "G98: feed per minute"),
+        ("G18 G21 G90 G7 G94\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F150\nG1 Z-100\n", 1, "feed per minute (G94)"),
+        ("G18 G21 G90 G7\nG97 S1000 M3\nG0 X30 Z-20\nG1 X16 F0.2\nG1 Z-100\n", 4, "feed per revolution (G95)"),
+        (HEAD + "G1 Z-500\n", 5, "Z-500 is beyond the chuck face (Z-430)"),
+        ("G18 G21 G90 G95\nG97 S1000 M3\nG0 X30 Z-20\n", 3, "before G7 (diameter) or G8 (radius)"),
+        ("G18 G20 G90 G7 G95\n", 1, "inch units (G20)"),
+        ("G18 G21 G91 G7 G95\n", 1, "incremental distances (G91)"),
+        (
+            "G18 G21 G90 G7 G95\nG96 S100 M3\nG0 X30 Z-20\nG1 X16 F0.2\nG1 Z-100\n",
+            4,
+            "G96 without a spindle-speed limit (D)",
+        ),
+        (HEAD + "G1 Z-400 F0.0001\n", 0, "at most 2,000,000"),
+        ("G18 G21 G90 G7 G95\nG97 S1000 M3\nG0 X16 Z-20\nG1 Z-100 F0.2\n", 3, "a rapid move (G0) into the stock"),
+        (HEAD + "G76 P1\n", 5, "G76 is not simulated"),
+        (HEAD + "G1 X-2\n", 5, "below the axis"),
+    ],
+)
 def test_lathe_program_checks(cfg, tmp_path, body, line, says):
     from ncadapt.errors import InputError
 
@@ -365,14 +407,33 @@ def test_simulate_cli_bounds_and_seed(cfg, tmp_path):
     f = tmp_path / "p.ngc"
     f.write_text(tu.program(tu.plan(cfg, "path"), cfg))
     run = CliRunner().invoke
-    for opt, v in (("--rho-sigma", "1e20"), ("--stiffness-sigma", "1e308"), ("--rho-sigma", "nan"),
-                   ("--stiffness-sigma", "-0.1")):
+    for opt, v in (
+        ("--rho-sigma", "1e20"),
+        ("--stiffness-sigma", "1e308"),
+        ("--rho-sigma", "nan"),
+        ("--stiffness-sigma", "-0.1"),
+    ):
         r = run(main, ["turning", "simulate", str(CONFIG), str(f), opt, v])
         assert r.exit_code == 2 and opt in r.output, r.output
     out = []
     for _ in range(2):
-        r = run(main, ["turning", "simulate", str(CONFIG), str(f), "--rho-sigma", "0.5", "--stiffness-sigma", "0.5",
-                       "--seed", "7", "--json", "-"])
+        r = run(
+            main,
+            [
+                "turning",
+                "simulate",
+                str(CONFIG),
+                str(f),
+                "--rho-sigma",
+                "0.5",
+                "--stiffness-sigma",
+                "0.5",
+                "--seed",
+                "7",
+                "--json",
+                "-",
+            ],
+        )
         assert r.exit_code == 0, r.output
         d = json.loads(r.stdout)
         assert all(np.isfinite(v) for v in (d["diameter_min"], d["diameter_max"], d["diameter_error_max"]))
@@ -386,9 +447,12 @@ def test_simulate_cli_bounds_and_seed(cfg, tmp_path):
 
 def test_plan_cli_refuses_bad_configurations(tmp_path, examples):
     text = (examples / "turning" / "shaft_d20_l430.toml").read_text()
-    for old, new in (("step = 1.0 ", "step = 0 "), ("step = 1.0 ", "step = -1 "),
-                     ("rho = [290.0, 250.0, 220.0, 210.0]", "rho = [290.0, 250.0, 220.0, 1e25]"),
-                     ("youngs_modulus = 2.1e5 ", "youngs_modulus = nan ")):
+    for old, new in (
+        ("step = 1.0 ", "step = 0 "),
+        ("step = 1.0 ", "step = -1 "),
+        ("rho = [290.0, 250.0, 220.0, 210.0]", "rho = [290.0, 250.0, 220.0, 1e25]"),
+        ("youngs_modulus = 2.1e5 ", "youngs_modulus = nan "),
+    ):
         p = tmp_path / "c.toml"
         p.write_text(text.replace(old, new, 1))
         r = CliRunner().invoke(main, ["turning", "plan", str(p)])
@@ -473,8 +537,12 @@ def test_roughness_bound_and_baselines(tmp_path, examples):
     cf, _ = m.constant_offset(p.x3, rf["finish_feed"] * 1e-3, n, depth=c.finish_depth, left=wr - cr)
     lines = ["G18 G21 G90 G7 G95", f"G97 S{n:.0f} M3", "G0 X24", f"G0 Z{-p.x3[0] * 1e3:.4f}"]
     for r, f in ((R + c.finish_depth * 1e3 - cr * 1e3, rf["feed"]), (R - cf * 1e3, rf["finish_feed"])):
-        lines += [f"G1 X{2 * r:.4f} F0.05", f"G1 Z{-p.x3[-1] * 1e3:.4f} F{f:.4f}", "G0 X24",
-                  f"G0 Z{-p.x3[0] * 1e3:.4f}"]
+        lines += [
+            f"G1 X{2 * r:.4f} F0.05",
+            f"G1 Z{-p.x3[-1] * 1e3:.4f} F{f:.4f}",
+            "G0 X24",
+            f"G0 Z{-p.x3[0] * 1e3:.4f}",
+        ]
     prog = tmp_path / "rf.ngc"
     prog.write_text("\n".join(lines + ["M2"]) + "\n")
     pr = st.simulate(c, prog)
@@ -483,7 +551,9 @@ def test_roughness_bound_and_baselines(tmp_path, examples):
     # constant feed at the same mean (the issue measured 41 %)
     assert 0.3 < p.diameter_variation / p.diameter_variation_constant_feed < 0.5
     bad = tmp_path / "c.toml"
-    bad.write_text((examples / "turning" / "shaft_d20_l430_finish.toml").read_text().replace("rz_max = 25.0", "rz_max = 1.0"))
+    bad.write_text(
+        (examples / "turning" / "shaft_d20_l430_finish.toml").read_text().replace("rz_max = 25.0", "rz_max = 1.0")
+    )
     from ncadapt.errors import InputError
 
     with pytest.raises(InputError, match=r"\[bounds\] rz_max allows feeds up to 0.0800 mm/rev"):
@@ -504,8 +574,18 @@ def _fe_beam_general(L, ei_of, a, kc=None, kt=None, clamped=False, n=200, nodes=
     for e in range(nn - 1):
         h = xs[e + 1] - xs[e]
         EI = ei_of(0.5 * (xs[e] + xs[e + 1]))
-        ke = EI / h ** 3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                                     [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
+        ke = (
+            EI
+            / h**3
+            * np.array(
+                [
+                    [12, 6 * h, -12, 6 * h],
+                    [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                    [-12, -6 * h, 12, -6 * h],
+                    [6 * h, 2 * h * h, -6 * h, 4 * h * h],
+                ]
+            )
+        )
         idx = [2 * e, 2 * e + 1, 2 * e + 2, 2 * e + 3]
         K[np.ix_(idx, idx)] += ke
     fixed = []
@@ -535,10 +615,12 @@ def test_workpiece_options_match_a_finite_element_beam(cfg, stepped, chuck):
     assumptions; with springs, the pinned stepped beam's lever rule is exact (FE with springs)."""
     import dataclasses
 
-    c = dataclasses.replace(cfg, stepped=stepped, chuck_support=chuck, chuck=np.diag(np.diag(cfg.chuck)),
-                            tail=np.diag(np.diag(cfg.tail)))
+    c = dataclasses.replace(
+        cfg, stepped=stepped, chuck_support=chuck, chuck=np.diag(np.diag(cfg.chuck)), tail=np.diag(np.diag(cfg.tail))
+    )
     m = tu.Model(c)
     for a in (0.05, 0.15, 0.215, 0.3, 0.39):
+
         def ei(x, a=a):
             return m.EI_f if (stepped and c.start <= x < a) else m.EI
 
@@ -549,7 +631,7 @@ def test_workpiece_options_match_a_finite_element_beam(cfg, stepped, chuck):
             assert m.workpiece_compliance(a)[0, 0, 0] == pytest.approx(fe, rel=1e-6)
     # the propped cantilever at mid-span by hand: δ = 7L³/768EI (clamped at one end, pinned at the other)
     if chuck == "clamped" and not stepped:
-        assert m._bending(c.length / 2)[0] == pytest.approx(7 * c.length ** 3 / (768 * m.EI), rel=1e-12)
+        assert m._bending(c.length / 2)[0] == pytest.approx(7 * c.length**3 / (768 * m.EI), rel=1e-12)
 
 
 def test_workpiece_options_change_the_plan(cfg, tmp_path, examples):

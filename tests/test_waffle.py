@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import needs_rs274
-from rs274 import canonical
 
+from conftest import needs_rs274
 from ncadapt.cli import main
 from ncadapt.processes import waffle as pw
 from ncadapt.sim import waffle as sw
+from rs274 import canonical
 
 
 def _cli(*args):
@@ -60,8 +60,20 @@ def test_tilt_cli_json_rows_in_input_order(tmp_path):
     b = [0, 1, 2, 3, 4, 5, 6, 7]
     v = [0.0, 0.1, 0.2, 0.3, 1.0, 0.7, 0.4, 0.1]
     (tmp_path / "log.csv").write_text("B,Z,V\n" + "".join(f"{x},{-50},{y}\n" for x, y in zip(b, v)))
-    r = _cli("waffle", "tilt", "--tracking", tmp_path / "log.csv", "--tool-radius", 10, "--diameter", 2000,
-             "--segment", 4, "--json", tmp_path / "t.json")
+    r = _cli(
+        "waffle",
+        "tilt",
+        "--tracking",
+        tmp_path / "log.csv",
+        "--tool-radius",
+        10,
+        "--diameter",
+        2000,
+        "--segment",
+        4,
+        "--json",
+        tmp_path / "t.json",
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "t.json").read_text())
     s = 360 / (math.pi * 2000)
@@ -86,8 +98,8 @@ def test_play_shelf_and_lag_closed_form():
     y = pw.play(x, 0.04)
     np.testing.assert_allclose(y[10:101], x[10:101] - 0.02, atol=1e-12)
     top = 101
-    assert np.all(y[top:top + 3] == y[100])  # flat while the input crosses the gap
-    np.testing.assert_allclose(y[top + 4:], x[top + 4:] + 0.02, atol=1e-12)
+    assert np.all(y[top : top + 3] == y[100])  # flat while the input crosses the gap
+    np.testing.assert_allclose(y[top + 4 :], x[top + 4 :] + 0.02, atol=1e-12)
 
 
 def test_drive_matches_scipy_lsim_with_held_input():
@@ -133,10 +145,30 @@ def test_correct_moves_the_depth_axis_only_and_keeps_b(tmp_path):
     prog.write_text(sw.cell_program(0, 0))
     _tracking(tmp_path / "log.csv", 0.05)
     bt, zt = np.meshgrid(np.arange(0.0, 15.01, 1.0), np.arange(-230.0, -129.0, 10.0))
-    (tmp_path / "map.csv").write_text("B,Z,thickness\n" + "".join(f"{b},{z},2.32\n" for b, z in zip(bt.ravel(), zt.ravel())))
-    r = _cli("waffle", "correct", prog, "--tracking", tmp_path / "log.csv", "--tool-radius", 10, "--diameter", 1500,
-             "--thickness", tmp_path / "map.csv", "--target", 2.0, "--allowance", 0.3, "-o", tmp_path / "out.ngc",
-             "--json", tmp_path / "out.json")
+    (tmp_path / "map.csv").write_text(
+        "B,Z,thickness\n" + "".join(f"{b},{z},2.32\n" for b, z in zip(bt.ravel(), zt.ravel()))
+    )
+    r = _cli(
+        "waffle",
+        "correct",
+        prog,
+        "--tracking",
+        tmp_path / "log.csv",
+        "--tool-radius",
+        10,
+        "--diameter",
+        1500,
+        "--thickness",
+        tmp_path / "map.csv",
+        "--target",
+        2.0,
+        "--allowance",
+        0.3,
+        "-o",
+        tmp_path / "out.ngc",
+        "--json",
+        tmp_path / "out.json",
+    )
     assert r.exit_code == 0, r.output
     k = -10 * 0.05 * 360 / (math.pi * 1500) + 0.02
     before, after = canonical(prog), canonical(tmp_path / "out.ngc")
@@ -158,7 +190,7 @@ def test_depth_field_follows_b_along_split_moves():
     f = pw.DepthField([0, 20, 0, 20], [0, 0, 30, 30], [0.0, 0.2, 0.0, 0.2], diameter=1000)  # K = 0.01·B
     p = nc.parse("G21 G90 G94\nG0 X0 Y0 Z10 B0\nG1 Y5 F500\nG1 B10 Z20\nM2\n").correct(f, max_segment=1.0)
     c = p.correction
-    b = (c.points[:, 2] - 10)  # B = Z − 10 along the last move
+    b = c.points[:, 2] - 10  # B = Z − 10 along the last move
     last = c.line == 4
     np.testing.assert_allclose(c.displacements[last, 1], 0.01 * b[last], atol=1e-12)
     assert "B10" in p.text.splitlines()[3] or "B10.0" in p.text
@@ -168,8 +200,19 @@ def test_correct_refuses_points_outside_the_measurement(tmp_path):
     prog = tmp_path / "cell.ngc"
     prog.write_text(sw.cell_program(0, 5))  # B 75..90, the log covers 0..15
     _tracking(tmp_path / "log.csv", 0.05)
-    r = _cli("waffle", "correct", prog, "--tracking", tmp_path / "log.csv", "--tool-radius", 10, "--diameter", 1500,
-             "-o", tmp_path / "out.ngc")
+    r = _cli(
+        "waffle",
+        "correct",
+        prog,
+        "--tracking",
+        tmp_path / "log.csv",
+        "--tool-radius",
+        10,
+        "--diameter",
+        1500,
+        "-o",
+        tmp_path / "out.ngc",
+    )
     assert r.exit_code == 1 and "outside" in r.output
     assert not (tmp_path / "out.ngc").exists()
 
@@ -197,8 +240,18 @@ def test_testbed_targets_on_three_seeds():
 
 
 def test_simulate_cli_json_and_report(tmp_path):
-    r = _cli("waffle", "simulate", "--strategy", "combined", "--seed", 2, "--json", tmp_path / "w.json",
-             "--report", tmp_path / "w.html")
+    r = _cli(
+        "waffle",
+        "simulate",
+        "--strategy",
+        "combined",
+        "--seed",
+        2,
+        "--json",
+        tmp_path / "w.json",
+        "--report",
+        tmp_path / "w.html",
+    )
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "w.json").read_text())
     assert {"strategy", "rms_error", "max_abs_error", "retunes", "cells"} <= set(d)

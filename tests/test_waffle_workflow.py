@@ -54,8 +54,15 @@ def test_the_shipped_examples_are_what_the_documented_commands_give(tmp_path):
     import runpy
 
     runpy.run_path(str(EXAMPLES / "make_examples.py"), run_name="examples")["main"](tmp_path)
-    for name in ("tracking.csv", "backlash_signals.csv", "thickness_r1c1.csv", "cell_r1c1.ngc", "cell_r1c2.ngc", "cell_r1c1_semi.ngc",
-                 "finished/thickness_r1c1.csv"):
+    for name in (
+        "tracking.csv",
+        "backlash_signals.csv",
+        "thickness_r1c1.csv",
+        "cell_r1c1.ngc",
+        "cell_r1c2.ngc",
+        "cell_r1c1_semi.ngc",
+        "finished/thickness_r1c1.csv",
+    ):
         assert (tmp_path / name).read_text() == (EXAMPLES / name).read_text(), name
 
 
@@ -66,8 +73,21 @@ def test_documented_commands_finish_the_web(shop):
     pass without K_dist) leaves the web too thick by the tilt. (The testbed sweeps the cutter's face
     over the wall, which also sees the wall's slope along Z: the paper's correction leaves the mean
     a few µm thin.)"""
-    r = _cli("waffle", "correct", "cell_r1c1.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
-             "--allowance", 0.3, "-o", "fin.ngc", cwd=shop)
+    r = _cli(
+        "waffle",
+        "correct",
+        "cell_r1c1.ngc",
+        *COMMON,
+        "--thickness",
+        "thickness_r1c1.csv",
+        "--target",
+        2.0,
+        "--allowance",
+        0.3,
+        "-o",
+        "fin.ngc",
+        cwd=shop,
+    )
     assert r.exit_code == 0, r.output
     fin = sw.machine_program(shop / "fin.ngc", 1, 0, 0)
     plain = sw.machine_program(shop / "cell_r1c1.ngc", 1, 0, 0)
@@ -75,10 +95,29 @@ def test_documented_commands_finish_the_web(shop):
     assert _rms(fin) < _rms(plain) / 3
     # the old example: the semi-finishing pass without K_dist, then K_dist added on top
     semi_plain = sw.machine_program(shop / "cell_r1c1_semi.ngc", 1, 0, 0)
-    np.savetxt(shop / "semi_plain.csv", sw.gauge_map(semi_plain, 1), delimiter=",", header="B,Z,thickness",
-               comments="", fmt="%.5f")
-    r = _cli("waffle", "correct", "cell_r1c1.ngc", *COMMON, "--thickness", "semi_plain.csv", "--target", 2.0,
-             "--allowance", 0.3, "-o", "twice.ngc", cwd=shop)
+    np.savetxt(
+        shop / "semi_plain.csv",
+        sw.gauge_map(semi_plain, 1),
+        delimiter=",",
+        header="B,Z,thickness",
+        comments="",
+        fmt="%.5f",
+    )
+    r = _cli(
+        "waffle",
+        "correct",
+        "cell_r1c1.ngc",
+        *COMMON,
+        "--thickness",
+        "semi_plain.csv",
+        "--target",
+        2.0,
+        "--allowance",
+        0.3,
+        "-o",
+        "twice.ngc",
+        cwd=shop,
+    )
     twice = sw.machine_program(shop / "twice.ngc", 1, 0, 0)
     uu, ww = sw.cell_path()
     b, z = sw.cell_centre(0, 0)
@@ -90,19 +129,65 @@ def test_documented_commands_finish_the_web(shop):
 def test_cell_reuse_with_cell_origins(shop):
     """Item 8: cell 2's program with cell 1's K_fb moved by the pitch (15°) — refused as outside
     without the origins; with them, cell 2 finishes within a third of its uncorrected RMS."""
-    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
-             "--allowance", 0.3, "-o", "c2.ngc", cwd=shop)
+    r = _cli(
+        "waffle",
+        "correct",
+        "cell_r1c2.ngc",
+        *COMMON,
+        "--thickness",
+        "thickness_r1c1.csv",
+        "--target",
+        2.0,
+        "--allowance",
+        0.3,
+        "-o",
+        "c2.ngc",
+        cwd=shop,
+    )
     assert r.exit_code == 1 and "outside" in r.output  # a safety refusal: nothing written
-    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
-             "--allowance", 0.3, "--map-origin", "7.5,-180", "--cell-origin", "22.5,-180", "-o", "c2.ngc",
-             "--json", "c2.json", cwd=shop)
+    r = _cli(
+        "waffle",
+        "correct",
+        "cell_r1c2.ngc",
+        *COMMON,
+        "--thickness",
+        "thickness_r1c1.csv",
+        "--target",
+        2.0,
+        "--allowance",
+        0.3,
+        "--map-origin",
+        "7.5,-180",
+        "--cell-origin",
+        "22.5,-180",
+        "-o",
+        "c2.ngc",
+        "--json",
+        "c2.json",
+        cwd=shop,
+    )
     assert r.exit_code == 0, r.output
     assert json.loads((shop / "c2.json").read_text())["map_shift"] == [15.0, 0.0]
     fin = sw.machine_program(shop / "c2.ngc", 1, 0, 1)
     plain = sw.machine_program(shop / "cell_r1c2.ngc", 1, 0, 1)
     assert _rms(fin) < _rms(plain) / 3
-    r = _cli("waffle", "correct", "cell_r1c2.ngc", *COMMON, "--thickness", "thickness_r1c1.csv", "--target", 2.0,
-             "--map-origin", "7.5", "--cell-origin", "22.5,-180", "-o", "c2.ngc", cwd=shop)
+    r = _cli(
+        "waffle",
+        "correct",
+        "cell_r1c2.ngc",
+        *COMMON,
+        "--thickness",
+        "thickness_r1c1.csv",
+        "--target",
+        2.0,
+        "--map-origin",
+        "7.5",
+        "--cell-origin",
+        "22.5,-180",
+        "-o",
+        "c2.ngc",
+        cwd=shop,
+    )
     assert r.exit_code == 2 and "--map-origin" in r.output
 
 
@@ -129,8 +214,26 @@ def test_waffle_cells_decides_by_the_band(tmp_path):
     (progs / "cell_r1c4.ngc").write_text(sw.cell_program(0, 3))
     out = tmp_path / "out"
     out.mkdir()
-    r = _cli("waffle", "cells", "--thickness-dir", d, "--cells", "2x4", "--target", 2.0, "--band", "1.97,2.03",
-             "--json", tmp_path / "c.json", "--programs", progs, "--allowance", 0.3, "-o", out)
+    r = _cli(
+        "waffle",
+        "cells",
+        "--thickness-dir",
+        d,
+        "--cells",
+        "2x4",
+        "--target",
+        2.0,
+        "--band",
+        "1.97,2.03",
+        "--json",
+        tmp_path / "c.json",
+        "--programs",
+        progs,
+        "--allowance",
+        0.3,
+        "-o",
+        out,
+    )
     assert r.exit_code == 0, r.output
     j = json.loads((tmp_path / "c.json").read_text())
     st = {(c["row"], c["cell"]): c for c in j["cells"]}
@@ -141,8 +244,26 @@ def test_waffle_cells_decides_by_the_band(tmp_path):
     assert "row 1 cell 2: thickness 1.9900 .. 2.0310 mm (out of band)" in r.output
     # the minimum at the band's edge counts too ("or"), and the next cell's program is written
     cell("thickness_r1c3.csv", [2.0, 2.0, 1.97, 2.0, 2.0, 2.0])
-    r = _cli("waffle", "cells", "--thickness-dir", d, "--cells", "2x4", "--target", 2.0, "--band", "1.97,2.03",
-             "--json", tmp_path / "c.json", "--programs", progs, "--allowance", 0.3, "-o", out)
+    r = _cli(
+        "waffle",
+        "cells",
+        "--thickness-dir",
+        d,
+        "--cells",
+        "2x4",
+        "--target",
+        2.0,
+        "--band",
+        "1.97,2.03",
+        "--json",
+        tmp_path / "c.json",
+        "--programs",
+        progs,
+        "--allowance",
+        0.3,
+        "-o",
+        out,
+    )
     assert r.exit_code == 0, r.output
     j = json.loads((tmp_path / "c.json").read_text())
     assert j["next"]["semi_finish"] is True and j["semi_program"] == str(out / "semi_r1c4.ngc")
@@ -163,8 +284,19 @@ def test_waffle_cells_decides_by_the_band(tmp_path):
 
 
 def test_waffle_cells_on_the_shipped_example(shop):
-    r = _cli("waffle", "cells", "--thickness-dir", "finished", "--cells", "4x24", "--target", 2.0, "--band",
-             "1.97,2.03", cwd=shop)
+    r = _cli(
+        "waffle",
+        "cells",
+        "--thickness-dir",
+        "finished",
+        "--cells",
+        "4x24",
+        "--target",
+        2.0,
+        "--band",
+        "1.97,2.03",
+        cwd=shop,
+    )
     assert r.exit_code == 0, r.output
     # the raw map of the finished cell 1 has points outside ±30 µm (the testbed's: 1.950 … 2.041 mm)
     assert "1 of 96 cells finished, 1 out of the band" in r.output
@@ -249,8 +381,23 @@ def test_simulate_lists_cells_out_of_tolerance(tmp_path):
 def test_collinear_thickness_maps_are_located_errors(tmp_path, shop):
     for rows in ("7.5,-180,2.3\n8.0,-179,2.3\n", "7.5,-180,2.3\n8.0,-179,2.3\n8.5,-178,2.3\n"):
         (tmp_path / "m.csv").write_text("B,Z,thickness\n" + rows)
-        r = _cli("waffle", "correct", shop / "cell_r1c1.ngc", "--tracking", shop / "tracking.csv", "--tool-radius", 10,
-                 "--diameter", 1500, "--thickness", tmp_path / "m.csv", "--target", 2.0, "-o", tmp_path / "o.ngc")
+        r = _cli(
+            "waffle",
+            "correct",
+            shop / "cell_r1c1.ngc",
+            "--tracking",
+            shop / "tracking.csv",
+            "--tool-radius",
+            10,
+            "--diameter",
+            1500,
+            "--thickness",
+            tmp_path / "m.csv",
+            "--target",
+            2.0,
+            "-o",
+            tmp_path / "o.ngc",
+        )
         assert r.exit_code == 2 and "lie on one line" in r.output and "Traceback" not in r.output
         assert not (tmp_path / "o.ngc").exists()
 
@@ -265,7 +412,9 @@ def test_tilt_option_bounds(tmp_path, shop, args):
 
 def test_huge_values_in_the_data_are_located(tmp_path):
     (tmp_path / "t.csv").write_text("B,Z,V\n0,0,1\n1,0,1e308\n2,0,3\n")
-    r = _cli("waffle", "tilt", "--tracking", tmp_path / "t.csv", "--tool-radius", 10, "--diameter", 1500, "--segment", 3)
+    r = _cli(
+        "waffle", "tilt", "--tracking", tmp_path / "t.csv", "--tool-radius", 10, "--diameter", 1500, "--segment", 3
+    )
     # refused at its line by the reader's bound on any machine value (±1e6), before the sensor's travel
     assert r.exit_code == 2 and f"{tmp_path / 't.csv'}:3:5:" in r.output and "beyond ±1e+06" in r.output
     vi, vm, dt = sw.backlash_pair(1)
@@ -299,7 +448,7 @@ def test_the_cutter_face_swept_over_a_plane_wall(ts, tz):
     v = shell.v(b + uu, z + ww)
     drift = sw.DRIFT * ((24 + 5) / 96 - 0.5) - sw.FLANGE
     e = sw.cell_error(shell, 1, 5, w=v) - sw.rib_pattern(uu, ww) - drift
-    expected = -max(np.sqrt(sw.R_TOOL ** 2 - dz ** 2) * abs(ts) + dz * abs(tz) for dz in (0.0, 8.0))
+    expected = -max(np.sqrt(sw.R_TOOL**2 - dz**2) * abs(ts) + dz * abs(tz) for dz in (0.0, 8.0))
     inner = e[1:-1, 20:-20]  # away from the cell's edges, where the face covers fewer positions
     np.testing.assert_allclose(inner, expected, atol=1e-12)
     if tz == 0:
@@ -315,5 +464,6 @@ def test_the_copying_chain_on_a_ramp():
     v = r * t
     w = sw.copying_chain(v, dt)
     wn = 2 * np.pi * sw.DRIVE_HZ
-    np.testing.assert_allclose(v[-100:] - w[-100:], sw.GAP / 2 + 2 * sw.DRIVE_ZETA * r / wn + r * dt / 2,
-                               atol=3e-6)  # the held input's saw (±rΔt/2 at 100 Hz) barely passes the 3.5 Hz drive
+    np.testing.assert_allclose(
+        v[-100:] - w[-100:], sw.GAP / 2 + 2 * sw.DRIVE_ZETA * r / wn + r * dt / 2, atol=3e-6
+    )  # the held input's saw (±rΔt/2 at 100 Hz) barely passes the 3.5 Hz drive

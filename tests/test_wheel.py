@@ -25,16 +25,23 @@ def _venv(path: Path, spec: str) -> Path:
     return path / "bin" / "ncadapt"
 
 
-def test_the_wheel_is_manylinux_abi3():
+def test_the_wheel_is_manylinux_abi3_with_its_licence_and_types():
+    import zipfile
+
     name = Path(WHEEL).name
     assert "-abi3-" in name and "manylinux" in name, name
+    files = zipfile.ZipFile(WHEEL).namelist()
+    assert "ncadapt/py.typed" in files and any(f.endswith("licenses/LICENSE") for f in files)
 
 
 def test_base_install_corrects_and_names_the_missing_extra(tmp_path):
     exe = _venv(tmp_path / "base", WHEEL)
     out = tmp_path / "o.ngc"
-    r = subprocess.run([str(exe), "correct", str(EXAMPLES / "nc" / "plate.ngc"), "--shift", "0,0,0.01", "-o", str(out)],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [str(exe), "correct", str(EXAMPLES / "nc" / "plate.ngc"), "--shift", "0,0,0.01", "-o", str(out)],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0 and out.stat().st_size > 0, r.stderr
     r = subprocess.run([str(exe), "demo", "--out", str(tmp_path / "d")], capture_output=True, text=True)
     assert r.returncode == 2 and "pip install 'ncadapt[" in r.stderr, r.stderr

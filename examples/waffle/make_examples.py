@@ -35,8 +35,12 @@ HERE = Path(__file__).resolve().parent
 
 
 def ncadapt(*args, cwd) -> str:
-    r = subprocess.run([sys.executable, "-c", "from ncadapt.cli import main; main()", *map(str, args)], cwd=cwd,
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-c", "from ncadapt.cli import main; main()", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+    )
     if r.returncode != 0:
         raise SystemExit(f"ncadapt {' '.join(map(str, args))}: exit {r.returncode}\n{r.stdout}{r.stderr}")
     return r.stdout
@@ -55,8 +59,10 @@ def tracking(folder: Path) -> None:
     b = np.arange(0.0, 30.0 + 1e-9, 0.25)
     zs = np.arange(-230.0, -130.0 + 1e-9, 5.0)
     with open(folder / "tracking.csv", "w") as f:
-        f.write(f"# ncadapt waffle testbed (seed {SEED}): tracking pre-measurement of row 1, cells 1-2, one-way along B\n"
-                "B,Z,V\n")
+        f.write(
+            f"# ncadapt waffle testbed (seed {SEED}): tracking pre-measurement of row 1, cells 1-2, one-way along B\n"
+            "B,Z,V\n"
+        )
         for z in zs:
             v = shell.v(b, np.full_like(b, z)) + rng.normal(0, sw.NOISE_TRACK, b.shape)
             for bi, vi in zip(b, v):
@@ -67,7 +73,9 @@ def backlash(folder: Path) -> None:
     """The pair of signals of section 3 (`sim.waffle.backlash_pair`) with their time column."""
     vi, vm, dt = sw.backlash_pair(SEED)
     with open(folder / "backlash_signals.csv", "w") as f:
-        f.write(f"# ncadapt waffle testbed (seed {SEED}): row 1 cell 1 zig-zag, dt = {dt:.5f} s\nt,V_ideal,V_measured\n")
+        f.write(
+            f"# ncadapt waffle testbed (seed {SEED}): row 1 cell 1 zig-zag, dt = {dt:.5f} s\nt,V_ideal,V_measured\n"
+        )
         for i, (a, b) in enumerate(zip(vi, vm)):
             f.write(f"{i * dt:.5f},{a:.5f},{b:.5f}\n")
 
@@ -83,18 +91,38 @@ def main(folder: Path = HERE) -> None:
     common = ("--tracking", "tracking.csv", "--tool-radius", sw.R_TOOL, "--diameter", sw.D)
     ncadapt("waffle", "correct", "cell_r1c1_semi.ngc", *common, "-o", "cell_r1c1_semi_corrected.ngc", cwd=folder)
     semi = sw.machine_program(folder / "cell_r1c1_semi_corrected.ngc", SEED, 0, 0)
-    write_map(folder / "thickness_r1c1.csv", sw.gauge_map(semi, SEED, 0, 0),
-              f"ncadapt waffle testbed (seed {SEED}): web thickness after semi-finishing row 1 cell 1 with K_dist "
-              f"(allowance {sw.ALLOWANCE} mm)")
+    write_map(
+        folder / "thickness_r1c1.csv",
+        sw.gauge_map(semi, SEED, 0, 0),
+        f"ncadapt waffle testbed (seed {SEED}): web thickness after semi-finishing row 1 cell 1 with K_dist "
+        f"(allowance {sw.ALLOWANCE} mm)",
+    )
     fb = ("--thickness", "thickness_r1c1.csv", "--target", sw.T_REF, "--allowance", sw.ALLOWANCE)
     ncadapt("waffle", "correct", "cell_r1c1.ngc", *common, *fb, "-o", "cell_r1c1_corrected.ngc", cwd=folder)
     fin = sw.machine_program(folder / "cell_r1c1_corrected.ngc", SEED, 0, 0)
-    write_map(folder / "finished" / "thickness_r1c1.csv", sw.gauge_map(fin, SEED, 0, 0),
-              f"ncadapt waffle testbed (seed {SEED}): web thickness after finishing row 1 cell 1")
+    write_map(
+        folder / "finished" / "thickness_r1c1.csv",
+        sw.gauge_map(fin, SEED, 0, 0),
+        f"ncadapt waffle testbed (seed {SEED}): web thickness after finishing row 1 cell 1",
+    )
     for f in ("cell_r1c1_semi_corrected.ngc", "cell_r1c1_corrected.ngc"):
         (folder / f).unlink()
-    print(ncadapt("waffle", "cells", "--thickness-dir", "finished", "--cells", f"{sw.ROWS}x{sw.CELLS}", "--target",
-                  sw.T_REF, "--band", f"{sw.T_REF - sw.BAND:g},{sw.T_REF + sw.BAND:g}", cwd=folder), end="")
+    print(
+        ncadapt(
+            "waffle",
+            "cells",
+            "--thickness-dir",
+            "finished",
+            "--cells",
+            f"{sw.ROWS}x{sw.CELLS}",
+            "--target",
+            sw.T_REF,
+            "--band",
+            f"{sw.T_REF - sw.BAND:g},{sw.T_REF + sw.BAND:g}",
+            cwd=folder,
+        ),
+        end="",
+    )
 
 
 if __name__ == "__main__":

@@ -13,7 +13,6 @@ from pathlib import Path
 
 from .errors import InputError
 
-
 #: Temporary files are named with this prefix (and the target's name, so its suffix is kept).
 TMP_PREFIX = ".ncadapt-tmp-"
 
@@ -124,9 +123,10 @@ def read_text(path: str | os.PathLike) -> str:
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
         col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
-        bad = data[e.start:e.start + 1].hex()
-        raise InputError(f"not UTF-8 text: byte 0x{bad} ({e.reason}); save the file as UTF-8", str(p), line, col) \
-            from None
+        bad = data[e.start : e.start + 1].hex()
+        raise InputError(
+            f"not UTF-8 text: byte 0x{bad} ({e.reason}); save the file as UTF-8", str(p), line, col
+        ) from None
 
 
 #: The longest CSV field read (characters); a longer one is an error at its line.

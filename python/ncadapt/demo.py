@@ -56,7 +56,9 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
     nominal, normal = ff.probe_points(part, PROBE_BORDER, PROBE_SPACING)
     measured = ff.measure(first, nominal, normal, noise=NOISE, seed=seed)
     rows = ["id,x,y,z,i,j,k,mx,my,mz"] + [
-        f"P{k + 1}," + ",".join(f"{v:.6f}" for v in (*p, *n, *m)) for k, (p, n, m) in enumerate(zip(nominal, normal, measured))]
+        f"P{k + 1}," + ",".join(f"{v:.6f}" for v in (*p, *n, *m))
+        for k, (p, n, m) in enumerate(zip(nominal, normal, measured))
+    ]
     meas_path = out / "measurements.csv"
     atomic_write(meas_path, ("\n".join(rows) + "\n").encode())
     meas = measure.read(meas_path)
@@ -76,7 +78,9 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
     # the systematic error itself: the same points measured without noise
     before = np.einsum("ij,ij->i", ff.measure(first, nominal, normal) - nominal, normal)
     after = np.einsum("ij,ij->i", ff.measure(second, nominal, normal) - nominal, normal)
-    after_measured = np.einsum("ij,ij->i", ff.measure(second, nominal, normal, noise=NOISE, seed=seed + 1) - nominal, normal)
+    after_measured = np.einsum(
+        "ij,ij->i", ff.measure(second, nominal, normal, noise=NOISE, seed=seed + 1) - nominal, normal
+    )
     rms = lambda v: float(np.sqrt(np.mean(v * v)))  # noqa: E731
     summary = {
         "seed": seed,
@@ -93,17 +97,40 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
         "verdict": analysis.verdict.as_dict(),
         "filter": decomposition.as_dict(),
         "program": corr.as_dict(),
-        "model": {"tool_radius": TOOL_RADIUS, "stepover": STEPOVER, "noise": NOISE,
-                  "curvature_amplitude": CURVATURE_AMPLITUDE, "polynomial": {f"u^{i} v^{j}": c for (i, j), c in POLYNOMIAL.items()}},
+        "model": {
+            "tool_radius": TOOL_RADIUS,
+            "stepover": STEPOVER,
+            "noise": NOISE,
+            "curvature_amplitude": CURVATURE_AMPLITUDE,
+            "polynomial": {f"u^{i} v^{j}": c for (i, j), c in POLYNOMIAL.items()},
+        },
     }
-    files = {"program": "part.ngc", "measurements": "measurements.csv", "corrected program": "corrected.ngc",
-             "compensated surface": "compensated.step", "report": "report.html", "summary": "summary.json"}
-    cards = {"systematic RMS before": f"{summary['systematic_rms_before'] * 1000:.1f} µm",
-             "after one compensation": f"{summary['systematic_rms_after'] * 1000:.1f} µm",
-             "remaining": f"{100 * summary['ratio']:.0f} %"}
-    write_report(out / "report.html", rep.render(
-        title="Freeform compensation: demo part", analysis=analysis, decomposition=decomposition,
-        xy=nominal, deviation=meas.deviation, after=after_measured, summary=cards, files=files))
+    files = {
+        "program": "part.ngc",
+        "measurements": "measurements.csv",
+        "corrected program": "corrected.ngc",
+        "compensated surface": "compensated.step",
+        "report": "report.html",
+        "summary": "summary.json",
+    }
+    cards = {
+        "systematic RMS before": f"{summary['systematic_rms_before'] * 1000:.1f} µm",
+        "after one compensation": f"{summary['systematic_rms_after'] * 1000:.1f} µm",
+        "remaining": f"{100 * summary['ratio']:.0f} %",
+    }
+    write_report(
+        out / "report.html",
+        rep.render(
+            title="Freeform compensation: demo part",
+            analysis=analysis,
+            decomposition=decomposition,
+            xy=nominal,
+            deviation=meas.deviation,
+            after=after_measured,
+            summary=cards,
+            files=files,
+        ),
+    )
     import json
 
     atomic_write(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())

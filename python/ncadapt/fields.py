@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .constants import COORD_MAX
 from ._io import csv_column, csv_reader, read_text
+from .constants import COORD_MAX
 from .errors import InputError, RefusedError, cut
 
 __all__ = [
@@ -86,7 +86,7 @@ def _collinear(xy: np.ndarray) -> bool:
     return len(sv) < 2 or not sv[0] > 0 or sv[1] <= 1e-9 * sv[0]
 
 
-def _scattered(points, displacements, linenos, source, outside) -> "ScatteredField":
+def _scattered(points, displacements, linenos, source, outside) -> ScatteredField:
     """A :class:`ScatteredField` from read points, with located errors: at least 3 points, no
     (x, y) given twice, not all on one line."""
     pts = np.asarray(points, dtype=np.float64)
@@ -97,11 +97,15 @@ def _scattered(points, displacements, linenos, source, outside) -> "ScatteredFie
     if (counts > 1).any():
         k = int(first[np.flatnonzero(counts > 1)[0]])
         m = next(m for m in range(len(pts)) if m != k and (pts[m, :2] == pts[k, :2]).all())
-        raise InputError(f"point x={pts[k, 0]:g} y={pts[k, 1]:g} repeats the point at line {linenos[k]}",
-                         src, int(linenos[m]), 1)
+        raise InputError(
+            f"point x={pts[k, 0]:g} y={pts[k, 1]:g} repeats the point at line {linenos[k]}", src, int(linenos[m]), 1
+        )
     if _collinear(pts[:, :2]):
-        raise InputError(f"the {len(pts)} points lie on one line (from line {linenos[0]} to {linenos[-1]}); "
-                         "a field needs points that span an area", src)
+        raise InputError(
+            f"the {len(pts)} points lie on one line (from line {linenos[0]} to {linenos[-1]}); "
+            "a field needs points that span an area",
+            src,
+        )
     return ScatteredField(pts, displacements, outside=outside, source=src)
 
 
@@ -199,7 +203,9 @@ class GridField(Field):
         elif self.outside == "extrapolate" and out.any():
             from scipy.interpolate import RegularGridInterpolator  # imported where needed: it is slow to import
 
-            rgi = RegularGridInterpolator((self.xs, self.ys), self.dz.T, method="cubic", bounds_error=False, fill_value=None)
+            rgi = RegularGridInterpolator(
+                (self.xs, self.ys), self.dz.T, method="cubic", bounds_error=False, fill_value=None
+            )
             d[:, 2] = rgi(np.column_stack([x, y]))
         else:
             if self._spline is None:
@@ -324,7 +330,10 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
             if missing:
                 raise InputError(
                     f"missing column(s) {', '.join(missing)}; the header must name {', '.join(required)}",
-                    str(path), lineno, 1)
+                    str(path),
+                    lineno,
+                    1,
+                )
             idx = [header.index(c) for c in required]
             cols = {c: [] for c in required}
             continue
@@ -334,14 +343,20 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
             try:
                 v = float(row[k])
             except ValueError:
-                raise InputError(f"column {c}: expected a number, found {cut(row[k].strip())}", str(path), lineno,
-                                 csv_column(row, k)) from None
+                raise InputError(
+                    f"column {c}: expected a number, found {cut(row[k].strip())}", str(path), lineno, csv_column(row, k)
+                ) from None
             if not math.isfinite(v):
-                raise InputError(f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno,
-                                 csv_column(row, k))
+                raise InputError(
+                    f"column {c}: value is not finite ({row[k].strip()})", str(path), lineno, csv_column(row, k)
+                )
             if abs(v) > COORD_MAX:
-                raise InputError(f"column {c}: {v:g} is beyond ±{COORD_MAX:g}, larger than any machine value",
-                                 str(path), lineno, csv_column(row, k))
+                raise InputError(
+                    f"column {c}: {v:g} is beyond ±{COORD_MAX:g}, larger than any machine value",
+                    str(path),
+                    lineno,
+                    csv_column(row, k),
+                )
             cols[c].append(v)
         linenos.append(lineno)
     if header is None:
@@ -367,7 +382,10 @@ def _grid_from_points(x, y, dz, linenos, path, method, outside) -> GridField:
             if seen[j[k], i[k]]:
                 raise InputError(
                     f"duplicate grid point x={x[k]:g} y={y[k]:g} (first on line {seen[j[k], i[k]]})",
-                    str(path), int(linenos[k]), 1)
+                    str(path),
+                    int(linenos[k]),
+                    1,
+                )
             seen[j[k], i[k]] = linenos[k]
             grid[j[k], i[k]] = dz[k]
     if np.isnan(grid).any():
@@ -375,10 +393,14 @@ def _grid_from_points(x, y, dz, linenos, path, method, outside) -> GridField:
         n_missing = int(np.isnan(grid).sum())
         raise InputError(
             f"not a rectangular grid: {n_missing} of {grid.size} points missing, e.g. x={xs[ii]:g} y={ys[jj]:g}",
-            str(path))
+            str(path),
+        )
     if method == "cubic" and (len(xs) < 4 or len(ys) < 4):
-        raise InputError(f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
-                         f"has {len(xs)} x {len(ys)}: use --interp linear", str(path))
+        raise InputError(
+            f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
+            f"has {len(xs)} x {len(ys)}: use --interp linear",
+            str(path),
+        )
     return GridField(xs, ys, grid, method=method, outside=outside, source=str(path))
 
 
@@ -532,5 +554,6 @@ def read(path, method: str = "linear", outside: str = "error") -> Field:
         return read_probe_log(path, method, outside)
     raise InputError(
         f"unknown field format {ext!r}; expected .csv (x,y,dz or x,y,z,dx,dy,dz), .probe (bCNC), .hmap "
-        "(OpenCNCPilot), .map (Candle), or a LinuxCNC probe log or grbl [PRB:…] log (.txt, .log)", str(path))
-
+        "(OpenCNCPilot), .map (Candle), or a LinuxCNC probe log or grbl [PRB:…] log (.txt, .log)",
+        str(path),
+    )

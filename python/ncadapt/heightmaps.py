@@ -39,8 +39,16 @@ from ._io import read_text
 from .constants import COORD_MAX
 from .errors import InputError, cut
 
-__all__ = ["read_grbl_log", "read_hmap", "read_candle_map", "read_worded_log", "is_grbl_log", "is_worded_log",
-           "prb_reports", "worded_points"]
+__all__ = [
+    "read_grbl_log",
+    "read_hmap",
+    "read_candle_map",
+    "read_worded_log",
+    "is_grbl_log",
+    "is_worded_log",
+    "prb_reports",
+    "worded_points",
+]
 
 #: Most nodes of a height map read (a 1000 x 1000 map is far beyond any autolevel grid).
 MAX_NODES = 1_000_000
@@ -106,8 +114,15 @@ def read_worded_log(path, method: str = "linear", outside: str = "error"):
     from . import fields
 
     a, lines = worded_points(path)
-    return fields.from_values(np.round(a[:, 0], 6), np.round(a[:, 1], 6), a[:, 2], method=method, outside=outside,
-                              source=str(path), linenos=lines)
+    return fields.from_values(
+        np.round(a[:, 0], 6),
+        np.round(a[:, 1], 6),
+        a[:, 2],
+        method=method,
+        outside=outside,
+        source=str(path),
+        linenos=lines,
+    )
 
 
 def is_grbl_log(text: str) -> bool:
@@ -155,14 +170,23 @@ def prb_reports(path) -> list[tuple[int, np.ndarray]]:
                 raise InputError("a probe report is [PRB:x,y,z:s]; the success flag is missing", src, n, col)
             coords, flag = body.rsplit(":", 1)
             if flag.strip() not in ("0", "1"):
-                raise InputError(f"probe report success flag must be 0 or 1, found {cut(flag.strip())}", src, n,
-                                 col + len(coords) + 1)
+                raise InputError(
+                    f"probe report success flag must be 0 or 1, found {cut(flag.strip())}",
+                    src,
+                    n,
+                    col + len(coords) + 1,
+                )
             v = _numbers(coords, src, n, col, "probe position")
             if len(v) < 3:
                 raise InputError(f"probe report needs x,y,z, found {len(v)} number(s)", src, n, col)
             if flag.strip() == "0":
-                raise InputError("probe report with success flag 0: the probe did not touch (grbl alarm); the map "
-                                 "is incomplete, probe again", src, n, m.start() + 1)
+                raise InputError(
+                    "probe report with success flag 0: the probe did not touch (grbl alarm); the map "
+                    "is incomplete, probe again",
+                    src,
+                    n,
+                    m.start() + 1,
+                )
             if wco is not None:
                 off = wco
             elif wcs in offsets:
@@ -172,7 +196,11 @@ def prb_reports(path) -> list[tuple[int, np.ndarray]]:
                 raise InputError(
                     "grbl reports probe positions in machine coordinates and the log holds no work offset before "
                     f"this report (a status report with WCO: or the $# report's [{wcs}:…]); send $# before probing "
-                    "and keep its output in the log", src, n, m.start() + 1)
+                    "and keep its output in the log",
+                    src,
+                    n,
+                    m.start() + 1,
+                )
             out.append((n, np.asarray(v[:3]) - off))
     return out
 
@@ -195,15 +223,20 @@ def read_grbl_log(path, method: str = "linear", outside: str = "error"):
         pts.append(p)
         lines.append(n)
     a = np.asarray(pts)
-    return fields.from_values(np.round(a[:, 0], 6), np.round(a[:, 1], 6), a[:, 2], method=method, outside=outside,
-                              source=str(path), linenos=np.asarray(lines))
+    return fields.from_values(
+        np.round(a[:, 0], 6),
+        np.round(a[:, 1], 6),
+        a[:, 2],
+        method=method,
+        outside=outside,
+        source=str(path),
+        linenos=np.asarray(lines),
+    )
 
 
 def read_hmap(path, method: str = "linear", outside: str = "error"):
     """Read an OpenCNCPilot ``.hmap`` height map as a :class:`~ncadapt.fields.GridField`."""
     from lxml import etree
-
-    from . import fields
 
     path = Path(path)
     src = str(path)
@@ -218,8 +251,11 @@ def read_hmap(path, method: str = "linear", outside: str = "error"):
         msg = re.sub(r",? line \d+, column \d+$", "", e.msg or "")
         raise InputError(f"not well-formed XML (.hmap): {msg}", src, line or 0, col or 0) from None
     if root is None or not isinstance(root.tag, str) or etree.QName(root).localname != "heightmap":
-        raise InputError("not an OpenCNCPilot height map: the root element must be <heightmap>", src,
-                         getattr(root, "sourceline", 0) or 0)
+        raise InputError(
+            "not an OpenCNCPilot height map: the root element must be <heightmap>",
+            src,
+            getattr(root, "sourceline", 0) or 0,
+        )
     ln = root.sourceline or 0
 
     def attr(name):
@@ -252,7 +288,9 @@ def read_hmap(path, method: str = "linear", outside: str = "error"):
             if not re.fullmatch(r"\d{1,7}", s):
                 raise InputError(f"point {k} must be a node index (a whole number), found {cut(s)}", src, el_ln)
             if int(s) >= size:
-                raise InputError(f"point {k}={s} is beyond the map's Size{k}={size} (indices 0..{size - 1})", src, el_ln)
+                raise InputError(
+                    f"point {k}={s} is beyond the map's Size{k}={size} (indices 0..{size - 1})", src, el_ln
+                )
             idx.append(int(s))
         i, j = idx
         if where[j, i]:
@@ -262,13 +300,18 @@ def read_hmap(path, method: str = "linear", outside: str = "error"):
     missing = np.argwhere(np.isnan(z))
     if len(missing):
         j, i = missing[0]
-        raise InputError(f"{len(missing)} of {nx * ny} nodes not probed, e.g. X={i} Y={j}; probe the whole map", src, ln)
+        raise InputError(
+            f"{len(missing)} of {nx * ny} nodes not probed, e.g. X={i} Y={j}; probe the whole map", src, ln
+        )
     xs = x0 + np.arange(nx) * ((x1 - x0) / (nx - 1))
     ys = y0 + np.arange(ny) * ((y1 - y0) / (ny - 1))
     xs[-1], ys[-1] = x1, y1
     if method == "cubic" and (nx < 4 or ny < 4):
-        raise InputError(f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
-                         f"has {nx} x {ny}: use --interp linear", src)
+        raise InputError(
+            f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
+            f"has {nx} x {ny}: use --interp linear",
+            src,
+        )
     return _grid(xs, ys, z, method, outside, src)
 
 
@@ -276,22 +319,25 @@ def _grid(xs, ys, z, method, outside, src):
     from . import fields
 
     if np.any(np.diff(xs) <= 0) or np.any(np.diff(ys) <= 0):
-        raise InputError("the map's nodes do not have distinct coordinates (its extent is too small for its "
-                         "number of nodes)", src)
+        raise InputError(
+            "the map's nodes do not have distinct coordinates (its extent is too small for its number of nodes)", src
+        )
     return fields.GridField(xs, ys, z, method=method, outside=outside, source=src)
 
 
 def read_candle_map(path, method: str = "linear", outside: str = "error"):
     """Read a Candle ``.map`` height map as a :class:`~ncadapt.fields.GridField`."""
-    from . import fields
 
     path = Path(path)
     src = str(path)
     lines = read_text(path).splitlines()
     rows = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip()]
     if len(rows) < 3:
-        raise InputError("a Candle height map starts with three header lines (x;y;width;height, nx;ny;zbottom;ztop, "
-                         "interpolation;stepx;stepy)", src)
+        raise InputError(
+            "a Candle height map starts with three header lines (x;y;width;height, nx;ny;zbottom;ztop, "
+            "interpolation;stepx;stepy)",
+            src,
+        )
 
     def fields_of(n, text, count, what):
         parts = text.split(";")
@@ -304,8 +350,9 @@ def read_candle_map(path, method: str = "linear", outside: str = "error"):
         return out
 
     (n1, l1), (n2, l2), (n3, _) = rows[:3]
-    x0, y0, w, h = (_num(p, src, n1, c, k) for (p, c), k in zip(fields_of(n1, l1, 4, "border"),
-                                                               ("x", "y", "width", "height")))
+    x0, y0, w, h = (
+        _num(p, src, n1, c, k) for (p, c), k in zip(fields_of(n1, l1, 4, "border"), ("x", "y", "width", "height"))
+    )
     if not (w > 0 and h > 0):
         raise InputError(f"the border's width and height must be positive, found {w:g} and {h:g}", src, n1, 1)
     g = fields_of(n2, l2, 4, "grid")
@@ -320,8 +367,11 @@ def read_candle_map(path, method: str = "linear", outside: str = "error"):
         raise InputError(f"{nx} x {ny} nodes: more than {MAX_NODES:,}", src, n2, 1)
     data = rows[3:]
     if len(data) != ny:
-        raise InputError(f"the header announces {ny} rows of heights, the file has {len(data)}", src,
-                         data[ny][0] if len(data) > ny else 0)
+        raise InputError(
+            f"the header announces {ny} rows of heights, the file has {len(data)}",
+            src,
+            data[ny][0] if len(data) > ny else 0,
+        )
     z = np.empty((ny, nx))
     for i, (n, text) in enumerate(data):
         for j, (p, c) in enumerate(fields_of(n, text, nx, f"row {i + 1}")):
@@ -331,6 +381,9 @@ def read_candle_map(path, method: str = "linear", outside: str = "error"):
     xs = x0 + np.arange(nx) * (w / (nx - 1))
     ys = y0 + np.arange(ny) * (h / (ny - 1))
     if method == "cubic" and (nx < 4 or ny < 4):
-        raise InputError(f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
-                         f"has {nx} x {ny}: use --interp linear", src)
+        raise InputError(
+            f"bicubic interpolation (--interp cubic) needs a grid of at least 4 x 4 points; this one "
+            f"has {nx} x {ny}: use --interp linear",
+            src,
+        )
     return _grid(xs, ys, z, method, outside, src)

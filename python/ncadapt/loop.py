@@ -61,8 +61,10 @@ async def make_certificates(folder, host: str = "127.0.0.1") -> dict:
 
     folder = Path(folder)
     out = {}
-    for name, uri, use in (("controller", SERVER_URI, ExtendedKeyUsageOID.SERVER_AUTH),
-                           ("client", CLIENT_URI, ExtendedKeyUsageOID.CLIENT_AUTH)):
+    for name, uri, use in (
+        ("controller", SERVER_URI, ExtendedKeyUsageOID.SERVER_AUTH),
+        ("client", CLIENT_URI, ExtendedKeyUsageOID.CLIENT_AUTH),
+    ):
         key, cert = folder / f"{name}.pem", folder / f"{name}.der"
         await setup_self_signed_certificate(key, cert, uri, host, [use], {"commonName": f"ncadapt skin {name}"})
         key.chmod(0o600)  # a private key: its owner's only
@@ -175,8 +177,9 @@ class CsvSource:
             try:
                 yield float(v)
             except ValueError:
-                raise InputError(f"column thickness: expected a number, found {v!r}", self.path, r.line_num,
-                                 csv_column(row, k)) from None
+                raise InputError(
+                    f"column thickness: expected a number, found {v!r}", self.path, r.line_num, csv_column(row, k)
+                ) from None
 
 
 class CsvSink:
@@ -206,21 +209,29 @@ class CsvSink:
         header = list(self.source.header) if self.source else []
         names = [h.strip().lower() for h in header]
         k = names.index("w1_offset") if "w1_offset" in names else len(header)
-        header[k:k + 1] = ["w1_offset"]
+        header[k : k + 1] = ["w1_offset"]
         out = io.StringIO()
         w = csv.writer(out, lineterminator="\n")
         w.writerow(header)
         for row, value in self._rows:
             row = row + [""] * (len(header) - len(row))  # a short row is padded
-            row[k:k + 1] = [value]
+            row[k : k + 1] = [value]
             w.writerow(row)
         atomic_write(self.path, out.getvalue().encode())
 
 
 # ------------------------------------------------------------------------------------ OPC UA
-async def serve_machine(machines, target_depth: float, *, endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
-                        ready=None, poll: float = 0.0005, status: dict | None = None, ack_timeout: float = 5.0,
-                        security: Security | None = None):
+async def serve_machine(
+    machines,
+    target_depth: float,
+    *,
+    endpoint: str = "opc.tcp://127.0.0.1:48400/ncadapt/",
+    ready=None,
+    poll: float = 0.0005,
+    status: dict | None = None,
+    ack_timeout: float = 5.0,
+    security: Security | None = None,
+):
     """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
     its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done.
     ``Pockets`` tells the client how many pockets there are; a client that sets ``Fault`` stops
@@ -317,8 +328,13 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
             from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 
             client.application_uri = CLIENT_URI
-            await client.set_security(SecurityPolicyBasic256Sha256, security.cert, security.key,
-                                      server_certificate=security.peer_cert, mode=ua.MessageSecurityMode.SignAndEncrypt)
+            await client.set_security(
+                SecurityPolicyBasic256Sha256,
+                security.cert,
+                security.key,
+                server_certificate=security.peer_cert,
+                mode=ua.MessageSecurityMode.SignAndEncrypt,
+            )
             client.set_user(security.user)
             client.set_password(security.password)
         try:
@@ -328,7 +344,7 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
             with contextlib.suppress(Exception):
                 await client.disconnect()
             raise ConnectionRefused(str(e).strip() or type(e).__name__) from None
-        except (OSError, asyncio.TimeoutError):
+        except (TimeoutError, OSError):
             with contextlib.suppress(Exception):
                 await client.disconnect()
             if time.monotonic() + delay > deadline:
@@ -337,10 +353,20 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
             delay = min(2 * delay, 1.0)
 
 
-async def run_opcua(url: str, make_compensator, target_thickness: float, *, pockets: int | None = None,
-                    poll: float = 0.0005, latencies: list | None = None, make_guard=None,
-                    connect_timeout: float = 30.0, info: dict | None = None, stale_timeout: float = 5.0,
-                    security: Security | None = None) -> int:
+async def run_opcua(
+    url: str,
+    make_compensator,
+    target_thickness: float,
+    *,
+    pockets: int | None = None,
+    poll: float = 0.0005,
+    latencies: list | None = None,
+    make_guard=None,
+    connect_timeout: float = 30.0,
+    info: dict | None = None,
+    stale_timeout: float = 5.0,
+    security: Security | None = None,
+) -> int:
     """The compensator as an OPC UA client. ``make_compensator()`` gives a fresh compensator for
     each pocket (a negative Sequence announces the next one), ``make_guard()`` its interlocks
     (:class:`ncadapt.processes.skin.Interlocks`, the same as in a replay). ``pockets``: how many to
@@ -360,17 +386,19 @@ async def run_opcua(url: str, make_compensator, target_thickness: float, *, pock
     try:
         idx = await client.get_namespace_index(NAMESPACE)
         obj = await client.nodes.objects.get_child(f"{idx}:Controller")
-        nodes = {name: await obj.get_child(f"{idx}:{name}")
-                 for name in ("Thickness", "Sequence", "W1Offset", "Ack", "Fault")}
+        nodes = {
+            name: await obj.get_child(f"{idx}:{name}") for name in ("Thickness", "Sequence", "W1Offset", "Ack", "Fault")
+        }
         if pockets is None:
             pockets = int(await (await obj.get_child(f"{idx}:Pockets")).read_value())
             if pockets < 1:
                 raise ValueError(f"the controller announces {pockets} pockets")
         info["pockets"] = pockets
         try:
-            await _exchange(nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies,
-                            stale_timeout, info)
-        except (OSError, asyncio.TimeoutError, ua.UaError) as e:
+            await _exchange(
+                nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies, stale_timeout, info
+            )
+        except (TimeoutError, OSError, ua.UaError) as e:
             raise ControllerLost(f"the connection to the controller broke: {e or type(e).__name__}") from None
     finally:
         with contextlib.suppress(Exception):
@@ -378,8 +406,9 @@ async def run_opcua(url: str, make_compensator, target_thickness: float, *, pock
     return info["steps"]
 
 
-async def _exchange(nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies, stale_timeout,
-                    info) -> None:
+async def _exchange(
+    nodes, make_compensator, make_guard, target_thickness, pockets, poll, latencies, stale_timeout, info
+) -> None:
     """The client's side of the exchange (see :func:`run_opcua`); the totals go to ``info``."""
     from asyncua import ua
 

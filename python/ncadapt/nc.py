@@ -19,18 +19,18 @@ G1 X2
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from . import constants
 from ._io import atomic_open, atomic_write
 from ._nc import Corrector as _NativeCorrector
-from ._nc import correct_native as _nc_correct
 from ._nc import EngineError
 from ._nc import Program as _Native
+from ._nc import correct_native as _nc_correct
 from .errors import InputError, RefusedError
 
 __all__ = [
@@ -161,14 +161,15 @@ def _engine_error(e: EngineError, path: str | None) -> InputError:
     return InputError(message, path, line, col)
 
 
-def parse(text: str | bytes, name: str | None = None) -> "Program":
+def parse(text: str | bytes, name: str | None = None) -> Program:
     """Read a program from a string or bytes; ``name`` is used in error messages."""
     data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else bytes(text)
     return Program(data, name=name or "<string>")
 
 
-def correct_file(path: str | os.PathLike, output: str | os.PathLike, field: Callable[[np.ndarray], np.ndarray],
-                 **options) -> Correction:
+def correct_file(
+    path: str | os.PathLike, output: str | os.PathLike, field: Callable[[np.ndarray], np.ndarray], **options
+) -> Correction:
     """Correct the program in file ``path`` and write it to ``output``, reading and writing it
     piece by piece: memory stays bounded whatever the program's length.
 
@@ -188,7 +189,7 @@ def inspect_file(path: str | os.PathLike) -> dict:
     return _inspect(str(path), str(path))
 
 
-def read(path: str | os.PathLike) -> "Program":
+def read(path: str | os.PathLike) -> Program:
     """Read a program file. Raises :class:`InputError` naming ``path:line:col`` on bad input."""
     p = Path(path)
     try:
@@ -347,7 +348,7 @@ class Program:
         keep_unsupported: bool = False,
         clearance: float | None = None,
         progress: Callable[[str], None] | None = None,
-    ) -> "Program":
+    ) -> Program:
         """Apply a correction field and return the corrected program.
 
         Parameters
@@ -376,9 +377,20 @@ class Program:
         """
         parts: list[bytes] = []
         self._refuse_unsupported(keep_unsupported)
-        c = _correct(self._data, self.name, parts.append, field, chord_tol=chord_tol, max_segment=max_segment,
-                     limit=limit, rapids=rapids, keep_unsupported=keep_unsupported, clearance=clearance,
-                     progress=progress, keep_points=True)
+        c = _correct(
+            self._data,
+            self.name,
+            parts.append,
+            field,
+            chord_tol=chord_tol,
+            max_segment=max_segment,
+            limit=limit,
+            rapids=rapids,
+            keep_unsupported=keep_unsupported,
+            clearance=clearance,
+            progress=progress,
+            keep_points=True,
+        )
         # the corrected program is parsed only if it is used as a program again
         result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True)
         result.correction = c
@@ -504,11 +516,16 @@ class _Warnings:
         out = []
         if self.unknown:
             line, axes = self.first
-            out.append(f"{self.unknown} cutting move(s) not corrected because the position is unknown (first at line "
-                       f"{line}: {axes}: no earlier move sets it, or a move the engine does not trace left it unknown); "
-                       f"give every axis a G0/G1 at the start and after G28, G30, G53 or a canned cycle")
-        out += [f"line {ln}: rapid ends at Z{z:.4f}, below the clearance Z{self.clearance:g} inside the field's "
-                f"area, and is not corrected" for ln, z in self.low]
+            out.append(
+                f"{self.unknown} cutting move(s) not corrected because the position is unknown (first at line "
+                f"{line}: {axes}: no earlier move sets it, or a move the engine does not trace left it unknown); "
+                f"give every axis a G0/G1 at the start and after G28, G30, G53 or a canned cycle"
+            )
+        out += [
+            f"line {ln}: rapid ends at Z{z:.4f}, below the clearance Z{self.clearance:g} inside the field's "
+            f"area, and is not corrected"
+            for ln, z in self.low
+        ]
         return out
 
 
@@ -526,14 +543,36 @@ def _native_field(field) -> tuple | None:
     if type(field) is _fields.Shift:
         return ("shift", tuple(float(v) for v in field.d))
     if type(field) is _fields.GridField and field.method == "linear" and field.outside in _fields.OUTSIDE:
-        return ("grid", [float(v) for v in field.xs], [float(v) for v in field.ys],
-                field._steps[0], field._steps[1], np.ascontiguousarray(field.dz, dtype=np.float64).ravel().tolist(),
-                field.outside, tuple(float(v) for v in field.bounds))
+        return (
+            "grid",
+            [float(v) for v in field.xs],
+            [float(v) for v in field.ys],
+            field._steps[0],
+            field._steps[1],
+            np.ascontiguousarray(field.dz, dtype=np.float64).ravel().tolist(),
+            field.outside,
+            tuple(float(v) for v in field.bounds),
+        )
     return None
 
 
-def _correct_native(source, name, out_file, field, spec, *, chord_tol, max_segment, limit, rapids, keep_unsupported,
-                    clearance, say, gx, gy) -> Correction | None:
+def _correct_native(
+    source,
+    name,
+    out_file,
+    field,
+    spec,
+    *,
+    chord_tol,
+    max_segment,
+    limit,
+    rapids,
+    keep_unsupported,
+    clearance,
+    say,
+    gx,
+    gy,
+) -> Correction | None:
     """The correction run by the engine alone (reading, field, figures, emitting and writing to
     ``out_file`` in threads without the GIL), for the fields of :func:`_native_field`. None when a
     check refuses the program: ``out_file`` is then emptied and the caller runs the Python
@@ -545,10 +584,25 @@ def _correct_native(source, name, out_file, field, spec, *, chord_tol, max_segme
         shift_norm = float(np.sqrt(np.einsum("ij,ij->i", d, d))[0])
     out_file.flush()
     start = out_file.tell()
-    r = _engine(lambda: _nc_correct(source, out_file.fileno(), spec, float(chord_tol), float(max_segment), bool(rapids),
-                                    gx, gy, _PIECE_BYTES, float(limit), bool(keep_unsupported),
-                                    None if clearance is None else float(clearance), shift_norm,
-                                    lambda a, b: say(f"correcting lines {a + 1:,}-{b:,}")), name)
+    r = _engine(
+        lambda: _nc_correct(
+            source,
+            out_file.fileno(),
+            spec,
+            float(chord_tol),
+            float(max_segment),
+            bool(rapids),
+            gx,
+            gy,
+            _PIECE_BYTES,
+            float(limit),
+            bool(keep_unsupported),
+            None if clearance is None else float(clearance),
+            shift_norm,
+            lambda a, b: say(f"correcting lines {a + 1:,}-{b:,}"),
+        ),
+        name,
+    )
     if r is None:
         out_file.seek(start)
         out_file.truncate()
@@ -559,9 +613,22 @@ def _correct_native(source, name, out_file, field, spec, *, chord_tol, max_segme
     return _correction(r["stats"], r["max"], r["total"], r["n_points"], uns, keep_unsupported, notes, r["notes"])
 
 
-def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_segment=constants.MAX_SEGMENT,
-             limit=constants.LIMIT, rapids=False, keep_unsupported=False, clearance=None, progress=None,
-             keep_points=True, out_file=None) -> Correction:
+def _correct(
+    source,
+    name,
+    write,
+    field,
+    *,
+    chord_tol=constants.CHORD_TOL,
+    max_segment=constants.MAX_SEGMENT,
+    limit=constants.LIMIT,
+    rapids=False,
+    keep_unsupported=False,
+    clearance=None,
+    progress=None,
+    keep_points=True,
+    out_file=None,
+) -> Correction:
     """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
 
     ``source`` is the program's bytes or its file's path. Every check runs over the whole program
@@ -578,13 +645,30 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
     gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
     spec = _native_field(field) if out_file is not None and not keep_points else None
     if spec is not None:
-        c = _correct_native(source, name, out_file, field, spec, chord_tol=chord_tol, max_segment=max_segment,
-                            limit=limit, rapids=rapids, keep_unsupported=keep_unsupported, clearance=clearance,
-                            say=say, gx=gx, gy=gy)
+        c = _correct_native(
+            source,
+            name,
+            out_file,
+            field,
+            spec,
+            chord_tol=chord_tol,
+            max_segment=max_segment,
+            limit=limit,
+            rapids=rapids,
+            keep_unsupported=keep_unsupported,
+            clearance=clearance,
+            say=say,
+            gx=gx,
+            gy=gy,
+        )
         if c is not None:
             return c
-    run = _engine(lambda: _NativeCorrector(source, float(chord_tol), float(max_segment), bool(rapids), True,
-                                           gx, gy, _PIECE_BYTES), name)
+    run = _engine(
+        lambda: _NativeCorrector(
+            source, float(chord_tol), float(max_segment), bool(rapids), True, gx, gy, _PIECE_BYTES
+        ),
+        name,
+    )
     kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     outside: list[dict] = []
     n_outside, domain = 0, ""
@@ -615,8 +699,10 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
             refused = True
             n_outside += len(e.indices)
             domain = e.domain
-            outside += [{"line": int(lines[i]), "position": pts[i].round(4).tolist()}
-                        for i in e.indices[: max(0, 10 - len(outside))]]
+            outside += [
+                {"line": int(lines[i]), "position": pts[i].round(4).tolist()}
+                for i in e.indices[: max(0, 10 - len(outside))]
+            ]
             run.discard()
             continue
         if disp.shape != pts.shape:
@@ -630,15 +716,17 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
         # the ten largest displacements seen (a piece whose largest is below the tenth adds none)
         if len(norms) and (len(worst) < 10 or float(norms.max()) > worst[-1][0]):
             top = np.argpartition(-norms, min(10, len(norms)) - 1)[:10]
-            worst = sorted(worst + [(float(norms[i]), int(lines[i]), pts[i].copy(), disp[i].copy()) for i in top],
-                           key=lambda w: -w[0])[:10]
+            worst = sorted(
+                worst + [(float(norms[i]), int(lines[i]), pts[i].copy(), disp[i].copy()) for i in top],
+                key=lambda w: -w[0],
+            )[:10]
             refused |= worst[0][0] > limit
         if keep_points:
             kept.append((pts.copy(), disp, lines))
         if refused:
             run.discard()  # the output is no longer wanted; the checks still see every piece
         else:
-            write(_engine(lambda: run.emit(disp), name))
+            write(_engine(lambda d=disp: run.emit(d), name))
     uns = tuple(Unsupported(*u) for u in run.unsupported())
     if uns and not keep_unsupported:
         raise _unsupported_error(name, uns)
@@ -667,12 +755,24 @@ def _correct(source, name, write, field, *, chord_tol=constants.CHORD_TOL, max_s
         pts_all = np.concatenate([k[0] for k in kept]) if kept else np.zeros((0, 3))
         disp_all = np.concatenate([k[1] for k in kept]) if kept else np.zeros((0, 3))
         line_all = np.concatenate([k[2] for k in kept]) if kept else np.zeros(0, dtype=np.int64)
-    return _correction(run.stats(), worst_norm, total, n_pts, uns, keep_unsupported, notes, run.notes(),
-                       pts_all, disp_all, line_all)
+    return _correction(
+        run.stats(), worst_norm, total, n_pts, uns, keep_unsupported, notes, run.notes(), pts_all, disp_all, line_all
+    )
 
 
-def _correction(stats, max_norm, total, n_pts, uns, keep_unsupported, notes, engine_notes, points=None,
-                displacements=None, line=None) -> Correction:
+def _correction(
+    stats,
+    max_norm,
+    total,
+    n_pts,
+    uns,
+    keep_unsupported,
+    notes,
+    engine_notes,
+    points=None,
+    displacements=None,
+    line=None,
+) -> Correction:
     """The :class:`Correction` of a run: its engine's figures and the warnings gathered."""
     warnings = notes.messages()
     if keep_unsupported and uns:
@@ -697,8 +797,10 @@ def _correction(stats, max_norm, total, n_pts, uns, keep_unsupported, notes, eng
 
 def _inspect(source, name) -> dict:
     """Units, planes, motion counts, extents, unsupported constructs and notes, piece by piece."""
-    run = _engine(lambda: _NativeCorrector(source, constants.CHORD_TOL, constants.MAX_SEGMENT, True, False, [], [],
-                                           _PIECE_BYTES), name)
+    run = _engine(
+        lambda: _NativeCorrector(source, constants.CHORD_TOL, constants.MAX_SEGMENT, True, False, [], [], _PIECE_BYTES),
+        name,
+    )
     lo = {k: np.full(3, np.inf) for k in ("all", "feed")}
     hi = {k: np.full(3, -np.inf) for k in ("all", "feed")}
     while (chunk := _engine(run.next, name)) is not None:
@@ -712,8 +814,10 @@ def _inspect(source, name) -> dict:
                 lo[k] = np.minimum(lo[k], pts[sel].min(axis=0))
                 hi[k] = np.maximum(hi[k], pts[sel].max(axis=0))
     s = run.summary()
-    ext = {k: ({a: [float(lo[k][i]), float(hi[k][i])] for i, a in enumerate("xyz")} if np.isfinite(lo[k]).all()
-               else None) for k in ("all", "feed")}
+    ext = {
+        k: ({a: [float(lo[k][i]), float(hi[k][i])] for i, a in enumerate("xyz")} if np.isfinite(lo[k]).all() else None)
+        for k in ("all", "feed")
+    }
     units = "mixed" if s["inch_lines"] and s["mm_lines"] else ("inch" if s["inch_lines"] else "mm")
     return {
         "file": name,

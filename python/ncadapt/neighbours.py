@@ -18,6 +18,8 @@ def pairs_within(tree: cKDTree, r: float, what: str) -> np.ndarray:
     # counting walks the tree without listing: ordered pairs, each point with itself included
     m = (int(tree.count_neighbors(tree, r)) - tree.n) // 2
     if m > MAX_PAIRS:
-        raise InputError(f"{what} {r:g} mm joins {m:,} pairs of the {tree.n:,} points, more than {MAX_PAIRS:,}; "
-                         "give a smaller distance")
+        raise InputError(
+            f"{what} {r:g} mm joins {m:,} pairs of the {tree.n:,} points, more than {MAX_PAIRS:,}; "
+            "give a smaller distance"
+        )
     return tree.query_pairs(r, output_type="ndarray")

@@ -38,9 +38,24 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["DIALECTS", "GridPlan", "FacePoints", "Plan", "grid_points", "grid_program", "face_points", "points_program",
-           "plan_text", "read_plan", "companion_inputs", "read_log", "read_log_with_plan", "is_plan", "PLAN_MAGIC",
-           "MAX_POINTS"]
+__all__ = [
+    "DIALECTS",
+    "GridPlan",
+    "FacePoints",
+    "Plan",
+    "grid_points",
+    "grid_program",
+    "face_points",
+    "points_program",
+    "plan_text",
+    "read_plan",
+    "companion_inputs",
+    "read_log",
+    "read_log_with_plan",
+    "is_plan",
+    "PLAN_MAGIC",
+    "MAX_POINTS",
+]
 
 DIALECTS = ("linuxcnc", "grbl", "fanuc", "sinumerik")
 #: Most points one program probes.
@@ -84,8 +99,10 @@ def grid_points(extent, step: float | None = None, nx: int | None = None, ny: in
             raise ValueError(f"step must be positive, got {step}")
         fx, fy = math.ceil((x1 - x0) / step - 1e-9) + 1.0, math.ceil((y1 - y0) / step - 1e-9) + 1.0
         if not fx * fy <= MAX_POINTS:
-            raise ValueError(f"a spacing of {step:g} mm over {x1 - x0:g} x {y1 - y0:g} mm needs {fx:.0f} x {fy:.0f} "
-                             f"points: more than {MAX_POINTS:,}; use a larger step")
+            raise ValueError(
+                f"a spacing of {step:g} mm over {x1 - x0:g} x {y1 - y0:g} mm needs {fx:.0f} x {fy:.0f} "
+                f"points: more than {MAX_POINTS:,}; use a larger step"
+            )
         nx, ny = int(fx), int(fy)
         nx, ny = max(nx, 2), max(ny, 2)
     if nx is None or ny is None or nx < 2 or ny < 2:
@@ -167,8 +184,16 @@ def _touch(dialect, target, feed, fast_feed, log, two_touch, back):
     return out
 
 
-def grid_program(plan: GridPlan, *, safe_z: float, depth: float, feed: float, fast_feed: float | None = None,
-                 dialect: str = "linuxcnc", log: str = "probe-log.txt") -> str:
+def grid_program(
+    plan: GridPlan,
+    *,
+    safe_z: float,
+    depth: float,
+    feed: float,
+    fast_feed: float | None = None,
+    dialect: str = "linuxcnc",
+    log: str = "probe-log.txt",
+) -> str:
     """The probing program of a grid: retract to ``safe_z``, move over each point, probe down to
     ``depth`` at ``feed`` mm/min (first at ``fast_feed`` and again slowly when given), back to
     ``safe_z``. Absolute millimetres (G21 G90), work coordinates."""
@@ -176,8 +201,11 @@ def grid_program(plan: GridPlan, *, safe_z: float, depth: float, feed: float, fa
     if not depth < safe_z:
         raise ValueError(f"--depth ({depth:g}) must be below --safe-z ({safe_z:g})")
     two = fast_feed is not None
-    lines = _header(dialect, f"ncadapt probe grid: {plan.nx} x {plan.ny} points, serpentine, X "
-                             f"{_f(plan.extent[0])}..{_f(plan.extent[1])} Y {_f(plan.extent[2])}..{_f(plan.extent[3])}")
+    lines = _header(
+        dialect,
+        f"ncadapt probe grid: {plan.nx} x {plan.ny} points, serpentine, X "
+        f"{_f(plan.extent[0])}..{_f(plan.extent[1])} Y {_f(plan.extent[2])}..{_f(plan.extent[3])}",
+    )
     lines += _log_open(dialect, log, two)
     lines.append(f"G0 Z{_f(safe_z)}")
     back = {"Z": min(BACKOFF, safe_z - depth)}
@@ -235,8 +263,12 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
     tree = cKDTree(edges)
     # the face's lengths along u and v (mid lines), for a grid of square-ish cells
     um, vm = (u0 + u1) / 2, (v0 + v1) / 2
-    lu = np.linalg.norm(np.diff(cad.face_evaluate(face, np.linspace(u0, u1, 33), np.full(33, vm))[0], axis=0), axis=1).sum()
-    lv = np.linalg.norm(np.diff(cad.face_evaluate(face, np.full(33, um), np.linspace(v0, v1, 33))[0], axis=0), axis=1).sum()
+    lu = np.linalg.norm(
+        np.diff(cad.face_evaluate(face, np.linspace(u0, u1, 33), np.full(33, vm))[0], axis=0), axis=1
+    ).sum()
+    lv = np.linalg.norm(
+        np.diff(cad.face_evaluate(face, np.full(33, um), np.linspace(v0, v1, 33))[0], axis=0), axis=1
+    ).sum()
     aspect = max(lu, 1e-9) / max(lv, 1e-9)
     top = max(float(edges[:, 2].max()), cad.face_top(face))
 
@@ -259,18 +291,23 @@ def face_points(face, n: int, *, margin: float, adaptive: bool = False, seed: in
         kmean = float(kk[ok].mean())
         w = 0.2 + (kk[ok] / kmean if kmean > 0 else 0.8)
         if ok.sum() < n:
-            raise ValueError(f"the face has room for {int(ok.sum())} points {margin:g} mm from its edges, fewer than {n}")
+            raise ValueError(
+                f"the face has room for {int(ok.sum())} points {margin:g} mm from its edges, fewer than {n}"
+            )
         rng = np.random.default_rng(seed)
         keys = rng.random(int(ok.sum())) ** (1.0 / w)
         pick = np.sort(np.argsort(-keys)[:n])
         idx = np.flatnonzero(ok)[pick]
         tu, tv = fu[idx], fv[idx]
     else:
-        a0, a1, b0, b1 = _tight_box(face, tree, margin, fu[ok].min(), fu[ok].max(), fv[ok].min(), fv[ok].max(),
-                                    (u0, u1, v0, v1))
+        a0, a1, b0, b1 = _tight_box(
+            face, tree, margin, fu[ok].min(), fu[ok].max(), fv[ok].min(), fv[ok].max(), (u0, u1, v0, v1)
+        )
         m = n
         for _ in range(40):
-            gu, gv = grid(m, a0, a1, b0, b1, pad=False) if n > 1 else (np.array([(a0 + a1) / 2]), np.array([(b0 + b1) / 2]))
+            gu, gv = (
+                grid(m, a0, a1, b0, b1, pad=False) if n > 1 else (np.array([(a0 + a1) / 2]), np.array([(b0 + b1) / 2]))
+            )
             gok, *_ = _admissible(face, gu, gv, tree, margin)
             if gok.sum() >= n:
                 break
@@ -292,7 +329,8 @@ def _tight_box(face, tree, margin, a0, a1, b0, b1, bounds):
 
     box = [a0, a1, b0, b1]
     for side, limit in enumerate(bounds):
-        def fine(t):
+
+        def fine(t, side=side):
             q = list(box)
             q[side] = t
             if side < 2:
@@ -325,9 +363,19 @@ def _grid_shape(m: int, aspect: float) -> tuple[int, int]:
     return best[1], best[2]
 
 
-def points_program(points, normals, *, approach: float, overtravel: float, feed: float, safe_z: float,
-                   stylus_radius: float, dialect: str = "linuxcnc", log: str = "probe-log.txt",
-                   fast_feed: float | None = None) -> str:
+def points_program(
+    points,
+    normals,
+    *,
+    approach: float,
+    overtravel: float,
+    feed: float,
+    safe_z: float,
+    stylus_radius: float,
+    dialect: str = "linuxcnc",
+    log: str = "probe-log.txt",
+    fast_feed: float | None = None,
+) -> str:
     """The inspection program: for each nominal point p (outward normal n) a rapid over
     p + approach·n at ``safe_z``, down to it, a probe move towards p − overtravel·n (the ball
     centre), back to p + approach·n and up to ``safe_z``."""
@@ -335,15 +383,18 @@ def points_program(points, normals, *, approach: float, overtravel: float, feed:
     p = np.asarray(points, float)
     nn = np.asarray(normals, float)
     if not approach > stylus_radius:
-        raise ValueError(f"--approach ({approach:g} mm) must exceed the stylus radius ({stylus_radius:g} mm): the "
-                         "ball must start clear of the surface")
+        raise ValueError(
+            f"--approach ({approach:g} mm) must exceed the stylus radius ({stylus_radius:g} mm): the "
+            "ball must start clear of the surface"
+        )
     start = p + approach * nn
     end = p - overtravel * nn
     if not safe_z >= start[:, 2].max():
         raise ValueError(f"--safe-z ({safe_z:g}) is below the highest start point ({start[:, 2].max():.4f})")
     two = fast_feed is not None
-    lines = _header(dialect, f"ncadapt probe points: {len(p)} points along their normals, stylus radius "
-                             f"{_f(stylus_radius)} mm")
+    lines = _header(
+        dialect, f"ncadapt probe points: {len(p)} points along their normals, stylus radius {_f(stylus_radius)} mm"
+    )
     lines += _log_open(dialect, log, two)
     lines.append(f"G0 Z{_f(safe_z)}")
     for s, e, n in zip(start, end, nn):
@@ -366,8 +417,7 @@ def plan_text(points, normals, *, stylus_radius: float, log: str, ids=None, touc
     p = np.asarray(points, float)
     nn = np.asarray(normals, float)
     ids = ids or [f"P{k + 1}" for k in range(len(p))]
-    rows = [f"{PLAN_MAGIC}: point k is line k of the probe log",
-            f"# log={log}", f"# stylus_radius={stylus_radius:.6f}"]
+    rows = [f"{PLAN_MAGIC}: point k is line k of the probe log", f"# log={log}", f"# stylus_radius={stylus_radius:.6f}"]
     if touches != 1:
         rows.append(f"# touches={touches}")
     rows.append("id,x,y,z,i,j,k")
@@ -507,23 +557,47 @@ def read_log_with_plan(plan_path, log_path=None, probe_radius: float = 0.0):
             raise InputError("the plan names no log ('# log=FILE'); give the log", plan.source, 1, 1)
         log_path = Path(plan.source).parent / plan.log
         if not Path(log_path).is_file():
-            raise InputError(f"the plan's log {plan.log!r} is not beside the plan ({log_path}); copy the probe log "
-                             "from the machine there", plan.source, 2, 1)
+            raise InputError(
+                f"the plan's log {plan.log!r} is not beside the plan ({log_path}); copy the probe log "
+                "from the machine there",
+                plan.source,
+                2,
+                1,
+            )
     if probe_radius not in (0.0, plan.stylus_radius):
-        raise InputError(f"the plan records the stylus radius {plan.stylus_radius:g} mm; --probe-radius "
-                         f"{probe_radius:g} disagrees (leave it out)", plan.source, 3, 1)
+        raise InputError(
+            f"the plan records the stylus radius {plan.stylus_radius:g} mm; --probe-radius "
+            f"{probe_radius:g} disagrees (leave it out)",
+            plan.source,
+            3,
+            1,
+        )
     measured, lns = read_log(log_path)
     if plan.touches == 2:  # a fast and a slow touch per point: the slow one counts
         if len(measured) % 2:
-            raise InputError(f"the plan has two touches per point and the log {len(measured)} entries, an odd number: "
-                             "the probing stopped between the two touches", str(log_path))
+            raise InputError(
+                f"the plan has two touches per point and the log {len(measured)} entries, an odd number: "
+                "the probing stopped between the two touches",
+                str(log_path),
+            )
         measured, lns = measured[1::2], lns[1::2]
     k, n = len(measured), len(plan.nominal)
     if k < n:
-        raise InputError(f"the log has {k} probed point(s), the plan {n}: the probing stopped before point "
-                         f"{plan.ids[k]} (plan line {plan.lines[k]})", str(log_path))
+        raise InputError(
+            f"the log has {k} probed point(s), the plan {n}: the probing stopped before point "
+            f"{plan.ids[k]} (plan line {plan.lines[k]})",
+            str(log_path),
+        )
     if k > n:
-        raise InputError(f"the log has {k} probed points, the plan only {n}: not this plan's log", str(log_path),
-                         int(lns[n]), 1)
-    return from_arrays(plan.nominal, plan.normal, measured=measured, ids=plan.ids,
-                       probe_radius=plan.stylus_radius, lines=plan.lines, source=plan.source)
+        raise InputError(
+            f"the log has {k} probed points, the plan only {n}: not this plan's log", str(log_path), int(lns[n]), 1
+        )
+    return from_arrays(
+        plan.nominal,
+        plan.normal,
+        measured=measured,
+        ids=plan.ids,
+        probe_radius=plan.stylus_radius,
+        lines=plan.lines,
+        source=plan.source,
+    )

@@ -72,7 +72,9 @@ class Weights:
         if self.kind == "knn":
             out = f"{self.neighbors} nearest neighbours"
         elif self.kind == "idw":
-            out = f"1/d^{self.power:g}, " + (f"pairs closer than {self.threshold:g} mm" if self.threshold else "all pairs")
+            out = f"1/d^{self.power:g}, " + (
+                f"pairs closer than {self.threshold:g} mm" if self.threshold else "all pairs"
+            )
         else:
             out = self.kind
         return out + (f" (chosen for more than {AUTO_ALL_PAIRS_MAX_N:,} points)" if self.chosen else "")
@@ -269,16 +271,23 @@ def moran(
         chosen = threshold is None and len(v) > AUTO_ALL_PAIRS_MAX_N
         weights = "knn" if chosen else "idw"
     if weights == "idw" and threshold is None and len(v) > ALL_PAIRS_MAX_N:
-        raise InputError(f"all-pairs inverse-distance weights over {len(v):,} points need {len(v) ** 2:.2g} distances "
-                         f"(more than {ALL_PAIRS_MAX_N:,} points); give a distance band (--threshold MM) or knn weights")
+        raise InputError(
+            f"all-pairs inverse-distance weights over {len(v):,} points need {len(v) ** 2:.2g} distances "
+            f"(more than {ALL_PAIRS_MAX_N:,} points); give a distance band (--threshold MM) or knn weights"
+        )
     if not power >= 1:
         raise ValueError(f"power must be >= 1, got {power}")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
     if threshold is not None and not threshold > 0:
         raise ValueError(f"threshold must be > 0 mm, got {threshold}")
-    wt = Weights(weights, float(power) if weights == "idw" else None, threshold if weights == "idw" else None,
-                 (int(neighbors) if neighbors else 8) if weights == "knn" else None, chosen)
+    wt = Weights(
+        weights,
+        float(power) if weights == "idw" else None,
+        threshold if weights == "idw" else None,
+        (int(neighbors) if neighbors else 8) if weights == "knn" else None,
+        chosen,
+    )
     z = _centred(v)
     if float(z @ z) == 0:
         raise InputError("all values are equal: Moran's I is undefined")
@@ -321,7 +330,6 @@ def _with_permutations(m: Moran, w, z: np.ndarray, r: int = PERMUTATIONS, seed: 
     same weights (seeded: the same data give the same p), p = (1 + #{I_r ≥ I}) / (r + 1), a test
     of exact size under randomisation (Hope 1968; esda's ``p_sim``, one-sided upwards)."""
     rng = np.random.default_rng(seed)
-    n = len(z)
     zz = float(z @ z)
     # zᵀWz of the observed order, recomputed the way the permutations are, so ties compare alike
     obs = float(z @ (w @ z))
@@ -342,7 +350,7 @@ def _moran(v, s0, s1, s2, zwz, alpha, wt) -> Moran:
     i_stat = n / s0 * zwz / zz
     ei = -1.0 / (n - 1)
     v_norm = (n * n * s1 - n * s2 + 3 * s0 * s0) / ((n * n - 1) * s0 * s0) - ei * ei
-    b2 = n * float((z ** 4).sum()) / zz ** 2
+    b2 = n * float((z**4).sum()) / zz**2
     num = n * ((n * n - 3 * n + 3) * s1 - n * s2 + 3 * s0 * s0) - b2 * ((n * n - n) * s1 - 2 * n * s2 + 6 * s0 * s0)
     v_rand = num / ((n - 1) * (n - 2) * (n - 3) * s0 * s0) - ei * ei
     z_n = (i_stat - ei) / math.sqrt(v_norm)
@@ -350,10 +358,17 @@ def _moran(v, s0, s1, s2, zwz, alpha, wt) -> Moran:
     if not all(math.isfinite(x) for x in (i_stat, v_norm, v_rand, z_n)):
         raise InputError(f"Moran's I is not finite with these weights ({wt.kind}): the weights are degenerate")
     return Moran(
-        I=i_stat, expected=ei, variance_normality=v_norm, variance_randomization=v_rand,
-        z_normality=z_n, z_randomization=z_r,
-        p_normality=float(stats.norm.sf(z_n)), p_randomization=float(stats.norm.sf(z_r)),
-        alpha=alpha, n=n, weights=wt,
+        I=i_stat,
+        expected=ei,
+        variance_normality=v_norm,
+        variance_randomization=v_rand,
+        z_normality=z_n,
+        z_randomization=z_r,
+        p_normality=float(stats.norm.sf(z_n)),
+        p_randomization=float(stats.norm.sf(z_r)),
+        alpha=alpha,
+        n=n,
+        weights=wt,
     )
 
 
@@ -391,7 +406,7 @@ def pearson_normality(x) -> tuple[float, int, float]:
     n = len(x)
     if n < 8:
         raise InputError(f"the normality test needs at least 8 values, got {n}")
-    k = max(5, math.ceil(2 * n ** 0.4))
+    k = max(5, math.ceil(2 * n**0.4))
     mu, sd = x.mean(), x.std(ddof=1)
     if sd == 0:
         return math.inf, k - 3, 0.0
@@ -425,9 +440,18 @@ def noise(points, residual, **moran_options) -> Noise:
     chi2, dof, pp = pearson_normality(r)
     r1, t, tp = lag1_autocorrelation(r)
     m = moran(points, r, **moran_options)
-    return Noise(std=float(r.std(ddof=1)), pearson_chi2=chi2, pearson_dof=dof, pearson_p=pp,
-                 lag1_r=r1, student_t=t, student_p=tp, moran_z=m.z_randomization, moran_p=m.p_value,
-                 alpha=m.alpha)
+    return Noise(
+        std=float(r.std(ddof=1)),
+        pearson_chi2=chi2,
+        pearson_dof=dof,
+        pearson_p=pp,
+        lag1_r=r1,
+        student_t=t,
+        student_p=tp,
+        moran_z=m.z_randomization,
+        moran_p=m.p_value,
+        alpha=m.alpha,
+    )
 
 
 @dataclass(frozen=True)
@@ -486,5 +510,10 @@ def p_text(p: float, digits: int = 3) -> str:
 def summary(values) -> dict:
     """mean, std, min, max, rms of a set of values."""
     v = np.asarray(values, dtype=float).ravel()
-    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
-            "min": float(v.min()), "max": float(v.max()), "rms": float(np.sqrt((v * v).mean()))}
+    return {
+        "mean": float(v.mean()),
+        "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+        "min": float(v.min()),
+        "max": float(v.max()),
+        "rms": float(np.sqrt((v * v).mean())),
+    }

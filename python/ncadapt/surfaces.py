@@ -48,7 +48,7 @@ class Surface:
         object.__setattr__(self, "_s", [RectBivariateSpline(u, v, g[:, :, k], kx=3, ky=3, s=0) for k in range(3)])
 
     @classmethod
-    def from_function(cls, f, u_range, v_range, nu: int = 41, nv: int = 41) -> "Surface":
+    def from_function(cls, f, u_range, v_range, nu: int = 41, nv: int = 41) -> Surface:
         """Interpolate ``f(u, v) -> (x, y, z)`` (vectorised) on an nu × nv grid."""
         u = np.linspace(*u_range, nu)
         v = np.linspace(*v_range, nv)
@@ -56,7 +56,7 @@ class Surface:
         return cls(u, v, np.stack(f(U, V), axis=-1))
 
     @classmethod
-    def height(cls, f, x_range, y_range, nx: int = 41, ny: int = 41) -> "Surface":
+    def height(cls, f, x_range, y_range, nx: int = 41, ny: int = 41) -> Surface:
         """A height field z = f(x, y), parametrised by u = x, v = y."""
         return cls.from_function(lambda x, y: (x, y, f(x, y)), x_range, y_range, nx, ny)
 
@@ -72,8 +72,13 @@ class Surface:
 
     def derivatives(self, u, v):
         """Q_u, Q_v, Q_uu, Q_uv, Q_vv."""
-        return (self._ev(u, v, 1, 0), self._ev(u, v, 0, 1), self._ev(u, v, 2, 0), self._ev(u, v, 1, 1),
-                self._ev(u, v, 0, 2))
+        return (
+            self._ev(u, v, 1, 0),
+            self._ev(u, v, 0, 1),
+            self._ev(u, v, 2, 0),
+            self._ev(u, v, 1, 1),
+            self._ev(u, v, 0, 2),
+        )
 
     def normal(self, u, v) -> np.ndarray:
         """Unit normal Q_u × Q_v / |Q_u × Q_v|."""
@@ -100,7 +105,7 @@ class Surface:
         ctrl = np.stack([t[2].reshape(ncu, ncv) for t in tck], axis=-1)
         return tu, tv, ctrl
 
-    def with_grid(self, grid) -> "Surface":
+    def with_grid(self, grid) -> Surface:
         """The same parametrisation through other grid points (a compensated surface)."""
         return Surface(self.u, self.v, grid)
 
@@ -126,7 +131,7 @@ class Frame:
     axes: np.ndarray  # (3, 3) rows e_u, e_v, e_w
 
     @classmethod
-    def along(cls, w) -> "Frame":
+    def along(cls, w) -> Frame:
         w = np.asarray(w, float)
         w = w / np.linalg.norm(w)
         k = int(np.argmin(np.abs(w)))
@@ -135,20 +140,26 @@ class Frame:
         return cls(np.array([u, np.cross(w, u), w]))
 
     @classmethod
-    def fit(cls, normals, source: str | None = None) -> "Frame":
+    def fit(cls, normals, source: str | None = None) -> Frame:
         n = np.asarray(normals, float)
         m = n.sum(axis=0)
         if np.linalg.norm(m) < 1e-9 * max(len(n), 1):
-            raise InputError("the normals cancel out: the part is not a height field over one plane; "
-                             "measure and compensate it in patches", source)
+            raise InputError(
+                "the normals cancel out: the part is not a height field over one plane; "
+                "measure and compensate it in patches",
+                source,
+            )
         m /= np.linalg.norm(m)
         k = int(np.argmax(np.abs(m)))
         w = m if abs(m[k]) < np.cos(np.radians(AXIS_SNAP_DEG)) else np.sign(m[k]) * np.eye(3)[k]
         worst = float(np.min(n @ w))
         if worst <= np.cos(np.radians(MAX_TILT_DEG)):
             deg = float(np.degrees(np.arccos(np.clip(worst, -1, 1))))
-            raise InputError(f"a normal is {deg:.0f}° from the viewing direction (more than {MAX_TILT_DEG:.0f}°): the "
-                             "part is not a height field over one plane; measure and compensate it in patches", source)
+            raise InputError(
+                f"a normal is {deg:.0f}° from the viewing direction (more than {MAX_TILT_DEG:.0f}°): the "
+                "part is not a height field over one plane; measure and compensate it in patches",
+                source,
+            )
         return cls.along(w)
 
     @property

@@ -4,8 +4,8 @@
 
 use nc::emit::{EmitState, EmitStats, Emitter};
 use nc::field::{Field, Grid, Outside};
-use nc::pipeline::{self, Options, Outcome};
 use nc::interp::{Interp, NAXES};
+use nc::pipeline::{self, Options, Outcome};
 use nc::sample::{SampleOpts, Samples};
 use nc::stream::{scan_style, Piece, Reader, Stream};
 use nc::NcError;
@@ -15,13 +15,22 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
-create_exception!(_nc, EngineError, PyValueError, "An error of the NC engine: args (kind, line, col, message).");
+create_exception!(
+    _nc,
+    EngineError,
+    PyValueError,
+    "An error of the NC engine: args (kind, line, col, message)."
+);
 
 /// The one conversion of engine errors into Python exceptions.
 fn to_py(e: NcError) -> PyErr {
     match e {
-        NcError::Parse { line, col, message } => EngineError::new_err(("parse", line, col, message)),
-        NcError::Interpret { line, col, message } => EngineError::new_err(("interpret", line, col, message)),
+        NcError::Parse { line, col, message } => {
+            EngineError::new_err(("parse", line, col, message))
+        }
+        NcError::Interpret { line, col, message } => {
+            EngineError::new_err(("interpret", line, col, message))
+        }
         NcError::Usage(m) => PyValueError::new_err(m),
     }
 }
@@ -32,7 +41,8 @@ compile_error!("the array exchange with numpy assumes a little-endian machine");
 /// The bytes of a slice of plain numbers (one copy, into the Python bytes object).
 fn raw_bytes<'py, T: Copy>(py: Python<'py>, v: &[T]) -> Bound<'py, PyBytes> {
     // SAFETY: f64 and u32 have no padding and every bit pattern is a valid byte sequence.
-    let b = unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) };
+    let b =
+        unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, std::mem::size_of_val(v)) };
     PyBytes::new(py, b)
 }
 
@@ -44,7 +54,9 @@ fn u32_bytes<'py>(py: Python<'py>, v: impl Iterator<Item = u32>) -> Bound<'py, P
 /// The values of a C-contiguous float64 buffer.
 fn f64_slice(buf: &PyBuffer<f64>) -> PyResult<&[f64]> {
     if !buf.is_c_contiguous() {
-        return Err(PyValueError::new_err("displacements must be a C-contiguous float64 array"));
+        return Err(PyValueError::new_err(
+            "displacements must be a C-contiguous float64 array",
+        ));
     }
     // SAFETY: a contiguous buffer of item_count f64 values, held alive by `buf` while we read;
     // the caller passes an array it does not change during the call.
@@ -69,7 +81,12 @@ fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict
     let flags: Vec<u8> = it
         .records
         .iter()
-        .map(|r| r.inch as u8 | (r.incremental as u8) << 1 | (r.arc_absolute as u8) << 2 | (r.supported as u8) << 3)
+        .map(|r| {
+            r.inch as u8
+                | (r.incremental as u8) << 1
+                | (r.arc_absolute as u8) << 2
+                | (r.supported as u8) << 3
+        })
         .collect();
     let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();
     d.set_item("motion", PyBytes::new(py, &motion))?;
@@ -86,7 +103,9 @@ fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict
 }
 
 fn unsupported_list(u: &[nc::interp::Unsupported]) -> Vec<(u32, u32, String, u32)> {
-    u.iter().map(|u| (u.line + 1, u.col + 1, u.construct.clone(), u.blocks)).collect()
+    u.iter()
+        .map(|u| (u.line + 1, u.col + 1, u.construct.clone(), u.blocks))
+        .collect()
 }
 
 fn notes_list(n: &[nc::interp::Note]) -> Vec<(u32, String)> {
@@ -118,7 +137,9 @@ impl Program {
     fn parse(py: Python<'_>, data: &[u8]) -> PyResult<Self> {
         // a borrowed slice, copied once (a Vec<u8> argument would be extracted byte by byte)
         let data = data.to_vec();
-        let inner = py.allow_threads(|| nc::Program::parse(data)).map_err(to_py)?;
+        let inner = py
+            .allow_threads(|| nc::Program::parse(data))
+            .map_err(to_py)?;
         Ok(Program { inner })
     }
 
@@ -171,14 +192,29 @@ impl Program {
         grid_x: Vec<f64>,
         grid_y: Vec<f64>,
     ) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyBytes>)> {
-        let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y };
-        let s = py.allow_threads(|| self.inner.sample(&opts)).map_err(to_py)?;
+        let opts = SampleOpts {
+            chord_tol,
+            max_segment,
+            include_rapids,
+            only_supported,
+            grid_x,
+            grid_y,
+        };
+        let s = py
+            .allow_threads(|| self.inner.sample(&opts))
+            .map_err(to_py)?;
         Ok((raw_bytes(py, &s.xyz), raw_bytes(py, &s.rec)))
     }
 }
 
 /// A piece sampled for Python: first line, end line, xyz bytes, record bytes, the piece's records.
-type ChunkArrays<'py> = (usize, usize, Bound<'py, PyBytes>, Bound<'py, PyBytes>, Bound<'py, PyDict>);
+type ChunkArrays<'py> = (
+    usize,
+    usize,
+    Bound<'py, PyBytes>,
+    Bound<'py, PyBytes>,
+    Bound<'py, PyDict>,
+);
 
 /// One piece handed to the emitting thread: its lines, samples and displacements.
 struct Job {
@@ -211,7 +247,8 @@ impl Source {
             Source::Bytes(b) => Box::new(std::io::Cursor::new(Shared(b.clone()))),
             Source::File(p) => Box::new(std::io::BufReader::with_capacity(
                 1 << 20,
-                std::fs::File::open(p).map_err(|e| NcError::Usage(format!("cannot read the program: {e}")))?,
+                std::fs::File::open(p)
+                    .map_err(|e| NcError::Usage(format!("cannot read the program: {e}")))?,
             )),
         })
     }
@@ -268,7 +305,14 @@ impl Corrector {
                 Ok(Stream::new(src.open()?, piece_bytes, style, crlf))
             })
             .map_err(to_py)?;
-        let opts = SampleOpts { chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y };
+        let opts = SampleOpts {
+            chord_tol,
+            max_segment,
+            include_rapids,
+            only_supported,
+            grid_x,
+            grid_y,
+        };
         let (jobs, job_rx) = std::sync::mpsc::channel::<Job>();
         let (done_tx, done) = std::sync::mpsc::channel::<Done>();
         let worker = std::thread::spawn(move || {
@@ -281,7 +325,11 @@ impl Corrector {
                 let r = em.lines(0..p.lexed.lines.len(), &job.samples, &job.disp, &mut out);
                 state = Some(em.into_state());
                 let failed = r.is_err();
-                if done_tx.send(r.map(|_| (out, job.samples, job.disp))).is_err() || failed {
+                if done_tx
+                    .send(r.map(|_| (out, job.samples, job.disp)))
+                    .is_err()
+                    || failed
+                {
                     break;
                 }
             }
@@ -305,12 +353,16 @@ impl Corrector {
     /// them), or None at the end of the program.
     fn next<'py>(&mut self, py: Python<'py>) -> PyResult<Option<ChunkArrays<'py>>> {
         if self.current.is_some() {
-            return Err(PyValueError::new_err("emit or discard the current piece before reading the next"));
+            return Err(PyValueError::new_err(
+                "emit or discard the current piece before reading the next",
+            ));
         }
         let mut samples = self.spare.pop().map(|(s, _)| s).unwrap_or_default();
         let (stream, opts) = (&mut self.stream, &self.opts);
         let r = py.allow_threads(|| -> Result<Option<Piece>, NcError> {
-            let Some(p) = stream.next_piece()? else { return Ok(None) };
+            let Some(p) = stream.next_piece()? else {
+                return Ok(None);
+            };
             nc::sample::sample_range(&p.interp, opts, 0..p.interp.records.len(), &mut samples)?;
             Ok(Some(p))
         });
@@ -327,7 +379,13 @@ impl Corrector {
         };
         let (a, b) = (piece.line_base, piece.line_base + piece.lexed.lines.len());
         let recs = records_dict(py, &piece.interp)?;
-        let r = (a, b, raw_bytes(py, &samples.xyz), raw_bytes(py, &samples.rec), recs);
+        let r = (
+            a,
+            b,
+            raw_bytes(py, &samples.xyz),
+            raw_bytes(py, &samples.rec),
+            recs,
+        );
         self.current = Some((piece, samples));
         Ok(Some(r))
     }
@@ -335,17 +393,32 @@ impl Corrector {
     /// Hand the current piece with its displacements (C-contiguous float64, 3 per sample) to the
     /// emitting thread; returns the output of the piece handed before (empty for the first).
     fn emit<'py>(&mut self, py: Python<'py>, disp: PyBuffer<f64>) -> PyResult<Bound<'py, PyBytes>> {
-        let (piece, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no piece read"))?;
+        let (piece, samples) = self
+            .current
+            .take()
+            .ok_or_else(|| PyValueError::new_err("no piece read"))?;
         let d = f64_slice(&disp)?;
         if d.len() != samples.xyz.len() {
-            return Err(PyValueError::new_err(format!("displacements have {} values, expected {}", d.len(), samples.xyz.len())));
+            return Err(PyValueError::new_err(format!(
+                "displacements have {} values, expected {}",
+                d.len(),
+                samples.xyz.len()
+            )));
         }
         let mut buf = self.spare.pop().map(|(_, v)| v).unwrap_or_default();
         buf.clear();
         buf.extend_from_slice(d);
         let prev = self.collect(py)?;
-        let jobs = self.jobs.as_ref().ok_or_else(|| PyValueError::new_err("the correction has finished"))?;
-        jobs.send(Job { piece, samples, disp: buf }).map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
+        let jobs = self
+            .jobs
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("the correction has finished"))?;
+        jobs.send(Job {
+            piece,
+            samples,
+            disp: buf,
+        })
+        .map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
         self.in_flight = true;
         Ok(PyBytes::new(py, &prev))
     }
@@ -354,7 +427,10 @@ impl Corrector {
     /// refused it, or this is an inspection), but reading goes on so the checks see the whole
     /// program.
     fn discard(&mut self) -> PyResult<()> {
-        let (_, samples) = self.current.take().ok_or_else(|| PyValueError::new_err("no piece read"))?;
+        let (_, samples) = self
+            .current
+            .take()
+            .ok_or_else(|| PyValueError::new_err("no piece read"))?;
         self.spare.push((samples, Vec::new()));
         Ok(())
     }
@@ -364,7 +440,9 @@ impl Corrector {
         let last = self.collect(py)?;
         self.jobs = None;
         if let Some(w) = self.worker.take() {
-            let st = py.allow_threads(|| w.join()).map_err(|_| PyValueError::new_err("the emitting thread failed"))?;
+            let st = py
+                .allow_threads(|| w.join())
+                .map_err(|_| PyValueError::new_err("the emitting thread failed"))?;
             self.stats = Some(st.map(|s| s.stats).unwrap_or_default());
         }
         Ok(PyBytes::new(py, &last))
@@ -372,7 +450,10 @@ impl Corrector {
 
     /// The counts of the finished run.
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let st = self.stats.as_ref().ok_or_else(|| PyValueError::new_err("call finish first"))?;
+        let st = self
+            .stats
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("call finish first"))?;
         stats_dict(py, st)
     }
 
@@ -410,7 +491,13 @@ impl Corrector {
         }
         self.in_flight = false;
         let done = &self.done;
-        let r = py.allow_threads(|| done.lock().map_err(|_| ()).and_then(|rx| rx.recv().map_err(|_| ()))).map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
+        let r = py
+            .allow_threads(|| {
+                done.lock()
+                    .map_err(|_| ())
+                    .and_then(|rx| rx.recv().map_err(|_| ()))
+            })
+            .map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
         let (out, samples, disp) = r.map_err(to_py)?;
         self.spare.push((samples, disp));
         Ok(out)
@@ -449,11 +536,22 @@ fn native_field(spec: &Bound<'_, PyAny>) -> PyResult<Field> {
 /// Evaluate a native field at points (bytes of float64, 3 per point): the displacements as
 /// bytes, or None when a point is outside a refusing domain or a value is not finite.
 #[pyfunction]
-fn eval_field<'py>(py: Python<'py>, spec: &Bound<'py, PyAny>, xyz: &[u8]) -> PyResult<Option<Bound<'py, PyBytes>>> {
+fn eval_field<'py>(
+    py: Python<'py>,
+    spec: &Bound<'py, PyAny>,
+    xyz: &[u8],
+) -> PyResult<Option<Bound<'py, PyBytes>>> {
     let f = native_field(spec)?;
-    let pts: Vec<f64> = xyz.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap())).collect();
+    let pts: Vec<f64> = xyz
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
+        .collect();
     let mut out = Vec::new();
-    Ok(if f.eval(&pts, &mut out) { Some(raw_bytes(py, &out)) } else { None })
+    Ok(if f.eval(&pts, &mut out) {
+        Some(raw_bytes(py, &out))
+    } else {
+        None
+    })
 }
 
 /// The caller's open file `fd`, duplicated (it is not taken over: the caller closes its own).
@@ -461,7 +559,9 @@ fn eval_field<'py>(py: Python<'py>, spec: &Bound<'py, PyAny>, xyz: &[u8]) -> PyR
 fn output_file(fd: i32) -> PyResult<Option<std::fs::File>> {
     use std::os::fd::BorrowedFd;
     // SAFETY: the caller's open file outlives the call
-    Ok(Some(std::fs::File::from(unsafe { BorrowedFd::borrow_raw(fd) }.try_clone_to_owned()?)))
+    Ok(Some(std::fs::File::from(
+        unsafe { BorrowedFd::borrow_raw(fd) }.try_clone_to_owned()?,
+    )))
 }
 
 /// Elsewhere the engine does not write the caller's file: the Python evaluation does the run.
@@ -503,9 +603,18 @@ fn correct_native<'py>(
     if fd < 0 {
         return Err(PyValueError::new_err("a file descriptor is >= 0"));
     }
-    let Some(out) = output_file(fd)? else { return Ok(None) };
+    let Some(out) = output_file(fd)? else {
+        return Ok(None);
+    };
     let opts = Options {
-        sample: SampleOpts { chord_tol, max_segment, include_rapids, only_supported: true, grid_x, grid_y },
+        sample: SampleOpts {
+            chord_tol,
+            max_segment,
+            include_rapids,
+            only_supported: true,
+            grid_x,
+            grid_y,
+        },
         piece_bytes: piece_bytes.max(1),
         limit,
         keep_unsupported,
@@ -532,11 +641,17 @@ fn correct_native<'py>(
             }
         })
     };
-    let r = py.allow_threads(|| pipeline::correct(&|| src.open(), &field, &opts, &out, &mut say)).map_err(to_py)?;
+    let r = py
+        .allow_threads(|| pipeline::correct(&|| src.open(), &field, &opts, &out, &mut say))
+        .map_err(to_py)?;
     let rep = match r {
         Outcome::Done(rep) => rep,
         Outcome::Refused => return Ok(None),
-        Outcome::Stopped => return Err(raised.unwrap_or_else(|| PyValueError::new_err("the correction was stopped"))),
+        Outcome::Stopped => {
+            return Err(
+                raised.unwrap_or_else(|| PyValueError::new_err("the correction was stopped"))
+            )
+        }
     };
     let d = PyDict::new(py);
     d.set_item("stats", stats_dict(py, &rep.stats)?)?;

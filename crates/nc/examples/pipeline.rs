@@ -5,8 +5,12 @@ use std::time::Instant;
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let prog = args.next().expect("usage: pipeline PROGRAM GRID.csv [MAXSEG]");
-    let csv = args.next().expect("usage: pipeline PROGRAM GRID.csv [MAXSEG]");
+    let prog = args
+        .next()
+        .expect("usage: pipeline PROGRAM GRID.csv [MAXSEG]");
+    let csv = args
+        .next()
+        .expect("usage: pipeline PROGRAM GRID.csv [MAXSEG]");
     let max_segment: f64 = args.next().map_or(5.0, |v| v.parse().expect("MAXSEG"));
     let text = std::fs::read_to_string(&csv).expect("read grid");
     let rows: Vec<[f64; 3]> = text
@@ -14,7 +18,10 @@ fn main() {
         .skip(1)
         .filter(|l| !l.trim().is_empty())
         .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|c| c.trim().parse().expect("number")).collect();
+            let v: Vec<f64> = l
+                .split(',')
+                .map(|c| c.trim().parse().expect("number"))
+                .collect();
             [v[0], v[1], v[2]]
         })
         .collect();
@@ -41,23 +48,42 @@ fn main() {
         bounds,
     });
     let opts = nc::pipeline::Options {
-        sample: nc::sample::SampleOpts { chord_tol: 0.002, max_segment, include_rapids: false, only_supported: true, grid_x: xs, grid_y: ys },
+        sample: nc::sample::SampleOpts {
+            chord_tol: 0.002,
+            max_segment,
+            include_rapids: false,
+            only_supported: true,
+            grid_x: xs,
+            grid_y: ys,
+        },
         piece_bytes: 1 << 18,
         limit: 1.0,
         keep_unsupported: false,
         clearance: None,
         shift_norm: None,
     };
-    let runs: usize = std::env::var("RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
+    let runs: usize = std::env::var("RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
     for _ in 0..runs {
         let out = std::fs::File::create("/tmp/pipeline.out").expect("create");
         let t = Instant::now();
         let open = || -> Result<nc::stream::Reader, nc::NcError> {
-            Ok(Box::new(std::io::BufReader::with_capacity(1 << 20, std::fs::File::open(&prog).map_err(|e| nc::NcError::Usage(e.to_string()))?)))
+            Ok(Box::new(std::io::BufReader::with_capacity(
+                1 << 20,
+                std::fs::File::open(&prog).map_err(|e| nc::NcError::Usage(e.to_string()))?,
+            )))
         };
-        let r = nc::pipeline::correct(&open, &field, &opts, &out, &mut |_, _| true).expect("correct");
+        let r =
+            nc::pipeline::correct(&open, &field, &opts, &out, &mut |_, _| true).expect("correct");
         match r {
-            nc::pipeline::Outcome::Done(rep) => println!("{:.3} s: {} points, max {:.4}", t.elapsed().as_secs_f64(), rep.n_points, rep.max),
+            nc::pipeline::Outcome::Done(rep) => println!(
+                "{:.3} s: {} points, max {:.4}",
+                t.elapsed().as_secs_f64(),
+                rep.n_points,
+                rep.max
+            ),
             nc::pipeline::Outcome::Refused | nc::pipeline::Outcome::Stopped => println!("refused"),
         }
     }

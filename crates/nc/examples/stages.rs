@@ -19,18 +19,31 @@ fn main() {
     let grid: Vec<f64> = (0..=100).map(|i| i as f64).collect();
     let opts = nc::sample::SampleOpts {
         chord_tol: 0.002,
-        max_segment: std::env::var("MAXSEG").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0),
+        max_segment: std::env::var("MAXSEG")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1.0),
         include_rapids: false,
         only_supported: true,
         grid_x: grid.clone(),
         grid_y: grid,
     };
-    let prog = nc::Program { src, lexed, interp: it };
-    let (mut t_samp, mut t_disp, mut t_emit, mut t_write) = (Duration::ZERO, Duration::ZERO, Duration::ZERO, Duration::ZERO);
+    let prog = nc::Program {
+        src,
+        lexed,
+        interp: it,
+    };
+    let (mut t_samp, mut t_disp, mut t_emit, mut t_write) = (
+        Duration::ZERO,
+        Duration::ZERO,
+        Duration::ZERO,
+        Duration::ZERO,
+    );
     let mut s = nc::sample::Samples::default();
     let mut disp: Vec<f64> = Vec::new();
     let mut out: Vec<u8> = Vec::new();
-    let mut file = std::io::BufWriter::new(std::fs::File::create("/tmp/stages.out").expect("create"));
+    let mut file =
+        std::io::BufWriter::new(std::fs::File::create("/tmp/stages.out").expect("create"));
     let mut em = nc::emit::Emitter::new(&prog.src, &prog.lexed, &prog.interp);
     let (mut n_samples, mut n_bytes) = (0, 0);
     let nl = prog.lexed.lines.len();

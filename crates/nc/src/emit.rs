@@ -39,7 +39,13 @@ impl Format {
         let d = style.max_decimals as usize;
         let (dec_mm, dec_inch) = (d.max(4), d.max(5));
         let half = |dec: usize| 0.5 * 10f64.powi(-(dec as i32));
-        Format { style, dec_mm, dec_inch, half_mm: half(dec_mm), half_inch: half(dec_inch) }
+        Format {
+            style,
+            dec_mm,
+            dec_inch,
+            half_mm: half(dec_mm),
+            half_inch: half(dec_inch),
+        }
     }
 
     #[inline]
@@ -79,7 +85,18 @@ impl Format {
     /// as the program writes them. The text is written straight into `out`.
     #[inline(always)]
     fn number_dec<const D: usize>(&self, v: f64, out: &mut Vec<u8>) -> f64 {
-        const POW10: [u64; 10] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
+        const POW10: [u64; 10] = [
+            1,
+            10,
+            100,
+            1_000,
+            10_000,
+            100_000,
+            1_000_000,
+            10_000_000,
+            100_000_000,
+            1_000_000_000,
+        ];
         let scale = POW10[D];
         let scaled = v * scale as f64;
         if scaled.is_nan() || scaled.abs() >= 9.0e15 {
@@ -90,7 +107,13 @@ impl Format {
         }
         // round half away from zero with one conversion (f64::round is a library call)
         // SAFETY: |scaled| < 9e15 (checked above) fits an i64
-        let m = unsafe { if scaled >= 0.0 { (scaled + 0.5).to_int_unchecked::<i64>() } else { (scaled - 0.5).to_int_unchecked::<i64>() } };
+        let m = unsafe {
+            if scaled >= 0.0 {
+                (scaled + 0.5).to_int_unchecked::<i64>()
+            } else {
+                (scaled - 0.5).to_int_unchecked::<i64>()
+            }
+        };
         let a = m.unsigned_abs();
         let (q, mut r) = (a / scale, a % scale);
         // the fraction's D digits, and how many of them are written
@@ -158,8 +181,22 @@ impl Format {
 }
 
 const POW10_U64: [u64; 17] = [
-    1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000, 10_000_000_000,
-    100_000_000_000, 1_000_000_000_000, 10_000_000_000_000, 100_000_000_000_000, 1_000_000_000_000_000,
+    1,
+    10,
+    100,
+    1_000,
+    10_000,
+    100_000,
+    1_000_000,
+    10_000_000,
+    100_000_000,
+    1_000_000_000,
+    10_000_000_000,
+    100_000_000_000,
+    1_000_000_000_000,
+    10_000_000_000_000,
+    100_000_000_000_000,
+    1_000_000_000_000_000,
     10_000_000_000_000_000,
 ];
 
@@ -194,10 +231,11 @@ fn motion_text(m: Motion, padded: bool) -> &'static str {
 
 #[inline]
 fn is_motion_g(w: &Word) -> bool {
-    w.letter == b'G' && {
-        let c = round(w.value * 10.0) as i32;
-        matches!(c, 0 | 10 | 20 | 30 | 800 | 730 | 740 | 760 | 810..=890 | 330 | 331 | 382..=385 | 50 | 51 | 52)
-    }
+    w.letter == b'G'
+        && {
+            let c = round(w.value * 10.0) as i32;
+            matches!(c, 0 | 10 | 20 | 30 | 800 | 730 | 740 | 760 | 810..=890 | 330 | 331 | 382..=385 | 50 | 51 | 52)
+        }
 }
 
 #[inline]
@@ -270,7 +308,14 @@ impl<'a> Emitter<'a> {
 
     /// Continue with the state a previous emitter left ([`Emitter::into_state`]).
     pub fn resume(src: &'a [u8], lx: &'a Lexed, it: &'a Interp, st: EmitState) -> Self {
-        Emitter { src, lx, it, fmt: Format::new(lx.style), eol: if lx.crlf { b"\r\n" } else { b"\n" }, st }
+        Emitter {
+            src,
+            lx,
+            it,
+            fmt: Format::new(lx.style),
+            eol: if lx.crlf { b"\r\n" } else { b"\n" },
+            st,
+        }
     }
 
     pub fn into_state(self) -> EmitState {
@@ -290,7 +335,13 @@ impl<'a> Emitter<'a> {
 
     /// Write lines `range` to `out`. `samples` must hold every sampled record of those lines
     /// ([`crate::sample::sample_range`]) and `disp` one displacement per sample.
-    pub fn lines(&mut self, range: std::ops::Range<usize>, samples: &Samples, disp: &[f64], out: &mut Vec<u8>) -> Result<(), NcError> {
+    pub fn lines(
+        &mut self,
+        range: std::ops::Range<usize>,
+        samples: &Samples,
+        disp: &[f64],
+        out: &mut Vec<u8>,
+    ) -> Result<(), NcError> {
         if disp.len() != samples.xyz.len() {
             return Err(NcError::Usage(format!(
                 "displacements have {} values, expected {} (3 per sample)",
@@ -311,11 +362,20 @@ impl<'a> Emitter<'a> {
             if ri != u32::MAX {
                 let ri = ri as usize;
                 if ri < samples.rec0 || ri >= samples.rec0 + nrec {
-                    return Err(NcError::Usage(format!("line {} has a block that was not sampled", li + 1)));
+                    return Err(NcError::Usage(format!(
+                        "line {} has a block that was not sampled",
+                        li + 1
+                    )));
                 }
                 let (f, c) = samples.of(ri);
                 if c > 0 {
-                    self.corrected(li, ri, &samples.xyz[3 * f..3 * (f + c)], &samples.t[f..f + c], &disp[3 * f..3 * (f + c)]);
+                    self.corrected(
+                        li,
+                        ri,
+                        &samples.xyz[3 * f..3 * (f + c)],
+                        &samples.t[f..f + c],
+                        &disp[3 * f..3 * (f + c)],
+                    );
                 } else {
                     self.uncorrected(li, ri);
                 }
@@ -323,7 +383,11 @@ impl<'a> Emitter<'a> {
                 self.st.out_motion = None;
             }
             // copy the line with its edits, then any added lines
-            let (ls, le, lee) = (line.start as usize, line.end as usize, line.eol_end as usize);
+            let (ls, le, lee) = (
+                line.start as usize,
+                line.end as usize,
+                line.eol_end as usize,
+            );
             let src = self.src;
             let st = &mut self.st;
             let has_tail = !st.tail_ends.is_empty();
@@ -372,7 +436,12 @@ impl<'a> Emitter<'a> {
     fn edit_number(&mut self, start: u32, end: u32, v: f64, inch: bool) -> f64 {
         let t0 = self.st.arena.len() as u32;
         let w = self.fmt.number(v, inch, &mut self.st.arena);
-        self.st.edits.push(Edit { start, end, t0, t1: self.st.arena.len() as u32 });
+        self.st.edits.push(Edit {
+            start,
+            end,
+            t0,
+            t1: self.st.arena.len() as u32,
+        });
         w
     }
 
@@ -380,16 +449,28 @@ impl<'a> Emitter<'a> {
     fn insert_motion(&mut self, li: usize, m: Motion) {
         let at = block_start(self.lx, li);
         let t0 = self.st.arena.len() as u32;
-        self.st.arena.extend_from_slice(motion_text(m, self.lx.style.padded_g).as_bytes());
+        self.st
+            .arena
+            .extend_from_slice(motion_text(m, self.lx.style.padded_g).as_bytes());
         self.st.arena.extend_from_slice(self.sep());
-        self.st.edits.push(Edit { start: at, end: at, t0, t1: self.st.arena.len() as u32 });
+        self.st.edits.push(Edit {
+            start: at,
+            end: at,
+            t0,
+            t1: self.st.arena.len() as u32,
+        });
     }
 
     /// Replace source bytes [start, end) by `text`.
     fn edit_bytes(&mut self, start: u32, end: u32, text: &[u8]) {
         let t0 = self.st.arena.len() as u32;
         self.st.arena.extend_from_slice(text);
-        self.st.edits.push(Edit { start, end, t0, t1: self.st.arena.len() as u32 });
+        self.st.edits.push(Edit {
+            start,
+            end,
+            t0,
+            t1: self.st.arena.len() as u32,
+        });
     }
 
     fn unit(rec: &Record, k: usize) -> f64 {
@@ -481,7 +562,9 @@ impl<'a> Emitter<'a> {
         let epos0 = self.st.epos;
         let explicit = words.iter().any(is_motion_g);
         let d0 = [disp[0], disp[1], disp[2]];
-        let uniform = disp.chunks_exact(3).all(|d| (0..3).all(|k| (d[k] - d0[k]).abs() <= 1e-9));
+        let uniform = disp
+            .chunks_exact(3)
+            .all(|d| (0..3).all(|k| (d[k] - d0[k]).abs() <= 1e-9));
         let half_mm = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
         let target_at = |k: usize, t: f64| -> [f64; NAXES] {
             // XYZ corrected, the axes the block names interpolated, the others where they are
@@ -492,7 +575,11 @@ impl<'a> Emitter<'a> {
             let mut named = rec.named >> 3;
             while named != 0 {
                 let a = 3 + named.trailing_zeros() as usize;
-                p[a] = if t == 1.0 { rec.end[a] } else { start[a] + t * (rec.end[a] - start[a]) };
+                p[a] = if t == 1.0 {
+                    rec.end[a]
+                } else {
+                    start[a] + t * (rec.end[a] - start[a])
+                };
                 named &= named - 1;
             }
             p
@@ -535,7 +622,10 @@ impl<'a> Emitter<'a> {
             } else {
                 self.insert_motion(li, Motion::Feed);
             }
-            for w in words.iter().filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P')) {
+            for w in words
+                .iter()
+                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P'))
+            {
                 self.remove_word(li, w);
             }
             self.st.out_motion = Some(Motion::Feed);
@@ -543,7 +633,11 @@ impl<'a> Emitter<'a> {
             self.restore_modal(li, rec, explicit);
         }
         // a uniform straight move that starts off the corrected path needs one piece to reach it
-        let pieces = if !linearise && uniform && only_xyz { n - 1..n } else { 1..n };
+        let pieces = if !linearise && uniform && only_xyz {
+            n - 1..n
+        } else {
+            1..n
+        };
         // program stops move to the last piece (they stay where they are when there is none)
         let mut stops: Vec<u8> = Vec::new();
         for w in words.iter().filter(|w| is_stop_m(w) && !pieces.is_empty()) {
@@ -553,7 +647,11 @@ impl<'a> Emitter<'a> {
         }
         let first = target_at(0, ts[0]);
         self.set_axes(li, rec, &first);
-        let prefix: &[u8] = if self.lx.lines[li].block_delete { b"/" } else { b"" };
+        let prefix: &[u8] = if self.lx.lines[li].block_delete {
+            b"/"
+        } else {
+            b""
+        };
         for k in pieces {
             let p = target_at(k, ts[k]);
             let t0 = self.st.tail.len();
@@ -564,8 +662,16 @@ impl<'a> Emitter<'a> {
                     continue;
                 }
                 let u = Self::unit(rec, a);
-                let want = if rec.incremental { (p[a] - self.st.epos[a]) / u } else { p[a] / u };
-                let differs = if rec.incremental { want.abs() >= self.fmt.half(rec.inch) } else { (p[a] - self.st.epos[a]).abs() / u >= self.fmt.half(rec.inch) };
+                let want = if rec.incremental {
+                    (p[a] - self.st.epos[a]) / u
+                } else {
+                    p[a] / u
+                };
+                let differs = if rec.incremental {
+                    want.abs() >= self.fmt.half(rec.inch)
+                } else {
+                    (p[a] - self.st.epos[a]).abs() / u >= self.fmt.half(rec.inch)
+                };
                 if differs {
                     if self.st.tail.len() > body {
                         let sep = self.sep();
@@ -573,7 +679,11 @@ impl<'a> Emitter<'a> {
                     }
                     self.st.tail.push(AXES[a]);
                     let v = self.fmt.number(want, rec.inch, &mut self.st.tail);
-                    self.st.epos[a] = if rec.incremental { self.st.epos[a] + v * u } else { v * u };
+                    self.st.epos[a] = if rec.incremental {
+                        self.st.epos[a] + v * u
+                    } else {
+                        v * u
+                    };
                 }
             }
             if k + 1 == n && !stops.is_empty() {
@@ -612,12 +722,24 @@ impl<'a> Emitter<'a> {
             if let Some(a) = axis_index(w.letter) {
                 seen[a] = true;
                 let u = Self::unit(rec, a);
-                let want = if rec.incremental { (target[a] - self.st.epos[a]) / u } else { target[a] / u };
+                let want = if rec.incremental {
+                    (target[a] - self.st.epos[a]) / u
+                } else {
+                    target[a] / u
+                };
                 if (want - w.value).abs() < half {
-                    self.st.epos[a] = if rec.incremental { self.st.epos[a] + w.value * u } else { w.value * u };
+                    self.st.epos[a] = if rec.incremental {
+                        self.st.epos[a] + w.value * u
+                    } else {
+                        w.value * u
+                    };
                 } else {
                     let v = self.edit_number(w.num_start, w.end, want, rec.inch);
-                    self.st.epos[a] = if rec.incremental { self.st.epos[a] + v * u } else { v * u };
+                    self.st.epos[a] = if rec.incremental {
+                        self.st.epos[a] + v * u
+                    } else {
+                        v * u
+                    };
                 }
             }
         }
@@ -633,15 +755,28 @@ impl<'a> Emitter<'a> {
                 let sep = self.sep();
                 self.st.arena.extend_from_slice(sep);
                 self.st.arena.push(AXES[a]);
-                let want = if rec.incremental { delta } else { target[a] / u };
+                let want = if rec.incremental {
+                    delta
+                } else {
+                    target[a] / u
+                };
                 let v = self.fmt.number(want, rec.inch, &mut self.st.arena);
-                self.st.epos[a] = if rec.incremental { self.st.epos[a] + v * u } else { v * u };
+                self.st.epos[a] = if rec.incremental {
+                    self.st.epos[a] + v * u
+                } else {
+                    v * u
+                };
             }
         }
         if self.st.arena.len() > t0 {
             // a block that had no words gets no separator first
             let skip = (self.st.arena[t0] == b' ' && self.lx.line_words(li).is_empty()) as usize;
-            self.st.edits.push(Edit { start: at, end: at, t0: (t0 + skip) as u32, t1: self.st.arena.len() as u32 });
+            self.st.edits.push(Edit {
+                start: at,
+                end: at,
+                t0: (t0 + skip) as u32,
+                t1: self.st.arena.len() as u32,
+            });
         }
     }
 
@@ -665,7 +800,12 @@ impl<'a> Emitter<'a> {
                 self.st.arena.extend_from_slice(sep);
                 self.st.arena.push(letter(a));
                 self.fmt.number(want, rec.inch, &mut self.st.arena);
-                self.st.edits.push(Edit { start: at, end: at, t0, t1: self.st.arena.len() as u32 });
+                self.st.edits.push(Edit {
+                    start: at,
+                    end: at,
+                    t0,
+                    t1: self.st.arena.len() as u32,
+                });
             }
         }
     }
@@ -676,14 +816,21 @@ fn dist_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 
     let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
     let l2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-    let t = if l2 > 0.0 { ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if l2 > 0.0 {
+        ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
     (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
 
 /// Distance from p to the point at fraction t of the segment a-b (XYZ).
 fn dist_at_fraction(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES], t: f64) -> f64 {
-    (0..3).map(|k| (p[k] - (a[k] + t * (b[k] - a[k]))).powi(2)).sum::<f64>().sqrt()
+    (0..3)
+        .map(|k| (p[k] - (a[k] + t * (b[k] - a[k]))).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// Where a block's words begin: after `/`, leading blanks and a leading N word.
@@ -708,7 +855,14 @@ mod tests {
     fn correct(src: &str, f: impl Fn(f64, f64, f64) -> [f64; 3], max_segment: f64) -> String {
         let l = lex(src.as_bytes()).unwrap();
         let it = interpret(&l).unwrap();
-        let o = SampleOpts { chord_tol: 0.002, max_segment, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
+        let o = SampleOpts {
+            chord_tol: 0.002,
+            max_segment,
+            include_rapids: false,
+            only_supported: true,
+            grid_x: vec![],
+            grid_y: vec![],
+        };
         let s = sample(&it, &o).unwrap();
         let mut d = Vec::new();
         for p in s.xyz.chunks_exact(3) {
@@ -721,7 +875,18 @@ mod tests {
     /// The formatting before `number_dec`, digit by digit, as a reference.
     fn reference_number(f: &Format, v: f64, inch: bool, out: &mut Vec<u8>) -> f64 {
         let this = f;
-        const POW10: [u64; 10] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
+        const POW10: [u64; 10] = [
+            1,
+            10,
+            100,
+            1_000,
+            10_000,
+            100_000,
+            1_000_000,
+            10_000_000,
+            100_000_000,
+            1_000_000_000,
+        ];
         let dec = this.decimals(inch).min(9);
         let scale = POW10[dec];
         let scaled = v * scale as f64;
@@ -732,7 +897,11 @@ mod tests {
             return t.parse().unwrap_or(v);
         }
         // round half away from zero with one conversion (f64::round is a library call)
-        let m = if scaled >= 0.0 { (scaled + 0.5) as i64 } else { (scaled - 0.5) as i64 };
+        let m = if scaled >= 0.0 {
+            (scaled + 0.5) as i64
+        } else {
+            (scaled - 0.5) as i64
+        };
         // the digits of |m| are written from the right into a buffer, two at a time, then copied
         // once: the last `dec` are the fraction
         let mut a = m.unsigned_abs();
@@ -806,21 +975,40 @@ mod tests {
             seed ^= seed << 17;
             seed
         };
-        for ((fixed, nlz, bare), max_decimals) in [(true, false, false), (false, false, false), (false, true, false), (false, false, true), (false, true, true)]
-            .into_iter()
-            .flat_map(|s| [(s, 0u8), (s, 6), (s, 7), (s, 8)])
+        for ((fixed, nlz, bare), max_decimals) in [
+            (true, false, false),
+            (false, false, false),
+            (false, true, false),
+            (false, false, true),
+            (false, true, true),
+        ]
+        .into_iter()
+        .flat_map(|s| [(s, 0u8), (s, 6), (s, 7), (s, 8)])
         {
-            let style = NumberStyle { fixed, no_leading_zero: nlz, bare_point: bare, max_decimals, ..NumberStyle::default() };
+            let style = NumberStyle {
+                fixed,
+                no_leading_zero: nlz,
+                bare_point: bare,
+                max_decimals,
+                ..NumberStyle::default()
+            };
             let f = Format::new(style);
             for k in 0..20000 {
                 let mag = 10f64.powi((next() % 9) as i32 - 4);
-                let v = ((next() >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * mag * if k % 7 == 0 { 1e4 } else { 1.0 };
+                let v = ((next() >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+                    * 2.0
+                    * mag
+                    * if k % 7 == 0 { 1e4 } else { 1.0 };
                 for inch in [false, true] {
                     let dec = f.decimals(inch);
                     let mut out = Vec::new();
                     let got = f.number(v, inch, &mut out);
                     let scaled = v * 10f64.powi(dec as i32);
-                    let m = if scaled >= 0.0 { (scaled + 0.5).floor() } else { (scaled - 0.5).ceil() };
+                    let m = if scaled >= 0.0 {
+                        (scaled + 0.5).floor()
+                    } else {
+                        (scaled - 0.5).ceil()
+                    };
                     let mut want = format!("{:.*}", dec, (m / 10f64.powi(dec as i32)).abs());
                     if !fixed {
                         want = want.trim_end_matches('0').to_string();
@@ -836,10 +1024,18 @@ mod tests {
                     }
                     let mut reference = Vec::new();
                     let got_ref = reference_number(&f, v, inch, &mut reference);
-                    assert_eq!(String::from_utf8(out.clone()).unwrap(), String::from_utf8(reference).unwrap(), "{v} inch={inch} style={style:?}");
+                    assert_eq!(
+                        String::from_utf8(out.clone()).unwrap(),
+                        String::from_utf8(reference).unwrap(),
+                        "{v} inch={inch} style={style:?}"
+                    );
                     assert_eq!(got.to_bits(), got_ref.to_bits());
                     if max_decimals == 0 {
-                        assert_eq!(String::from_utf8(out).unwrap(), want, "{v} inch={inch} style={style:?}");
+                        assert_eq!(
+                            String::from_utf8(out).unwrap(),
+                            want,
+                            "{v} inch={inch} style={style:?}"
+                        );
                         assert_eq!(got, m / 10f64.powi(dec as i32));
                     }
                 }
@@ -883,7 +1079,10 @@ mod tests {
     fn shift_keeps_arcs_and_style() {
         let src = "G21 G90 G0 X0 Y0 Z5\nG1 Z-1.000 F100 (cut)\nG2 X10.000 Y0.000 I5.000 J0.000\n";
         let out = correct(src, |_, _, _| [0.0, 0.0, 0.1], 1.0);
-        assert_eq!(out, "G21 G90 G0 X0 Y0 Z5\nG1 Z-0.9000 F100 (cut)\nG2 X10.000 Y0.000 I5.000 J0.000\n");
+        assert_eq!(
+            out,
+            "G21 G90 G0 X0 Y0 Z5\nG1 Z-0.9000 F100 (cut)\nG2 X10.000 Y0.000 I5.000 J0.000\n"
+        );
     }
 
     #[test]
@@ -891,20 +1090,39 @@ mod tests {
         let src = "G21 G90 G0 X0 Y0 Z5\nG1 Z-1 F100\nG2 X10 Y0 I5 J0\nG91 G1 X2\nX2 Y3\n(c)\nG3 X-4 Y0 I-2 J0 M30\n";
         let l = lex(src.as_bytes()).unwrap();
         let it = interpret(&l).unwrap();
-        let o = SampleOpts { chord_tol: 0.002, max_segment: 0.7, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
-        let field = |s: &Samples| s.xyz.chunks_exact(3).flat_map(|p| [0.01 * p[1], 0.0, 0.02 * p[0]]).collect::<Vec<f64>>();
+        let o = SampleOpts {
+            chord_tol: 0.002,
+            max_segment: 0.7,
+            include_rapids: false,
+            only_supported: true,
+            grid_x: vec![],
+            grid_y: vec![],
+        };
+        let field = |s: &Samples| {
+            s.xyz
+                .chunks_exact(3)
+                .flat_map(|p| [0.01 * p[1], 0.0, 0.02 * p[0]])
+                .collect::<Vec<f64>>()
+        };
         let s = sample(&it, &o).unwrap();
-        let (whole, stats) = Emitter::new(src.as_bytes(), &l, &it).run(&s, &field(&s)).unwrap();
+        let (whole, stats) = Emitter::new(src.as_bytes(), &l, &it)
+            .run(&s, &field(&s))
+            .unwrap();
         let prog = crate::Program::parse(src.as_bytes().to_vec()).unwrap();
         for step in 1..4 {
             let mut em = Emitter::new(src.as_bytes(), &l, &it);
             let (mut out, mut part) = (Vec::new(), Samples::default());
             for a in (0..l.lines.len()).step_by(step) {
                 let b = (a + step).min(l.lines.len());
-                crate::sample::sample_range(&it, &o, prog.records_of_lines(a..b), &mut part).unwrap();
+                crate::sample::sample_range(&it, &o, prog.records_of_lines(a..b), &mut part)
+                    .unwrap();
                 em.lines(a..b, &part, &field(&part), &mut out).unwrap();
             }
-            assert_eq!(String::from_utf8(out).unwrap(), String::from_utf8(whole.clone()).unwrap(), "chunks of {step} lines");
+            assert_eq!(
+                String::from_utf8(out).unwrap(),
+                String::from_utf8(whole.clone()).unwrap(),
+                "chunks of {step} lines"
+            );
             assert_eq!(em.stats(), &stats);
         }
     }

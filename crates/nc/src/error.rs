@@ -6,9 +6,17 @@ use std::fmt;
 #[derive(Clone, Debug, PartialEq)]
 pub enum NcError {
     /// The text could not be split into words.
-    Parse { line: usize, col: usize, message: String },
+    Parse {
+        line: usize,
+        col: usize,
+        message: String,
+    },
     /// The words could not be interpreted (an arc that does not close, a missing word).
-    Interpret { line: usize, col: usize, message: String },
+    Interpret {
+        line: usize,
+        col: usize,
+        message: String,
+    },
     /// A caller passed arrays or options that do not fit the program.
     Usage(String),
 }

@@ -68,9 +68,19 @@ fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
             let u = (x - grid[0]) / step;
             // np.clip(np.floor(u), 0, n - 2).astype(np.intp), then u - i in float64
             let f = floor(u);
-            let f = if f < 0.0 { 0.0 } else if f > top { top } else { f };
+            let f = if f < 0.0 {
+                0.0
+            } else if f > top {
+                top
+            } else {
+                f
+            };
             // SAFETY: 0 <= f <= n - 2 (a NaN, from a NaN point, takes cell 0: its value is NaN)
-            let i = if f >= 0.0 { unsafe { f.to_int_unchecked::<u64>() as usize } } else { 0 };
+            let i = if f >= 0.0 {
+                unsafe { f.to_int_unchecked::<u64>() as usize }
+            } else {
+                0
+            };
             (i, u - i as f64)
         }
         None => {
@@ -119,7 +129,13 @@ impl Field {
     pub fn check(&self) -> Result<(), String> {
         if let Field::Grid(g) = self {
             if g.xs.len() < 2 || g.ys.len() < 2 || g.v.len() != g.xs.len() * g.ys.len() {
-                return Err(format!("a grid of {} x {} needs {} values, got {}", g.xs.len(), g.ys.len(), g.xs.len() * g.ys.len(), g.v.len()));
+                return Err(format!(
+                    "a grid of {} x {} needs {} values, got {}",
+                    g.xs.len(),
+                    g.ys.len(),
+                    g.xs.len() * g.ys.len(),
+                    g.v.len()
+                ));
             }
         }
         Ok(())
@@ -215,14 +231,27 @@ mod tests {
 
     #[test]
     fn bilinear_at_nodes_centres_and_outside() {
-        let g = Grid { xs: vec![0.0, 10.0], ys: vec![0.0, 10.0], steps: [Some(10.0), Some(10.0)], v: vec![0.0, 0.1, 0.2, 0.3], outside: Outside::Extrapolate, bounds: [0.0, 10.0, 0.0, 10.0] };
+        let g = Grid {
+            xs: vec![0.0, 10.0],
+            ys: vec![0.0, 10.0],
+            steps: [Some(10.0), Some(10.0)],
+            v: vec![0.0, 0.1, 0.2, 0.3],
+            outside: Outside::Extrapolate,
+            bounds: [0.0, 10.0, 0.0, 10.0],
+        };
         assert_eq!(g.dz(5.0, 5.0), Some(0.15000000000000002));
         assert_eq!(g.dz(0.0, 0.0), Some(0.0));
         assert_eq!(g.dz(10.0, 10.0), Some(0.3));
         assert!((g.dz(20.0, 0.0).unwrap() - 0.2).abs() < 1e-15);
-        let c = Grid { outside: Outside::Clamp, ..g.clone() };
+        let c = Grid {
+            outside: Outside::Clamp,
+            ..g.clone()
+        };
         assert_eq!(c.dz(20.0, 0.0), Some(0.1));
-        let e = Grid { outside: Outside::Error, ..g };
+        let e = Grid {
+            outside: Outside::Error,
+            ..g
+        };
         assert_eq!(e.dz(10.0 + 1e-10, 0.0).is_some(), true);
         assert_eq!(e.dz(10.0 + 1e-8, 0.0), None);
     }
@@ -232,7 +261,10 @@ mod tests {
         for n in [0usize, 1, 7, 8, 9, 127, 128, 129, 1000] {
             let a: Vec<f64> = (0..n).map(|k| 0.1 * k as f64).collect();
             let s = numpy_sum(&a);
-            assert!((s - a.iter().sum::<f64>()).abs() <= 1e-9 * s.abs().max(1.0), "{n}");
+            assert!(
+                (s - a.iter().sum::<f64>()).abs() <= 1e-9 * s.abs().max(1.0),
+                "{n}"
+            );
         }
     }
 }

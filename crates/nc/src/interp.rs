@@ -177,7 +177,11 @@ fn g_name(c: i32) -> String {
 }
 
 fn ierr(line: usize, col: usize, msg: impl Into<String>) -> NcError {
-    NcError::Interpret { line: line + 1, col: col + 1, message: msg.into() }
+    NcError::Interpret {
+        line: line + 1,
+        col: col + 1,
+        message: msg.into(),
+    }
 }
 
 /// How far an R-format arc's radius may fall short of half the chord (LinuxCNC's
@@ -266,7 +270,11 @@ impl Interpreter {
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
         };
-        let r = if out.summary.end_line.is_some() { Ok(()) } else { self.lines(lx, line_base, &mut out) };
+        let r = if out.summary.end_line.is_some() {
+            Ok(())
+        } else {
+            self.lines(lx, line_base, &mut out)
+        };
         self.unsupported = std::mem::take(&mut out.unsupported);
         self.notes = std::mem::take(&mut out.notes);
         self.summary = std::mem::take(&mut out.summary);
@@ -274,412 +282,673 @@ impl Interpreter {
     }
 
     fn lines(&mut self, lx: &Lexed, line_base: usize, out: &mut Interp) -> Result<(), NcError> {
-    let nlines = lx.lines.len();
-    let st = &mut self.st;
-    let grouped = &mut self.grouped;
-    let first_content_seen = &mut self.first_content_seen;
-    let percent_open = &mut self.percent_open;
-    for lj in 0..nlines {
-        let li = line_base + lj;
-        let line = &lx.lines[lj];
-        let words = lx.line_words(lj);
-        if line.percent {
-            if !*first_content_seen {
-                *percent_open = true;
-                *first_content_seen = true;
+        let nlines = lx.lines.len();
+        let st = &mut self.st;
+        let grouped = &mut self.grouped;
+        let first_content_seen = &mut self.first_content_seen;
+        let percent_open = &mut self.percent_open;
+        for lj in 0..nlines {
+            let li = line_base + lj;
+            let line = &lx.lines[lj];
+            let words = lx.line_words(lj);
+            if line.percent {
+                if !*first_content_seen {
+                    *percent_open = true;
+                    *first_content_seen = true;
+                    continue;
+                } else if *percent_open {
+                    out.summary.end_line = Some(li as u32);
+                    break;
+                }
                 continue;
-            } else if *percent_open {
-                out.summary.end_line = Some(li as u32);
-                break;
             }
-            continue;
-        }
-        if let Some(e) = line.error {
-            return Err(lx.errors[e as usize].clone());
-        }
-        if words.is_empty() && line.opaque.is_none() {
-            continue;
-        }
-        *first_content_seen = true;
-        if line.block_delete {
-            out.summary.block_delete_lines += 1;
-        }
-        let col = |w: &Word| (w.start - line.start) as usize;
+            if let Some(e) = line.error {
+                return Err(lx.errors[e as usize].clone());
+            }
+            if words.is_empty() && line.opaque.is_none() {
+                continue;
+            }
+            *first_content_seen = true;
+            if line.block_delete {
+                out.summary.block_delete_lines += 1;
+            }
+            let col = |w: &Word| (w.start - line.start) as usize;
 
-        if let Some((kind, at)) = line.opaque {
-            let c = (at - line.start) as usize;
-            let construct = match kind {
-                Opaque::Expression => "parameters or expressions (# or [ ])",
-                Opaque::OWordFlow => "O-word subroutine or control flow",
-                Opaque::Polar => "polar coordinates (@ ^)",
-            };
-            let idx = push_unsupported(out, li, c, construct);
-            if kind == Opaque::OWordFlow && st.active.flow.is_none() {
-                st.active.flow = Some((li as u32, idx));
+            if let Some((kind, at)) = line.opaque {
+                let c = (at - line.start) as usize;
+                let construct = match kind {
+                    Opaque::Expression => "parameters or expressions (# or [ ])",
+                    Opaque::OWordFlow => "O-word subroutine or control flow",
+                    Opaque::Polar => "polar coordinates (@ ^)",
+                };
+                let idx = push_unsupported(out, li, c, construct);
+                if kind == Opaque::OWordFlow && st.active.flow.is_none() {
+                    st.active.flow = Some((li as u32, idx));
+                }
+                // an assignment alone moves nothing; anything else may move any axis
+                let assignment_only = words.is_empty() && kind == Opaque::Expression;
+                if !assignment_only || kind == Opaque::Polar {
+                    st.pos = [f64::NAN; NAXES];
+                    push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                    out.unsupported[idx].blocks += 1;
+                }
+                continue;
             }
-            // an assignment alone moves nothing; anything else may move any axis
-            let assignment_only = words.is_empty() && kind == Opaque::Expression;
-            if !assignment_only || kind == Opaque::Polar {
-                st.pos = [f64::NAN; NAXES];
-                push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
-                out.unsupported[idx].blocks += 1;
-            }
-            continue;
-        }
 
-        // gather words
-        let mut gs: [(i32, usize); 32] = [(0, 0); 32];
-        let mut ng = 0usize;
-        let mut axis: [Option<f64>; NAXES] = [None; NAXES];
-        let mut axis_col = 0usize;
-        let mut ijk: [Option<f64>; 3] = [None; 3];
-        let mut r: Option<(f64, usize)> = None;
-        let mut p: Option<f64> = None;
-        let mut ms: [(i32, usize); 8] = [(0, 0); 8];
-        let mut nm = 0usize;
-        let mut named: u16 = 0;
-        let mut l_word: Option<f64> = None;
-        let mut e_word: Option<usize> = None;
-        let mut seen: u32 = 0;
-        for w in words {
-            // LinuxCNC reads each letter once per block (G and M words excepted)
-            if w.letter.is_ascii_uppercase() && !matches!(w.letter, b'G' | b'M') {
-                let bit = 1u32 << (w.letter - b'A');
-                if seen & bit != 0 {
-                    return Err(ierr(li, col(w), format!("more than one {} word in one block", w.letter as char)));
-                }
-                seen |= bit;
-            }
-            match w.letter {
-                b'G' if ng < gs.len() => {
-                    gs[ng] = (code(w), col(w));
-                    ng += 1;
-                }
-                b'M' if nm < ms.len() => {
-                    ms[nm] = (crate::lex::round(w.value) as i32, col(w));
-                    nm += 1;
-                }
-                b'G' | b'M' => {
-                    return Err(ierr(li, col(w), format!("too many {} words in one block", w.letter as char)));
-                }
-                b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'U' | b'V' | b'W' => {
-                    let k = AXES.iter().position(|&a| a == w.letter).unwrap();
-                    if axis[k].is_none() {
-                        axis_col = col(w);
+            // gather words
+            let mut gs: [(i32, usize); 32] = [(0, 0); 32];
+            let mut ng = 0usize;
+            let mut axis: [Option<f64>; NAXES] = [None; NAXES];
+            let mut axis_col = 0usize;
+            let mut ijk: [Option<f64>; 3] = [None; 3];
+            let mut r: Option<(f64, usize)> = None;
+            let mut p: Option<f64> = None;
+            let mut ms: [(i32, usize); 8] = [(0, 0); 8];
+            let mut nm = 0usize;
+            let mut named: u16 = 0;
+            let mut l_word: Option<f64> = None;
+            let mut e_word: Option<usize> = None;
+            let mut seen: u32 = 0;
+            for w in words {
+                // LinuxCNC reads each letter once per block (G and M words excepted)
+                if w.letter.is_ascii_uppercase() && !matches!(w.letter, b'G' | b'M') {
+                    let bit = 1u32 << (w.letter - b'A');
+                    if seen & bit != 0 {
+                        return Err(ierr(
+                            li,
+                            col(w),
+                            format!("more than one {} word in one block", w.letter as char),
+                        ));
                     }
-                    axis[k] = Some(w.value);
-                    named |= 1 << k;
+                    seen |= bit;
                 }
-                b'I' => ijk[0] = Some(w.value),
-                b'J' => ijk[1] = Some(w.value),
-                b'K' => ijk[2] = Some(w.value),
-                b'R' => r = Some((w.value, col(w))),
-                b'P' => p = Some(w.value),
-                b'L' => l_word = Some(w.value),
-                b'E' => e_word = Some(col(w)),
-                b'T' => {
-                    let t = w.value.round() as u32;
-                    if !out.summary.tools.contains(&t) {
-                        out.summary.tools.push(t);
+                match w.letter {
+                    b'G' if ng < gs.len() => {
+                        gs[ng] = (code(w), col(w));
+                        ng += 1;
                     }
+                    b'M' if nm < ms.len() => {
+                        ms[nm] = (crate::lex::round(w.value) as i32, col(w));
+                        nm += 1;
+                    }
+                    b'G' | b'M' => {
+                        return Err(ierr(
+                            li,
+                            col(w),
+                            format!("too many {} words in one block", w.letter as char),
+                        ));
+                    }
+                    b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'U' | b'V' | b'W' => {
+                        let k = AXES.iter().position(|&a| a == w.letter).unwrap();
+                        if axis[k].is_none() {
+                            axis_col = col(w);
+                        }
+                        axis[k] = Some(w.value);
+                        named |= 1 << k;
+                    }
+                    b'I' => ijk[0] = Some(w.value),
+                    b'J' => ijk[1] = Some(w.value),
+                    b'K' => ijk[2] = Some(w.value),
+                    b'R' => r = Some((w.value, col(w))),
+                    b'P' => p = Some(w.value),
+                    b'L' => l_word = Some(w.value),
+                    b'E' => e_word = Some(col(w)),
+                    b'T' => {
+                        let t = w.value.round() as u32;
+                        if !out.summary.tools.contains(&t) {
+                            out.summary.tools.push(t);
+                        }
+                    }
+                    _ => {}
                 }
-                _ => {}
             }
-        }
 
-        // two codes of one modal group in a block are an error, as in LinuxCNC
-        for a in 0..ng {
-            for b in a + 1..ng {
-                if let (Some(ga), Some(gb)) = (g_group(gs[a].0), g_group(gs[b].0)) {
-                    if ga == gb && gs[a].0 != 800 && gs[b].0 != 800 {
-                        return Err(ierr(li, gs[b].1, format!("{} and {} are of one modal group; a block may have one", g_name(gs[a].0), g_name(gs[b].0))));
+            // two codes of one modal group in a block are an error, as in LinuxCNC
+            for a in 0..ng {
+                for b in a + 1..ng {
+                    if let (Some(ga), Some(gb)) = (g_group(gs[a].0), g_group(gs[b].0)) {
+                        if ga == gb && gs[a].0 != 800 && gs[b].0 != 800 {
+                            return Err(ierr(
+                                li,
+                                gs[b].1,
+                                format!(
+                                    "{} and {} are of one modal group; a block may have one",
+                                    g_name(gs[a].0),
+                                    g_name(gs[b].0)
+                                ),
+                            ));
+                        }
                     }
                 }
             }
-        }
-        if nm > 4 {
-            return Err(ierr(li, ms[4].1, "more than four M words in one block"));
-        }
-        for a in 0..nm {
-            for b in a + 1..nm {
-                let (ma, mb) = (ms[a].0, ms[b].0);
-                if let (Some(ga), Some(gb)) = (m_group(ma), m_group(mb)) {
-                    if ga == gb {
-                        return Err(ierr(li, ms[b].1, format!("M{ma} and M{mb} are of one modal group; a block may have one")));
+            if nm > 4 {
+                return Err(ierr(li, ms[4].1, "more than four M words in one block"));
+            }
+            for a in 0..nm {
+                for b in a + 1..nm {
+                    let (ma, mb) = (ms[a].0, ms[b].0);
+                    if let (Some(ga), Some(gb)) = (m_group(ma), m_group(mb)) {
+                        if ga == gb {
+                            return Err(ierr(
+                                li,
+                                ms[b].1,
+                                format!(
+                                    "M{ma} and M{mb} are of one modal group; a block may have one"
+                                ),
+                            ));
+                        }
                     }
                 }
             }
-        }
-        // axis words used by a code other than a motion (G10, G28, G30, G43.1, G52, G92, an M code
-        // the engine does not know, ...) do not move along the motion mode
-        let axis_user_count = gs[..ng].iter().filter(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500)).count();
-        if axis_user_count > 0 && named != 0 {
-            if let Some(&(c, gc)) = gs[..ng].iter().find(|&&(c, _)| g_group(c) == Some(1) && c != 800) {
-                let user = gs[..ng].iter().find(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500)).unwrap().0;
-                return Err(ierr(li, gc, format!("{} and {} in one block both use the axis words", g_name(user), g_name(c))));
+            // axis words used by a code other than a motion (G10, G28, G30, G43.1, G52, G92, an M code
+            // the engine does not know, ...) do not move along the motion mode
+            let axis_user_count = gs[..ng]
+                .iter()
+                .filter(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500))
+                .count();
+            if axis_user_count > 0 && named != 0 {
+                if let Some(&(c, gc)) = gs[..ng]
+                    .iter()
+                    .find(|&&(c, _)| g_group(c) == Some(1) && c != 800)
+                {
+                    let user = gs[..ng]
+                        .iter()
+                        .find(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500))
+                        .unwrap()
+                        .0;
+                    return Err(ierr(
+                        li,
+                        gc,
+                        format!(
+                            "{} and {} in one block both use the axis words",
+                            g_name(user),
+                            g_name(c)
+                        ),
+                    ));
+                }
             }
-        }
-        // an E word: a 3D printer's extruder axis (LinuxCNC reads E only for M66/M67/M68 and the
-        // G70/G76 cycles); `G92 E0` alone resets the extruder and moves nothing
-        let g92_e_only = e_word.is_some() && named == 0 && ng == 1 && gs[0].0 == 920;
-        if g92_e_only {
-            ng = 0;
-        }
-        let mut e_construct: Option<usize> = None;
-        if let Some(ec) = e_word {
-            let e_reader = ms[..nm].iter().any(|&(m, _)| matches!(m, 66..=68)) || gs[..ng].iter().any(|&(c, _)| matches!(c, 700 | 760));
-            if !e_reader && !g92_e_only {
-                e_construct = Some(grouped_unsupported(out, grouped, li, ec, "E word (a 3D printer's extruder axis, not RS274NGC)"));
+            // an E word: a 3D printer's extruder axis (LinuxCNC reads E only for M66/M67/M68 and the
+            // G70/G76 cycles); `G92 E0` alone resets the extruder and moves nothing
+            let g92_e_only = e_word.is_some() && named == 0 && ng == 1 && gs[0].0 == 920;
+            if g92_e_only {
+                ng = 0;
             }
-        }
-        // M codes the engine does not know may do anything, also with the axis words of the block
-        let mut unknown_m: Option<usize> = None;
-        for &(m, mc) in &ms[..nm] {
-            if m_group(m).is_none() && !matches!(m, 98 | 99) {
-                unknown_m = Some(grouped_unsupported(out, grouped, li, mc, &format!("M code M{m} the engine does not know")));
-                break;
+            let mut e_construct: Option<usize> = None;
+            if let Some(ec) = e_word {
+                let e_reader = ms[..nm].iter().any(|&(m, _)| matches!(m, 66..=68))
+                    || gs[..ng].iter().any(|&(c, _)| matches!(c, 700 | 760));
+                if !e_reader && !g92_e_only {
+                    e_construct = Some(grouped_unsupported(
+                        out,
+                        grouped,
+                        li,
+                        ec,
+                        "E word (a 3D printer's extruder axis, not RS274NGC)",
+                    ));
+                }
             }
-        }
+            // M codes the engine does not know may do anything, also with the axis words of the block
+            let mut unknown_m: Option<usize> = None;
+            for &(m, mc) in &ms[..nm] {
+                if m_group(m).is_none() && !matches!(m, 98 | 99) {
+                    unknown_m = Some(grouped_unsupported(
+                        out,
+                        grouped,
+                        li,
+                        mc,
+                        &format!("M code M{m} the engine does not know"),
+                    ));
+                    break;
+                }
+            }
 
-        // modal and non-modal G codes, in LinuxCNC's order of execution
-        let mut motion_word: Option<(Mode, usize)> = None;
-        let mut g53 = false;
-        let mut nonmodal_axis_user: Option<(i32, usize)> = None;
-        let mut home: Option<(i32, usize)> = None;
-        let mut unit_change = None;
-        let mut untraced: Option<usize> = None;
-        for &(c, gc) in &gs[..ng] {
-            match c {
-                0 => motion_word = Some((Mode::Motion(Motion::Rapid), gc)),
-                10 => motion_word = Some((Mode::Motion(Motion::Feed), gc)),
-                20 => motion_word = Some((Mode::Motion(Motion::ArcCw), gc)),
-                30 => motion_word = Some((Mode::Motion(Motion::ArcCcw), gc)),
-                // (G80 is handled below; its group shares no conflict with the other motions)
-                40 => {}                                   // dwell
-                170 => st.plane = 0,
-                180 => st.plane = 1,
-                190 => st.plane = 2,
-                200 => unit_change = Some(true),
-                210 => unit_change = Some(false),
-                900 => st.incremental = false,
-                910 => st.incremental = true,
-                901 => st.arc_absolute = true,
-                911 => st.arc_absolute = false,
-                400 => st.active.cutter_comp = None,
-                410 | 411 | 420 | 421 => {
-                    if st.active.cutter_comp.is_none() {
-                        let idx = push_unsupported(out, li, gc, &format!("cutter compensation {}", g_name(c)));
-                        st.active.cutter_comp = Some((li as u32, idx));
+            // modal and non-modal G codes, in LinuxCNC's order of execution
+            let mut motion_word: Option<(Mode, usize)> = None;
+            let mut g53 = false;
+            let mut nonmodal_axis_user: Option<(i32, usize)> = None;
+            let mut home: Option<(i32, usize)> = None;
+            let mut unit_change = None;
+            let mut untraced: Option<usize> = None;
+            for &(c, gc) in &gs[..ng] {
+                match c {
+                    0 => motion_word = Some((Mode::Motion(Motion::Rapid), gc)),
+                    10 => motion_word = Some((Mode::Motion(Motion::Feed), gc)),
+                    20 => motion_word = Some((Mode::Motion(Motion::ArcCw), gc)),
+                    30 => motion_word = Some((Mode::Motion(Motion::ArcCcw), gc)),
+                    // (G80 is handled below; its group shares no conflict with the other motions)
+                    40 => {} // dwell
+                    170 => st.plane = 0,
+                    180 => st.plane = 1,
+                    190 => st.plane = 2,
+                    200 => unit_change = Some(true),
+                    210 => unit_change = Some(false),
+                    900 => st.incremental = false,
+                    910 => st.incremental = true,
+                    901 => st.arc_absolute = true,
+                    911 => st.arc_absolute = false,
+                    400 => st.active.cutter_comp = None,
+                    410 | 411 | 420 | 421 => {
+                        if st.active.cutter_comp.is_none() {
+                            let idx = push_unsupported(
+                                out,
+                                li,
+                                gc,
+                                &format!("cutter compensation {}", g_name(c)),
+                            );
+                            st.active.cutter_comp = Some((li as u32, idx));
+                        }
                     }
-                }
-                // tool length: program coordinates are the tool tip; G43.1 takes its offsets from
-                // the axis words, and rs274 then traces the spindle, not the tip
-                430 | 490 => st.active.tool_offset = None,
-                432 => {}
-                431 => {
-                    let idx = push_unsupported(out, li, gc, "dynamic tool length offset G43.1");
-                    st.active.tool_offset = Some((li as u32, idx));
-                    nonmodal_axis_user = Some((c, idx));
-                }
-                540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => {
-                    let o = c as u16;
-                    if !out.summary.work_offsets.contains(&o) {
-                        out.summary.work_offsets.push(o);
+                    // tool length: program coordinates are the tool tip; G43.1 takes its offsets from
+                    // the axis words, and rs274 then traces the spindle, not the tip
+                    430 | 490 => st.active.tool_offset = None,
+                    432 => {}
+                    431 => {
+                        let idx = push_unsupported(out, li, gc, "dynamic tool length offset G43.1");
+                        st.active.tool_offset = Some((li as u32, idx));
+                        nonmodal_axis_user = Some((c, idx));
                     }
-                }
-                530 => g53 = true,
-                610 | 611 | 640 => {}                      // path control
-                940 | 950 => st.active.inverse_time = None,
-                930 => {
-                    if st.active.inverse_time.is_none() {
-                        let idx = push_unsupported(out, li, gc, "inverse-time feed G93");
-                        st.active.inverse_time = Some((li as u32, idx));
+                    540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => {
+                        let o = c as u16;
+                        if !out.summary.work_offsets.contains(&o) {
+                            out.summary.work_offsets.push(o);
+                        }
                     }
-                }
-                960 | 970 | 980 | 990 => {}                // spindle mode, canned return level
-                // G80 beside another motion code leaves that one in force, as in LinuxCNC
-                800 => {
-                    if motion_word.is_none() {
-                        motion_word = Some((Mode::None, gc));
+                    530 => g53 = true,
+                    610 | 611 | 640 => {} // path control
+                    940 | 950 => st.active.inverse_time = None,
+                    930 => {
+                        if st.active.inverse_time.is_none() {
+                            let idx = push_unsupported(out, li, gc, "inverse-time feed G93");
+                            st.active.inverse_time = Some((li as u32, idx));
+                        }
                     }
-                }
-                730 | 740 | 760 | 810 | 820 | 830 | 840 | 850 | 860 | 870 | 880 | 890 | 841 | 842 => {
-                    motion_word = Some((Mode::Canned(c), gc));
-                }
-                80 => st.active.diameter = None,
-                70 => {
-                    if st.active.diameter.is_none() {
-                        let idx = push_unsupported(out, li, gc, "lathe diameter mode G7");
-                        st.active.diameter = Some((li as u32, idx));
+                    960 | 970 | 980 | 990 => {} // spindle mode, canned return level
+                    // G80 beside another motion code leaves that one in force, as in LinuxCNC
+                    800 => {
+                        if motion_word.is_none() {
+                            motion_word = Some((Mode::None, gc));
+                        }
                     }
-                }
-                920 | 520 => {
-                    let idx = push_unsupported(out, li, gc, &format!("coordinate shift {}", g_name(c)));
-                    if st.active.shift.is_none() {
+                    730 | 740 | 760 | 810 | 820 | 830 | 840 | 850 | 860 | 870 | 880 | 890 | 841
+                    | 842 => {
+                        motion_word = Some((Mode::Canned(c), gc));
+                    }
+                    80 => st.active.diameter = None,
+                    70 => {
+                        if st.active.diameter.is_none() {
+                            let idx = push_unsupported(out, li, gc, "lathe diameter mode G7");
+                            st.active.diameter = Some((li as u32, idx));
+                        }
+                    }
+                    920 | 520 => {
+                        let idx = push_unsupported(
+                            out,
+                            li,
+                            gc,
+                            &format!("coordinate shift {}", g_name(c)),
+                        );
+                        if st.active.shift.is_none() {
+                            st.active.shift = Some((li as u32, idx));
+                        }
+                        nonmodal_axis_user = Some((c, idx));
+                    }
+                    // G92.1 / G92.2 clear or suspend G92 offsets: the frame becomes the plain work offset
+                    921 | 922 => st.active.shift = None,
+                    923 => {
+                        let idx = push_unsupported(out, li, gc, "coordinate shift G92.3");
                         st.active.shift = Some((li as u32, idx));
                     }
-                    nonmodal_axis_user = Some((c, idx));
-                }
-                // G92.1 / G92.2 clear or suspend G92 offsets: the frame becomes the plain work offset
-                921 | 922 => st.active.shift = None,
-                923 => {
-                    let idx = push_unsupported(out, li, gc, "coordinate shift G92.3");
-                    st.active.shift = Some((li as u32, idx));
-                }
-                100 => {
-                    let l = l_word.unwrap_or(0.0).round() as i32;
-                    let idx = push_unsupported(out, li, gc, &format!("offset setting G10 L{l}"));
-                    if matches!(l, 2 | 20) && st.active.shift.is_none() {
-                        st.active.shift = Some((li as u32, idx));
+                    100 => {
+                        let l = l_word.unwrap_or(0.0).round() as i32;
+                        let idx =
+                            push_unsupported(out, li, gc, &format!("offset setting G10 L{l}"));
+                        if matches!(l, 2 | 20) && st.active.shift.is_none() {
+                            st.active.shift = Some((li as u32, idx));
+                        }
+                        nonmodal_axis_user = Some((c, idx));
                     }
-                    nonmodal_axis_user = Some((c, idx));
-                }
-                280 | 300 => home = Some((c, gc)),
-                // G28.1 / G30.1 store the position and move nothing; with axis words LinuxCNC's
-                // reading is not the documented one, so those are reported
-                281 | 301 if named != 0 => {
-                    let idx = push_unsupported(out, li, gc, &format!("{} with axis words", g_name(c)));
-                    nonmodal_axis_user = Some((c, idx));
-                }
-                281 | 301 => {}
-                680 => {
-                    let idx = push_unsupported(out, li, gc, "coordinate rotation G68");
-                    st.active.rotation = Some((li as u32, idx));
-                }
-                690 => st.active.rotation = None,
-                510 => {
-                    let idx = push_unsupported(out, li, gc, "scaling G51");
-                    st.active.scaling = Some((li as u32, idx));
-                }
-                // G50 with axis words is a Fanuc lathe's coordinate setting; alone, scaling off
-                500 if named != 0 => {
-                    let idx = push_unsupported(out, li, gc, "coordinate setting G50 (Fanuc lathe)");
-                    if st.active.shift.is_none() {
-                        st.active.shift = Some((li as u32, idx));
+                    280 | 300 => home = Some((c, gc)),
+                    // G28.1 / G30.1 store the position and move nothing; with axis words LinuxCNC's
+                    // reading is not the documented one, so those are reported
+                    281 | 301 if named != 0 => {
+                        let idx = push_unsupported(
+                            out,
+                            li,
+                            gc,
+                            &format!("{} with axis words", g_name(c)),
+                        );
+                        nonmodal_axis_user = Some((c, idx));
                     }
-                    nonmodal_axis_user = Some((c, idx));
-                }
-                500 => st.active.scaling = None,
-                160 => {
-                    let idx = push_unsupported(out, li, gc, "polar coordinates G16");
-                    st.active.polar = Some((li as u32, idx));
-                }
-                150 => st.active.polar = None,
-                _ => {
-                    let what = match c {
-                        50..=53 => "spline",
-                        330 | 331 => "spindle-synchronised motion",
-                        382..=385 => "probing",
-                        171 | 181 | 191 => "UVW plane",
-                        700 | 710 | 720 | 711 | 721 => "lathe cycle",
-                        _ => "unknown G code",
-                    };
-                    let idx = push_unsupported(out, li, gc, &format!("{what} {}", g_name(c)));
-                    // these may move the machine somewhere the engine does not trace
-                    untraced = Some(idx);
+                    281 | 301 => {}
+                    680 => {
+                        let idx = push_unsupported(out, li, gc, "coordinate rotation G68");
+                        st.active.rotation = Some((li as u32, idx));
+                    }
+                    690 => st.active.rotation = None,
+                    510 => {
+                        let idx = push_unsupported(out, li, gc, "scaling G51");
+                        st.active.scaling = Some((li as u32, idx));
+                    }
+                    // G50 with axis words is a Fanuc lathe's coordinate setting; alone, scaling off
+                    500 if named != 0 => {
+                        let idx =
+                            push_unsupported(out, li, gc, "coordinate setting G50 (Fanuc lathe)");
+                        if st.active.shift.is_none() {
+                            st.active.shift = Some((li as u32, idx));
+                        }
+                        nonmodal_axis_user = Some((c, idx));
+                    }
+                    500 => st.active.scaling = None,
+                    160 => {
+                        let idx = push_unsupported(out, li, gc, "polar coordinates G16");
+                        st.active.polar = Some((li as u32, idx));
+                    }
+                    150 => st.active.polar = None,
+                    _ => {
+                        let what = match c {
+                            50..=53 => "spline",
+                            330 | 331 => "spindle-synchronised motion",
+                            382..=385 => "probing",
+                            171 | 181 | 191 => "UVW plane",
+                            700 | 710 | 720 | 711 | 721 => "lathe cycle",
+                            _ => "unknown G code",
+                        };
+                        let idx = push_unsupported(out, li, gc, &format!("{what} {}", g_name(c)));
+                        // these may move the machine somewhere the engine does not trace
+                        untraced = Some(idx);
+                    }
                 }
             }
-        }
-        for &(m, mc) in &ms[..nm] {
-            match m {
-                98 | 99 => {
-                    let idx = push_unsupported(out, li, mc, &format!("subprogram M{m}"));
-                    if st.active.flow.is_none() {
-                        st.active.flow = Some((li as u32, idx));
+            for &(m, mc) in &ms[..nm] {
+                match m {
+                    98 | 99 => {
+                        let idx = push_unsupported(out, li, mc, &format!("subprogram M{m}"));
+                        if st.active.flow.is_none() {
+                            st.active.flow = Some((li as u32, idx));
+                        }
                     }
+                    _ => {}
                 }
-                _ => {}
             }
-        }
-        if let Some(inch) = unit_change {
-            st.inch = inch;
-        }
-        if st.inch {
-            out.summary.inch_lines += 1;
-        } else {
-            out.summary.mm_lines += 1;
-        }
-        if let Some((m, mc)) = motion_word {
-            if let Mode::Canned(c) = m {
-                // canned cycles stay modal until G80
-                let idx = push_unsupported(out, li, mc, &format!("canned cycle {}", g_name(c)));
-                st.active.canned = Some((li as u32, idx));
+            if let Some(inch) = unit_change {
+                st.inch = inch;
+            }
+            if st.inch {
+                out.summary.inch_lines += 1;
             } else {
-                st.active.canned = None;
+                out.summary.mm_lines += 1;
             }
-            st.mode = m;
-        }
-        // a G code the engine does not know may change the motion mode too; for an unknown M code,
-        // what it does with the machine, and with the block's axis words, is not known
-        if let Some(idx) = untraced.or(unknown_m) {
-            st.pos = [f64::NAN; NAXES];
-            if untraced.is_some() {
-                st.mode = Mode::None;
-            }
-            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            out.unsupported[idx].blocks += 1;
-            if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
-                out.summary.end_line = Some(li as u32);
-                break;
-            }
-            continue;
-        }
-
-        let unit = if st.inch { MM_PER_INCH } else { 1.0 };
-        // an arc with centre words and no axis words is a full circle back to its start
-        let full_circle = named == 0
-            && matches!(st.mode, Mode::Motion(m) if m.is_arc())
-            && ijk.iter().any(|v| v.is_some());
-        // G0 or G1 written without axis words is a move to where the tool is (LinuxCNC traces it)
-        let standing = named == 0
-            && matches!(motion_word, Some((Mode::Motion(Motion::Rapid | Motion::Feed), _)));
-        if named == 0 && !full_circle && r.is_none() {
-            if let Some((Mode::Motion(m), gc)) = motion_word {
-                if m.is_arc() {
-                    return Err(ierr(li, gc, "arc with no axis words and no I/J/K or R words"));
+            if let Some((m, mc)) = motion_word {
+                if let Mode::Canned(c) = m {
+                    // canned cycles stay modal until G80
+                    let idx = push_unsupported(out, li, mc, &format!("canned cycle {}", g_name(c)));
+                    st.active.canned = Some((li as u32, idx));
+                } else {
+                    st.active.canned = None;
                 }
+                st.mode = m;
             }
-        }
-        let any_axis = named != 0 || full_circle || standing;
-
-        // non-modal codes that take the axis words
-        if let Some((_c, idx)) = nonmodal_axis_user {
-            if any_axis || matches!(_c, 280 | 300 | 281 | 301) {
+            // a G code the engine does not know may change the motion mode too; for an unknown M code,
+            // what it does with the machine, and with the block's axis words, is not known
+            if let Some(idx) = untraced.or(unknown_m) {
                 st.pos = [f64::NAN; NAXES];
+                if untraced.is_some() {
+                    st.mode = Mode::None;
+                }
                 push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                 out.unsupported[idx].blocks += 1;
+                if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                    out.summary.end_line = Some(li as u32);
+                    break;
+                }
+                continue;
             }
-            continue;
-        }
-        // G28 / G30: a rapid to the intermediate point the axis words give (in program coordinates,
-        // G90/G91 as set), then the axes named (every axis when none is) to the stored reference
-        // position, a machine position the program does not know: two moves, as LinuxCNC's rs274
-        if let Some((c, gc)) = home {
-            if matches!(motion_word, Some((Mode::Motion(_) | Mode::Canned(_), _))) {
-                return Err(ierr(li, gc, format!("{} and a motion code in one block both use the axis words", g_name(c))));
-            }
-            st.pos = target(&st.pos, &axis, st.incremental, unit);
-            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            for k in 0..NAXES {
-                if named == 0 || named & (1 << k) != 0 {
-                    st.pos[k] = f64::NAN;
+
+            let unit = if st.inch { MM_PER_INCH } else { 1.0 };
+            // an arc with centre words and no axis words is a full circle back to its start
+            let full_circle = named == 0
+                && matches!(st.mode, Mode::Motion(m) if m.is_arc())
+                && ijk.iter().any(|v| v.is_some());
+            // G0 or G1 written without axis words is a move to where the tool is (LinuxCNC traces it)
+            let standing = named == 0
+                && matches!(
+                    motion_word,
+                    Some((Mode::Motion(Motion::Rapid | Motion::Feed), _))
+                );
+            if named == 0 && !full_circle && r.is_none() {
+                if let Some((Mode::Motion(m), gc)) = motion_word {
+                    if m.is_arc() {
+                        return Err(ierr(
+                            li,
+                            gc,
+                            "arc with no axis words and no I/J/K or R words",
+                        ));
+                    }
                 }
             }
-            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            out.notes.push(Note {
+            let any_axis = named != 0 || full_circle || standing;
+
+            // non-modal codes that take the axis words
+            if let Some((_c, idx)) = nonmodal_axis_user {
+                if any_axis || matches!(_c, 280 | 300 | 281 | 301) {
+                    st.pos = [f64::NAN; NAXES];
+                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                    out.unsupported[idx].blocks += 1;
+                }
+                continue;
+            }
+            // G28 / G30: a rapid to the intermediate point the axis words give (in program coordinates,
+            // G90/G91 as set), then the axes named (every axis when none is) to the stored reference
+            // position, a machine position the program does not know: two moves, as LinuxCNC's rs274
+            if let Some((c, gc)) = home {
+                if matches!(motion_word, Some((Mode::Motion(_) | Mode::Canned(_), _))) {
+                    return Err(ierr(
+                        li,
+                        gc,
+                        format!(
+                            "{} and a motion code in one block both use the axis words",
+                            g_name(c)
+                        ),
+                    ));
+                }
+                st.pos = target(&st.pos, &axis, st.incremental, unit);
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                for k in 0..NAXES {
+                    if named == 0 || named & (1 << k) != 0 {
+                        st.pos[k] = f64::NAN;
+                    }
+                }
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                out.notes.push(Note {
                 line: li as u32,
                 message: format!(
                     "{} return to the stored reference position: kept as written, not corrected; the axes it moves are unknown afterwards",
                     g_name(c)
                 ),
             });
-            if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
-                out.summary.end_line = Some(li as u32);
-                break;
+                if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                    out.summary.end_line = Some(li as u32);
+                    break;
+                }
+                continue;
             }
-            continue;
-        }
-        if !any_axis {
+            if !any_axis {
+                for &(m, _) in &ms[..nm] {
+                    if m == 2 || m == 30 {
+                        out.summary.end_line = Some(li as u32);
+                    }
+                }
+                if out.summary.end_line.is_some() {
+                    break;
+                }
+                continue;
+            }
+
+            // the target of the axis words
+            let mut end = target(&st.pos, &axis, st.incremental && !g53, unit);
+
+            if g53 {
+                out.notes.push(Note {
+                line: li as u32,
+                message: "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards".into(),
+            });
+                for k in 0..NAXES {
+                    if axis[k].is_some() {
+                        end[k] = f64::NAN;
+                    }
+                }
+                st.pos = end;
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                continue;
+            }
+
+            let blocker = st.active.first();
+            match st.mode {
+                Mode::None => {
+                    let idx = push_unsupported(
+                        out,
+                        li,
+                        axis_col,
+                        "axis words with no motion mode (G80 or none yet)",
+                    );
+                    out.unsupported[idx].blocks += 1;
+                    st.pos = [f64::NAN; NAXES];
+                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                }
+                Mode::Canned(c) => {
+                    if let Some((_, idx)) = st.active.canned {
+                        out.unsupported[idx].blocks += 1;
+                    }
+                    // the hole position is known, the height after the cycle is not
+                    let _ = c;
+                    end[2] = f64::NAN;
+                    st.pos = end;
+                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                }
+                Mode::Motion(m) => {
+                    let mut center = [0.0; 2];
+                    let mut turns = 1u32;
+                    if m.is_arc() {
+                        let [a1, a2, _] = PLANE_AXES[st.plane as usize];
+                        let s = [st.pos[a1], st.pos[a2]];
+                        let e = [end[a1], end[a2]];
+                        // offsets by plane: XY uses I J, ZX uses K I, YZ uses J K
+                        let (o1, o2) = match st.plane {
+                            0 => (ijk[0], ijk[1]),
+                            1 => (ijk[2], ijk[0]),
+                            _ => (ijk[1], ijk[2]),
+                        };
+                        let gcol = motion_word.map_or(axis_col, |(_, c)| c);
+                        if let Some(pv) = p {
+                            if pv < 1.0 || pv.fract() != 0.0 {
+                                return Err(ierr(
+                                    li,
+                                    gcol,
+                                    format!("arc turns P must be a whole number >= 1, got {pv}"),
+                                ));
+                            }
+                            turns = pv as u32;
+                        }
+                        if let Some((rv, rc)) = r {
+                            if o1.is_some() || o2.is_some() {
+                                return Err(ierr(
+                                    li,
+                                    rc,
+                                    "arc with both R and I/J/K; use one form",
+                                ));
+                            }
+                            let rr = rv * unit;
+                            let dx = e[0] - s[0];
+                            let dy = e[1] - s[1];
+                            let d = (dx * dx + dy * dy).sqrt();
+                            if d.is_nan() {
+                                center = [f64::NAN; 2];
+                            } else {
+                                if d < 1e-9 {
+                                    return Err(ierr(li, rc, "R-format arc with the same start and end point; use I/J/K for a full circle"));
+                                }
+                                let half = d / 2.0;
+                                let mut h2 = rr * rr - half * half;
+                                if h2 < 0.0 {
+                                    if rr.abs() < half - ARC_ABS_TOL_MM {
+                                        return Err(ierr(li, rc, format!("arc radius {} too small to reach the end point {:.4} away", rv.abs(), d / unit)));
+                                    }
+                                    h2 = 0.0;
+                                }
+                                let h = h2.sqrt();
+                                let (ux, uy) = (dx / d, dy / d);
+                                let mid = [(s[0] + e[0]) / 2.0, (s[1] + e[1]) / 2.0];
+                                // clockwise minor arcs have their centre to the right of the chord
+                                let right = (m == Motion::ArcCw) == (rr > 0.0);
+                                let (px, py) = if right { (uy, -ux) } else { (-uy, ux) };
+                                center = [mid[0] + h * px, mid[1] + h * py];
+                            }
+                        } else {
+                            if o1.is_none() && o2.is_none() {
+                                return Err(ierr(
+                                    li,
+                                    gcol,
+                                    "arc needs I/J/K (centre) or R (radius) words for its plane",
+                                ));
+                            }
+                            let scale = unit;
+                            if st.arc_absolute {
+                                center = [o1.unwrap_or(0.0) * scale, o2.unwrap_or(0.0) * scale];
+                            } else {
+                                center = [
+                                    s[0] + o1.unwrap_or(0.0) * scale,
+                                    s[1] + o2.unwrap_or(0.0) * scale,
+                                ];
+                            }
+                            let r1 =
+                                ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2)).sqrt();
+                            let r2 =
+                                ((e[0] - center[0]).powi(2) + (e[1] - center[1]).powi(2)).sqrt();
+                            let abs_err = (r1 - r2).abs() / unit;
+                            let spiral = if st.inch {
+                                SPIRAL_ABS_TOL_INCH
+                            } else {
+                                SPIRAL_ABS_TOL_MM
+                            };
+                            if abs_err > 100.0 * spiral
+                                || (abs_err > spiral
+                                    && abs_err * unit / r1.max(r2) > SPIRAL_REL_TOL)
+                            {
+                                return Err(ierr(li, gcol, format!(
+                                "radius to the end of the arc ({:.4}) differs from radius to its start ({:.4})",
+                                r2 / unit, r1 / unit)));
+                            }
+                            if r1 < ARC_MIN_RADIUS_MM || r2 < ARC_MIN_RADIUS_MM {
+                                return Err(ierr(li, gcol, "arc with zero radius"));
+                            }
+                        }
+                    }
+                    // correctable when every axis it moves has a known end (a straight move from an
+                    // unknown start is corrected at its end only); arcs need their centre
+                    // an arc, and an axis other than XYZ that the block moves, needs its start too: their
+                    // pieces are interpolated from it (a move is never changed in kind from an unknown start)
+                    let known = (0..NAXES).all(|k| {
+                        let needed = k < 3 || named & (1 << k) != 0;
+                        !needed || end[k].is_finite()
+                    }) && center.iter().all(|v| v.is_finite())
+                        && (!m.is_arc() || st.pos[..3].iter().all(|v| v.is_finite()))
+                        && (3..NAXES).all(|k| named & (1 << k) == 0 || st.pos[k].is_finite());
+                    let supported = blocker.is_none() && e_construct.is_none();
+                    if let Some(idx) = blocker {
+                        out.unsupported[idx].blocks += 1;
+                    }
+                    if let Some(idx) = e_construct {
+                        out.unsupported[idx].blocks += 1;
+                    }
+                    st.pos = end;
+                    push_record(out, st, li, m, supported && known, named, center, turns);
+                    let s = &mut out.summary;
+                    s.counts[m as usize] += 1;
+                    if m.is_arc() {
+                        s.planes[st.plane as usize] += 1;
+                    }
+                }
+            }
             for &(m, _) in &ms[..nm] {
                 if m == 2 || m == 30 {
                     out.summary.end_line = Some(li as u32);
@@ -688,155 +957,8 @@ impl Interpreter {
             if out.summary.end_line.is_some() {
                 break;
             }
-            continue;
         }
-
-        // the target of the axis words
-        let mut end = target(&st.pos, &axis, st.incremental && !g53, unit);
-
-        if g53 {
-            out.notes.push(Note {
-                line: li as u32,
-                message: "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards".into(),
-            });
-            for k in 0..NAXES {
-                if axis[k].is_some() {
-                    end[k] = f64::NAN;
-                }
-            }
-            st.pos = end;
-            push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            continue;
-        }
-
-        let blocker = st.active.first();
-        match st.mode {
-            Mode::None => {
-                let idx = push_unsupported(out, li, axis_col, "axis words with no motion mode (G80 or none yet)");
-                out.unsupported[idx].blocks += 1;
-                st.pos = [f64::NAN; NAXES];
-                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            }
-            Mode::Canned(c) => {
-                if let Some((_, idx)) = st.active.canned {
-                    out.unsupported[idx].blocks += 1;
-                }
-                // the hole position is known, the height after the cycle is not
-                let _ = c;
-                end[2] = f64::NAN;
-                st.pos = end;
-                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-            }
-            Mode::Motion(m) => {
-                let mut center = [0.0; 2];
-                let mut turns = 1u32;
-                if m.is_arc() {
-                    let [a1, a2, _] = PLANE_AXES[st.plane as usize];
-                    let s = [st.pos[a1], st.pos[a2]];
-                    let e = [end[a1], end[a2]];
-                    // offsets by plane: XY uses I J, ZX uses K I, YZ uses J K
-                    let (o1, o2) = match st.plane {
-                        0 => (ijk[0], ijk[1]),
-                        1 => (ijk[2], ijk[0]),
-                        _ => (ijk[1], ijk[2]),
-                    };
-                    let gcol = motion_word.map_or(axis_col, |(_, c)| c);
-                    if let Some(pv) = p {
-                        if pv < 1.0 || pv.fract() != 0.0 {
-                            return Err(ierr(li, gcol, format!("arc turns P must be a whole number >= 1, got {pv}")));
-                        }
-                        turns = pv as u32;
-                    }
-                    if let Some((rv, rc)) = r {
-                        if o1.is_some() || o2.is_some() {
-                            return Err(ierr(li, rc, "arc with both R and I/J/K; use one form"));
-                        }
-                        let rr = rv * unit;
-                        let dx = e[0] - s[0];
-                        let dy = e[1] - s[1];
-                        let d = (dx * dx + dy * dy).sqrt();
-                        if d.is_nan() {
-                            center = [f64::NAN; 2];
-                        } else {
-                            if d < 1e-9 {
-                                return Err(ierr(li, rc, "R-format arc with the same start and end point; use I/J/K for a full circle"));
-                            }
-                            let half = d / 2.0;
-                            let mut h2 = rr * rr - half * half;
-                            if h2 < 0.0 {
-                                if rr.abs() < half - ARC_ABS_TOL_MM {
-                                    return Err(ierr(li, rc, format!("arc radius {} too small to reach the end point {:.4} away", rv.abs(), d / unit)));
-                                }
-                                h2 = 0.0;
-                            }
-                            let h = h2.sqrt();
-                            let (ux, uy) = (dx / d, dy / d);
-                            let mid = [(s[0] + e[0]) / 2.0, (s[1] + e[1]) / 2.0];
-                            // clockwise minor arcs have their centre to the right of the chord
-                            let right = (m == Motion::ArcCw) == (rr > 0.0);
-                            let (px, py) = if right { (uy, -ux) } else { (-uy, ux) };
-                            center = [mid[0] + h * px, mid[1] + h * py];
-                        }
-                    } else {
-                        if o1.is_none() && o2.is_none() {
-                            return Err(ierr(li, gcol, "arc needs I/J/K (centre) or R (radius) words for its plane"));
-                        }
-                        let scale = unit;
-                        if st.arc_absolute {
-                            center = [o1.unwrap_or(0.0) * scale, o2.unwrap_or(0.0) * scale];
-                        } else {
-                            center = [s[0] + o1.unwrap_or(0.0) * scale, s[1] + o2.unwrap_or(0.0) * scale];
-                        }
-                        let r1 = ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2)).sqrt();
-                        let r2 = ((e[0] - center[0]).powi(2) + (e[1] - center[1]).powi(2)).sqrt();
-                        let abs_err = (r1 - r2).abs() / unit;
-                        let spiral = if st.inch { SPIRAL_ABS_TOL_INCH } else { SPIRAL_ABS_TOL_MM };
-                        if abs_err > 100.0 * spiral || (abs_err > spiral && abs_err * unit / r1.max(r2) > SPIRAL_REL_TOL) {
-                            return Err(ierr(li, gcol, format!(
-                                "radius to the end of the arc ({:.4}) differs from radius to its start ({:.4})",
-                                r2 / unit, r1 / unit)));
-                        }
-                        if r1 < ARC_MIN_RADIUS_MM || r2 < ARC_MIN_RADIUS_MM {
-                            return Err(ierr(li, gcol, "arc with zero radius"));
-                        }
-                    }
-                }
-                // correctable when every axis it moves has a known end (a straight move from an
-                // unknown start is corrected at its end only); arcs need their centre
-                // an arc, and an axis other than XYZ that the block moves, needs its start too: their
-                // pieces are interpolated from it (a move is never changed in kind from an unknown start)
-                let known = (0..NAXES).all(|k| {
-                    let needed = k < 3 || named & (1 << k) != 0;
-                    !needed || end[k].is_finite()
-                }) && center.iter().all(|v| v.is_finite())
-                    && (!m.is_arc() || st.pos[..3].iter().all(|v| v.is_finite()))
-                    && (3..NAXES).all(|k| named & (1 << k) == 0 || st.pos[k].is_finite());
-                let supported = blocker.is_none() && e_construct.is_none();
-                if let Some(idx) = blocker {
-                    out.unsupported[idx].blocks += 1;
-                }
-                if let Some(idx) = e_construct {
-                    out.unsupported[idx].blocks += 1;
-                }
-                st.pos = end;
-                push_record(out, st, li, m, supported && known, named, center, turns);
-                let s = &mut out.summary;
-                s.counts[m as usize] += 1;
-                if m.is_arc() {
-                    s.planes[st.plane as usize] += 1;
-                }
-            }
-        }
-        for &(m, _) in &ms[..nm] {
-            if m == 2 || m == 30 {
-                out.summary.end_line = Some(li as u32);
-            }
-        }
-        if out.summary.end_line.is_some() {
-            break;
-        }
-    }
-    Ok(())
+        Ok(())
     }
 }
 
@@ -870,8 +992,8 @@ fn g_group(c: i32) -> Option<u8> {
 fn m_group(m: i32) -> Option<u8> {
     Some(match m {
         0 | 1 | 2 | 30 | 60 => 4,
-        3 | 4 | 5 => 7,
-        7 | 8 | 9 => 8,
+        3..=5 => 7,
+        7..=9 => 8,
         48..=53 => 9,
         6 | 61 => 6,
         19 => 11,
@@ -883,7 +1005,13 @@ fn m_group(m: i32) -> Option<u8> {
 }
 
 /// An unsupported construct reported once, its blocks counted over the program.
-fn grouped_unsupported(out: &mut Interp, grouped: &mut Vec<(String, usize)>, li: usize, col: usize, construct: &str) -> usize {
+fn grouped_unsupported(
+    out: &mut Interp,
+    grouped: &mut Vec<(String, usize)>,
+    li: usize,
+    col: usize,
+    construct: &str,
+) -> usize {
     if let Some((_, idx)) = grouped.iter().find(|(c, _)| c == construct) {
         return *idx;
     }
@@ -893,25 +1021,48 @@ fn grouped_unsupported(out: &mut Interp, grouped: &mut Vec<(String, usize)>, li:
 }
 
 fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) -> usize {
-    out.unsupported.push(Unsupported { line: li as u32, col: col as u32, construct: construct.to_string(), blocks: 0 });
+    out.unsupported.push(Unsupported {
+        line: li as u32,
+        col: col as u32,
+        construct: construct.to_string(),
+        blocks: 0,
+    });
     out.unsupported.len() - 1
 }
 
 #[allow(clippy::too_many_arguments)]
 /// Where the axis words of a block take the axes from `pos`: lengths scaled by `unit` (mm per
 /// program unit), rotary words in degrees; added to `pos` when incremental.
-fn target(pos: &[f64; NAXES], axis: &[Option<f64>; NAXES], incremental: bool, unit: f64) -> [f64; NAXES] {
+fn target(
+    pos: &[f64; NAXES],
+    axis: &[Option<f64>; NAXES],
+    incremental: bool,
+    unit: f64,
+) -> [f64; NAXES] {
     let mut end = *pos;
     for (k, (e, w)) in end.iter_mut().zip(axis).enumerate() {
         if let Some(v) = w {
             let scale = if (3..6).contains(&k) { 1.0 } else { unit };
-            *e = if incremental { pos[k] + v * scale } else { v * scale };
+            *e = if incremental {
+                pos[k] + v * scale
+            } else {
+                v * scale
+            };
         }
     }
     end
 }
 
-fn push_record(out: &mut Interp, st: &State, li: usize, motion: Motion, supported: bool, named: u16, center: [f64; 2], turns: u32) {
+fn push_record(
+    out: &mut Interp,
+    st: &State,
+    li: usize,
+    motion: Motion,
+    supported: bool,
+    named: u16,
+    center: [f64; 2],
+    turns: u32,
+) {
     out.line_record[li - out.line_base] = out.records.len() as u32;
     out.records.push(Record {
         line: li as u32,
@@ -953,16 +1104,26 @@ mod tests {
         // quarter circle clockwise from (0,0) to (1,1), radius 1: centre (1,0); counter-clockwise: (0,1)
         let it = run("G17 G90 G0 X0 Y0 Z0\nG2 X1 Y1 R1\n");
         let c = it.records[1].center;
-        assert!((c[0] - 1.0).abs() < 1e-12 && (c[1] - 0.0).abs() < 1e-12, "{c:?}");
+        assert!(
+            (c[0] - 1.0).abs() < 1e-12 && (c[1] - 0.0).abs() < 1e-12,
+            "{c:?}"
+        );
         let it = run("G17 G90 G0 X0 Y0 Z0\nG3 X1 Y1 R1\n");
         let c = it.records[1].center;
-        assert!((c[0] - 0.0).abs() < 1e-12 && (c[1] - 1.0).abs() < 1e-12, "{c:?}");
+        assert!(
+            (c[0] - 0.0).abs() < 1e-12 && (c[1] - 1.0).abs() < 1e-12,
+            "{c:?}"
+        );
     }
 
     #[test]
     fn unsupported_reported() {
         let it = run("G0 X0 Y0 Z0\nG41 D1 G1 X1\nG1 X2\nG40 G1 X3\nG81 X1 Y1 Z-1 R1\nX2\nG80\n");
-        let names: Vec<_> = it.unsupported.iter().map(|u| (u.line, u.construct.clone(), u.blocks)).collect();
+        let names: Vec<_> = it
+            .unsupported
+            .iter()
+            .map(|u| (u.line, u.construct.clone(), u.blocks))
+            .collect();
         assert_eq!(names[0], (1, "cutter compensation G41".to_string(), 2));
         assert_eq!(names[1], (4, "canned cycle G81".to_string(), 2));
         assert!(it.records[3].supported);
@@ -979,7 +1140,7 @@ mod tests {
         assert_eq!(&via.end[..3], &[1.0, 2.0, 3.0]);
         assert!(home.end[2].is_nan() && home.end[0] == 1.0 && home.end[1] == 2.0);
         assert!(!it.records[3].supported); // its Z is unknown
-        // G28.1 stores the position and moves nothing; G28 beside a motion code is an error
+                                           // G28.1 stores the position and moves nothing; G28 beside a motion code is an error
         assert_eq!(run("G0 X1 Y2 Z3\nG28.1\n").records.len(), 1);
         let l = lex(b"G0 X1 Y2 Z3\nG28 G1 X4 F1\n").unwrap();
         assert!(interpret(&l).is_err());

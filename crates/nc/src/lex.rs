@@ -122,8 +122,21 @@ const POW10: [f64; 23] = [
 ];
 
 const O_KEYWORDS: [&[u8]; 15] = [
-    b"sub", b"endsub", b"call", b"do", b"while", b"endwhile", b"if", b"elseif", b"else", b"endif",
-    b"repeat", b"endrepeat", b"return", b"break", b"continue",
+    b"sub",
+    b"endsub",
+    b"call",
+    b"do",
+    b"while",
+    b"endwhile",
+    b"if",
+    b"elseif",
+    b"else",
+    b"endif",
+    b"repeat",
+    b"endrepeat",
+    b"return",
+    b"break",
+    b"continue",
 ];
 
 /// Parse a number at `i`: optional sign, digits with at most one point, at least one digit.
@@ -180,11 +193,17 @@ fn number(s: &[u8], mut i: usize) -> Option<(f64, i8, usize, bool, bool, bool)> 
     } else {
         // rare: very long numbers; let the standard library round them
         let txt = std::str::from_utf8(&s[..i]).ok()?;
-        let start = txt.rfind(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(0, |p| p + 1);
+        let start = txt
+            .rfind(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .map_or(0, |p| p + 1);
         txt[start..].parse::<f64>().ok()?
     };
     let value = if neg { -value } else { value };
-    let decimals = if point { frac_digits.min(127) as i8 } else { -1 };
+    let decimals = if point {
+        frac_digits.min(127) as i8
+    } else {
+        -1
+    };
     Some((
         value,
         decimals,
@@ -216,7 +235,11 @@ pub fn round(x: f64) -> f64 {
 }
 
 fn err(line: usize, col: usize, msg: impl Into<String>) -> NcError {
-    NcError::Parse { line: line + 1, col: col + 1, message: msg.into() }
+    NcError::Parse {
+        line: line + 1,
+        col: col + 1,
+        message: msg.into(),
+    }
 }
 
 /// Lex a whole program.
@@ -273,7 +296,11 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
         while i < end {
             let c = s[i];
             match c {
-                b'\r' if s[i + 1..end].iter().any(|&c| !matches!(c, b' ' | b'\t' | b'\r' | 0x0c)) => {
+                b'\r'
+                    if s[i + 1..end]
+                        .iter()
+                        .any(|&c| !matches!(c, b' ' | b'\t' | b'\r' | 0x0c)) =>
+                {
                     // LinuxCNC reads a lone CR as a blank, so CR-only line ends make one block of
                     // the whole file: refused rather than guessed
                     bad = Some(err(lineno, i - pos, "carriage return inside a line (CR-only line ends?); LinuxCNC does not end a block there: convert the line ends to LF or CRLF"));
@@ -295,21 +322,23 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
                     }
                     i = end;
                 }
-                b'(' => {
-                    match memchr(b')', &s[i..end]) {
-                        Some(k) => {
-                            if !line.comment {
-                                line.comment_start = i as u32;
-                            }
-                            line.comment = true;
-                            i += k + 1;
+                b'(' => match memchr(b')', &s[i..end]) {
+                    Some(k) => {
+                        if !line.comment {
+                            line.comment_start = i as u32;
                         }
-                        None => {
-                            bad = Some(err(lineno, i - pos, "comment '(' is not closed on this line"));
-                            break;
-                        }
+                        line.comment = true;
+                        i += k + 1;
                     }
-                }
+                    None => {
+                        bad = Some(err(
+                            lineno,
+                            i - pos,
+                            "comment '(' is not closed on this line",
+                        ));
+                        break;
+                    }
+                },
                 b';' => {
                     if !line.comment {
                         line.comment_start = i as u32;
@@ -351,7 +380,14 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
                         continue;
                     }
                     match number(s, j) {
-                        Some((_, _, k, ..)) if k + 1 < end && matches!(s[k], b'e' | b'E') && (s[k + 1].is_ascii_digit() || (matches!(s[k + 1], b'+' | b'-') && k + 2 < end && s[k + 2].is_ascii_digit())) => {
+                        Some((_, _, k, ..))
+                            if k + 1 < end
+                                && matches!(s[k], b'e' | b'E')
+                                && (s[k + 1].is_ascii_digit()
+                                    || (matches!(s[k + 1], b'+' | b'-')
+                                        && k + 2 < end
+                                        && s[k + 2].is_ascii_digit())) =>
+                        {
                             bad = Some(err(lineno, k - pos, "a number with an exponent (such as 1e3) is not an RS274NGC number; write it out in full"));
                             break;
                         }
@@ -373,9 +409,13 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
                                     continue;
                                 }
                             }
-                            if matches!(letter, b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R' | b'U' | b'V' | b'W') {
+                            if matches!(
+                                letter,
+                                b'X' | b'Y' | b'Z' | b'I' | b'J' | b'K' | b'R' | b'U' | b'V' | b'W'
+                            ) {
                                 if decimals > 0 {
-                                    style.max_decimals = style.max_decimals.max(decimals.min(8) as u8);
+                                    style.max_decimals =
+                                        style.max_decimals.max(decimals.min(8) as u8);
                                 }
                                 style.fixed |= trailing;
                                 style.no_leading_zero |= no_lead;
@@ -404,7 +444,11 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
                             i = k;
                         }
                         None => {
-                            bad = Some(err(lineno, j - pos, format!("expected a number after '{}'", letter as char)));
+                            bad = Some(err(
+                                lineno,
+                                j - pos,
+                                format!("expected a number after '{}'", letter as char),
+                            ));
                             break;
                         }
                     }
@@ -497,16 +541,35 @@ mod tests {
                 _ => ((seed % 2001) as f64 - 1000.0) * 0.5,
             };
             let (a, b) = (round(x), x.round());
-            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()) || (a == 0.0 && b == 0.0), "{x}: {a} {b}");
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()) || (a == 0.0 && b == 0.0),
+                "{x}: {a} {b}"
+            );
         }
-        for x in [0.49999999999999994, -0.49999999999999994, 0.5, -0.5, 2.5, -2.5, 4503599627370495.5, 1e300, -0.0] {
+        for x in [
+            0.49999999999999994,
+            -0.49999999999999994,
+            0.5,
+            -0.5,
+            2.5,
+            -2.5,
+            4503599627370495.5,
+            1e300,
+            -0.0,
+        ] {
             assert_eq!(round(x) as i64, x.round() as i64, "{x}");
         }
     }
 
     #[test]
     fn numbers_are_exact() {
-        for (t, v) in [("0.1", 0.1), ("123.456", 123.456), ("-0.0001", -0.0001), (".5", 0.5), ("7.", 7.0)] {
+        for (t, v) in [
+            ("0.1", 0.1),
+            ("123.456", 123.456),
+            ("-0.0001", -0.0001),
+            (".5", 0.5),
+            ("7.", 7.0),
+        ] {
             let l = lex(format!("X{t}").as_bytes()).unwrap();
             assert_eq!(l.words[0].value, v, "{t}");
         }

@@ -97,7 +97,10 @@ fn warnings(it: &Interp, clearance: Option<f64>, bounds: Option<[f64; 4]>, r: &m
                     let mut said = Vec::new();
                     for (what, u) in [("end", &end_unknown), ("start", &start_unknown)] {
                         if u.iter().any(|&k| k) {
-                            let axes: String = (0..NAXES).filter(|&a| u[a]).map(|a| AXES[a] as char).collect();
+                            let axes: String = (0..NAXES)
+                                .filter(|&a| u[a])
+                                .map(|a| AXES[a] as char)
+                                .collect();
                             said.push(format!("the {what} of {axes} unknown"));
                         }
                     }
@@ -132,8 +135,18 @@ struct ReadEnd {
 
 /// Read, lex and interpret pieces into `tx`. With `style` None the first piece's style is
 /// assumed for every piece; the program's own is returned to be checked.
-fn read_pieces(reader: Reader, piece_bytes: usize, style: Option<(NumberStyle, bool)>, tx: std::sync::mpsc::SyncSender<Result<Piece, NcError>>) -> Option<ReadEnd> {
-    let mut stream = Stream::new(reader, piece_bytes, style.map_or(NumberStyle::default(), |s| s.0), style.is_some_and(|s| s.1));
+fn read_pieces(
+    reader: Reader,
+    piece_bytes: usize,
+    style: Option<(NumberStyle, bool)>,
+    tx: std::sync::mpsc::SyncSender<Result<Piece, NcError>>,
+) -> Option<ReadEnd> {
+    let mut stream = Stream::new(
+        reader,
+        piece_bytes,
+        style.map_or(NumberStyle::default(), |s| s.0),
+        style.is_some_and(|s| s.1),
+    );
     let mut assumed = style;
     let mut whole = NumberStyle::default();
     let mut counts = [0usize; 4];
@@ -165,12 +178,22 @@ fn read_pieces(reader: Reader, piece_bytes: usize, style: Option<(NumberStyle, b
     }
     whole.spaced = counts[0] >= counts[1];
     let whole = (whole, counts[2] > counts[3]);
-    Some(ReadEnd { assumed: assumed.unwrap_or(whole), whole, lines_read: stream.lines_read(), interp: stream.interp })
+    Some(ReadEnd {
+        assumed: assumed.unwrap_or(whole),
+        whole,
+        lines_read: stream.lines_read(),
+        interp: stream.interp,
+    })
 }
 
 /// Emit jobs from `rx`, handing the output to the writing thread on `write` (and taking its
 /// buffers back from `written`); the sample buffers go back on `back`.
-fn emit_pieces(rx: Receiver<Job>, back: Sender<(Samples, Vec<f64>)>, write: SyncSender<Vec<u8>>, written: Receiver<Vec<u8>>) -> Result<EmitStats, NcError> {
+fn emit_pieces(
+    rx: Receiver<Job>,
+    back: Sender<(Samples, Vec<f64>)>,
+    write: SyncSender<Vec<u8>>,
+    written: Receiver<Vec<u8>>,
+) -> Result<EmitStats, NcError> {
     let mut state: Option<EmitState> = None;
     let mut made = 0;
     for job in rx {
@@ -201,10 +224,15 @@ fn emit_pieces(rx: Receiver<Job>, back: Sender<(Samples, Vec<f64>)>, write: Sync
 }
 
 /// Write the buffers from `rx` to `out`, handing each back on `back`.
-fn write_pieces(rx: Receiver<Vec<u8>>, back: Sender<Vec<u8>>, out: &std::fs::File) -> Result<(), NcError> {
+fn write_pieces(
+    rx: Receiver<Vec<u8>>,
+    back: Sender<Vec<u8>>,
+    out: &std::fs::File,
+) -> Result<(), NcError> {
     let mut w = out;
     for buf in rx {
-        w.write_all(&buf).map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
+        w.write_all(&buf)
+            .map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
         let _ = back.send(buf);
     }
     Ok(())
@@ -255,19 +283,29 @@ fn pass(
                 }
                 Err(_) => back_rx.recv().unwrap_or_default(),
             };
-            if let Err(e) = sample_range(&piece.interp, &opts.sample, 0..piece.interp.records.len(), &mut samples) {
+            if let Err(e) = sample_range(
+                &piece.interp,
+                &opts.sample,
+                0..piece.interp.records.len(),
+                &mut samples,
+            ) {
                 failed = Some(e);
                 break;
             }
             warnings(&piece.interp, opts.clearance, bounds, &mut report);
-            if (!opts.keep_unsupported && !piece.interp.unsupported.is_empty()) || !field.eval(&samples.xyz, &mut disp) {
+            if (!opts.keep_unsupported && !piece.interp.unsupported.is_empty())
+                || !field.eval(&samples.xyz, &mut disp)
+            {
                 refused = true;
                 break;
             }
             norms.clear();
             match opts.shift_norm {
                 Some(n) => norms.resize(samples.rec.len(), n),
-                None => norms.extend(disp.chunks_exact(3).map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())),
+                None => norms.extend(
+                    disp.chunks_exact(3)
+                        .map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()),
+                ),
             }
             report.n_points += norms.len() as u64;
             report.total += numpy_sum(&norms);
@@ -280,7 +318,14 @@ fn pass(
                 break;
             }
             let (a, b) = (piece.line_base, piece.line_base + piece.lexed.lines.len());
-            if job_tx.send(Job { piece, samples, disp }).is_err() {
+            if job_tx
+                .send(Job {
+                    piece,
+                    samples,
+                    disp,
+                })
+                .is_err()
+            {
                 break;
             }
             if !progress(a, b) {
@@ -304,7 +349,9 @@ fn pass(
         }
         let stats = emitted?;
         wrote?;
-        let Some(end) = read_end else { return Err(NcError::Usage("the reading thread stopped".into())) };
+        let Some(end) = read_end else {
+            return Err(NcError::Usage("the reading thread stopped".into()));
+        };
         if !opts.keep_unsupported && !end.interp.unsupported.is_empty() {
             return Ok(Ok(Outcome::Refused));
         }
@@ -338,10 +385,14 @@ pub fn correct(
             // (a stop asked for during the first pass has ended it already)
             use std::io::Seek;
             let mut f = out;
-            f.set_len(0).and_then(|_| f.seek(std::io::SeekFrom::Start(0))).map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
+            f.set_len(0)
+                .and_then(|_| f.seek(std::io::SeekFrom::Start(0)))
+                .map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
             match pass(open, field, opts, Some(style), out, progress)? {
                 Ok(o) => Ok(o),
-                Err(_) => Err(NcError::Usage("the program's number style changed between two readings".into())),
+                Err(_) => Err(NcError::Usage(
+                    "the program's number style changed between two readings".into(),
+                )),
             }
         }
     }

@@ -88,7 +88,12 @@ pub fn arc_sweep(rec: &Record, start: &[f64; NAXES]) -> (f64, f64, f64, f64) {
 
 /// Point of an arc at fraction t (radius interpolated linearly, as a spiral, so the end is exact).
 #[inline]
-pub fn arc_point(rec: &Record, start: &[f64; NAXES], geom: (f64, f64, f64, f64), t: f64) -> [f64; 3] {
+pub fn arc_point(
+    rec: &Record,
+    start: &[f64; NAXES],
+    geom: (f64, f64, f64, f64),
+    t: f64,
+) -> [f64; 3] {
     let [a1, a2, an] = PLANE_AXES[rec.plane as usize];
     let (th0, d, r0, r1) = geom;
     let th = th0 + t * d;
@@ -139,7 +144,9 @@ fn too_many(rec: &Record, n: f64) -> NcError {
 }
 
 fn traceable(rec: &Record) -> bool {
-    rec.motion != Motion::Other && (0..3).all(|k| rec.end[k].is_finite()) && rec.center.iter().all(|v| v.is_finite())
+    rec.motion != Motion::Other
+        && (0..3).all(|k| rec.end[k].is_finite())
+        && rec.center.iter().all(|v| v.is_finite())
 }
 
 /// Sample the blocks of an interpreted program.
@@ -150,7 +157,12 @@ pub fn sample(it: &Interp, opts: &SampleOpts) -> Result<Samples, NcError> {
 }
 
 /// Sample records `recs` into `s`, replacing what it held (its buffers are reused).
-pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>, s: &mut Samples) -> Result<(), NcError> {
+pub fn sample_range(
+    it: &Interp,
+    opts: &SampleOpts,
+    recs: std::ops::Range<usize>,
+    s: &mut Samples,
+) -> Result<(), NcError> {
     s.xyz.clear();
     s.t.clear();
     s.rec.clear();
@@ -171,7 +183,12 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
         let first = s.t.len();
         let mut prev = [start[0], start[1], start[2]];
         let mut prev_t = 0.0;
-        let push = |s: &mut Samples, p: [f64; 3], t: f64, prev: &mut [f64; 3], prev_t: &mut f64, cuts: &mut Vec<f64>| {
+        let push = |s: &mut Samples,
+                    p: [f64; 3],
+                    t: f64,
+                    prev: &mut [f64; 3],
+                    prev_t: &mut f64,
+                    cuts: &mut Vec<f64>| {
             if !opts.grid_x.is_empty() || !opts.grid_y.is_empty() {
                 cuts.clear();
                 crossings(&grid_x, prev[0], p[0], cuts);
@@ -216,12 +233,23 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
             let n = n as usize;
             for k in 1..=n {
                 let t = k as f64 / n as f64;
-                let p = if k == n { end } else { arc_point(rec, &start, geom, t) };
+                let p = if k == n {
+                    end
+                } else {
+                    arc_point(rec, &start, geom, t)
+                };
                 push(s, p, t, &mut prev, &mut prev_t, &mut cuts);
             }
         } else {
-            let len = ((end[0] - prev[0]).powi(2) + (end[1] - prev[1]).powi(2) + (end[2] - prev[2]).powi(2)).sqrt();
-            let n = if opts.max_segment > 0.0 { pieces_for(len, opts.max_segment).max(1.0) } else { 1.0 };
+            let len = ((end[0] - prev[0]).powi(2)
+                + (end[1] - prev[1]).powi(2)
+                + (end[2] - prev[2]).powi(2))
+            .sqrt();
+            let n = if opts.max_segment > 0.0 {
+                pieces_for(len, opts.max_segment).max(1.0)
+            } else {
+                1.0
+            };
             if !(n <= MAX_PIECES_PER_BLOCK) {
                 return Err(too_many(rec, n));
             }
@@ -232,7 +260,11 @@ pub fn sample_range(it: &Interp, opts: &SampleOpts, recs: std::ops::Range<usize>
                 let p = if k == n {
                     end
                 } else {
-                    [s0[0] + t * (end[0] - s0[0]), s0[1] + t * (end[1] - s0[1]), s0[2] + t * (end[2] - s0[2])]
+                    [
+                        s0[0] + t * (end[0] - s0[0]),
+                        s0[1] + t * (end[1] - s0[1]),
+                        s0[2] + t * (end[2] - s0[2]),
+                    ]
                 };
                 push(s, p, t, &mut prev, &mut prev_t, &mut cuts);
             }
@@ -254,8 +286,16 @@ struct GridLines<'a> {
 impl<'a> GridLines<'a> {
     fn new(v: &'a [f64]) -> Self {
         let n = v.len();
-        let per_mm = if n >= 2 { (n - 1) as f64 / (v[n - 1] - v[0]) } else { 0.0 };
-        GridLines { v, first: if n > 0 { v[0] } else { 0.0 }, per_mm: if per_mm.is_finite() { per_mm } else { 0.0 } }
+        let per_mm = if n >= 2 {
+            (n - 1) as f64 / (v[n - 1] - v[0])
+        } else {
+            0.0
+        };
+        GridLines {
+            v,
+            first: if n > 0 { v[0] } else { 0.0 },
+            per_mm: if per_mm.is_finite() { per_mm } else { 0.0 },
+        }
     }
 
     /// `v.partition_point(|&g| g <= x)` (`OR_EQUAL`) or `v.partition_point(|&g| g < x)`: from
@@ -320,7 +360,14 @@ mod tests {
     use crate::lex::lex;
 
     fn opts() -> SampleOpts {
-        SampleOpts { chord_tol: 0.002, max_segment: 1.0, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] }
+        SampleOpts {
+            chord_tol: 0.002,
+            max_segment: 1.0,
+            include_rapids: false,
+            only_supported: true,
+            grid_x: vec![],
+            grid_y: vec![],
+        }
     }
 
     #[test]
@@ -347,7 +394,10 @@ mod tests {
         let mut seed = 0x2545F4914F6CDD1Du64;
         for v in [uniform, irregular, vec![1.0], vec![]] {
             let g = GridLines::new(&v);
-            let mut xs: Vec<f64> = v.iter().flat_map(|&x| [x, x - 1e-12, x + 1e-12, x.next_up(), x.next_down()]).collect();
+            let mut xs: Vec<f64> = v
+                .iter()
+                .flat_map(|&x| [x, x - 1e-12, x + 1e-12, x.next_up(), x.next_down()])
+                .collect();
             for _ in 0..10000 {
                 seed ^= seed << 13;
                 seed ^= seed >> 7;
@@ -356,8 +406,16 @@ mod tests {
             }
             xs.extend([f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300]);
             for x in xs {
-                assert_eq!(g.partition::<true>(x), v.partition_point(|&a| a <= x), "{x} in {v:?}");
-                assert_eq!(g.partition::<false>(x), v.partition_point(|&a| a < x), "{x} in {v:?}");
+                assert_eq!(
+                    g.partition::<true>(x),
+                    v.partition_point(|&a| a <= x),
+                    "{x} in {v:?}"
+                );
+                assert_eq!(
+                    g.partition::<false>(x),
+                    v.partition_point(|&a| a < x),
+                    "{x} in {v:?}"
+                );
             }
         }
     }

@@ -65,7 +65,11 @@ impl Lines {
 
 /// The number style and line ending of a whole program, read piece by piece.
 pub fn scan_style(reader: Reader, piece_bytes: usize) -> Result<(NumberStyle, bool), NcError> {
-    let mut lines = Lines { reader, carry: Vec::new(), eof: false };
+    let mut lines = Lines {
+        reader,
+        carry: Vec::new(),
+        eof: false,
+    };
     let mut style = NumberStyle::default();
     let mut counts = [0usize; 4];
     let mut base = 0usize;
@@ -98,7 +102,11 @@ impl Stream {
     /// [`scan_style`]) with `crlf` line ends where lines are added.
     pub fn new(reader: Reader, piece_bytes: usize, style: NumberStyle, crlf: bool) -> Self {
         Stream {
-            lines: Lines { reader, carry: Vec::new(), eof: false },
+            lines: Lines {
+                reader,
+                carry: Vec::new(),
+                eof: false,
+            },
             piece_bytes,
             line_base: 0,
             style,
@@ -120,17 +128,29 @@ impl Stream {
 
     /// The next piece, written in the style `style` gives from the piece's own lexing (which
     /// carries the piece's style and counts).
-    pub fn next_piece_with(&mut self, style: impl FnOnce(&Lexed) -> (NumberStyle, bool)) -> Result<Option<Piece>, NcError> {
-        let Some(src) = self.lines.next(self.piece_bytes)? else { return Ok(None) };
+    pub fn next_piece_with(
+        &mut self,
+        style: impl FnOnce(&Lexed) -> (NumberStyle, bool),
+    ) -> Result<Option<Piece>, NcError> {
+        let Some(src) = self.lines.next(self.piece_bytes)? else {
+            return Ok(None);
+        };
         if self.line_base + src.len() >= u32::MAX as usize {
-            return Err(NcError::Usage("a program of more than 4 billion lines".into()));
+            return Err(NcError::Usage(
+                "a program of more than 4 billion lines".into(),
+            ));
         }
         let mut lexed = lex_at(&src, self.line_base)?;
         (lexed.style, lexed.crlf) = style(&lexed);
         let interp = self.interp.run(&lexed, self.line_base)?;
         let line_base = self.line_base;
         self.line_base += lexed.lines.len();
-        Ok(Some(Piece { src, lexed, interp, line_base }))
+        Ok(Some(Piece {
+            src,
+            lexed,
+            interp,
+            line_base,
+        }))
     }
 }
 
@@ -145,27 +165,65 @@ mod tests {
     fn pieces_give_the_whole_program() {
         let src = "%\nG21 G90 G0 X0 Y0 Z5\nG1 Z-1.000 F100\nG2 X10 Y0 I5 J0\nG91 G1 X2\nX2 Y3 (c)\r\nG3 X-4 Y0 I-2 J0\nG90 G0 Z5\nM30\ntrailing text !\n";
         let whole = crate::Program::parse(src.as_bytes().to_vec()).unwrap();
-        let o = SampleOpts { chord_tol: 0.002, max_segment: 0.7, include_rapids: false, only_supported: true, grid_x: vec![], grid_y: vec![] };
-        let field = |s: &Samples| s.xyz.chunks_exact(3).flat_map(|p| [0.01 * p[1], 0.0, 0.02 * p[0]]).collect::<Vec<f64>>();
+        let o = SampleOpts {
+            chord_tol: 0.002,
+            max_segment: 0.7,
+            include_rapids: false,
+            only_supported: true,
+            grid_x: vec![],
+            grid_y: vec![],
+        };
+        let field = |s: &Samples| {
+            s.xyz
+                .chunks_exact(3)
+                .flat_map(|p| [0.01 * p[1], 0.0, 0.02 * p[0]])
+                .collect::<Vec<f64>>()
+        };
         let s = whole.sample(&o).unwrap();
-        let (expect, _) = Emitter::new(&whole.src, &whole.lexed, &whole.interp).run(&s, &field(&s)).unwrap();
+        let (expect, _) = Emitter::new(&whole.src, &whole.lexed, &whole.interp)
+            .run(&s, &field(&s))
+            .unwrap();
         for piece_bytes in [1, 7, 30, 1 << 20] {
-            let (style, crlf) = scan_style(Box::new(std::io::Cursor::new(src.as_bytes().to_vec())), piece_bytes).unwrap();
+            let (style, crlf) = scan_style(
+                Box::new(std::io::Cursor::new(src.as_bytes().to_vec())),
+                piece_bytes,
+            )
+            .unwrap();
             assert_eq!((style, crlf), (whole.lexed.style, whole.lexed.crlf));
-            let mut st = Stream::new(Box::new(std::io::Cursor::new(src.as_bytes().to_vec())), piece_bytes, style, crlf);
+            let mut st = Stream::new(
+                Box::new(std::io::Cursor::new(src.as_bytes().to_vec())),
+                piece_bytes,
+                style,
+                crlf,
+            );
             let (mut out, mut state, mut ends) = (Vec::new(), None::<EmitState>, Vec::new());
             while let Some(p) = st.next_piece().unwrap() {
                 let mut s = Samples::default();
                 sample_range(&p.interp, &o, 0..p.interp.records.len(), &mut s).unwrap();
                 let em_state = state.take().unwrap_or_else(|| EmitState::new(&p.interp));
                 let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, em_state);
-                em.lines(0..p.lexed.lines.len(), &s, &field(&s), &mut out).unwrap();
+                em.lines(0..p.lexed.lines.len(), &s, &field(&s), &mut out)
+                    .unwrap();
                 state = Some(em.into_state());
-                ends.extend(p.interp.records.iter().map(|r| (r.line, r.end[0].to_bits())));
+                ends.extend(
+                    p.interp
+                        .records
+                        .iter()
+                        .map(|r| (r.line, r.end[0].to_bits())),
+                );
             }
-            let whole_ends: Vec<_> = whole.interp.records.iter().map(|r| (r.line, r.end[0].to_bits())).collect();
+            let whole_ends: Vec<_> = whole
+                .interp
+                .records
+                .iter()
+                .map(|r| (r.line, r.end[0].to_bits()))
+                .collect();
             assert_eq!(ends, whole_ends, "pieces of {piece_bytes} bytes");
-            assert_eq!(String::from_utf8(out).unwrap(), String::from_utf8(expect.clone()).unwrap(), "pieces of {piece_bytes} bytes");
+            assert_eq!(
+                String::from_utf8(out).unwrap(),
+                String::from_utf8(expect.clone()).unwrap(),
+                "pieces of {piece_bytes} bytes"
+            );
             assert_eq!(st.interp.summary.end_line, whole.interp.summary.end_line);
         }
     }

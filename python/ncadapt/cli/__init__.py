@@ -41,10 +41,13 @@ class _Main(click.Group):
             internal_error(e, f"ncadapt {sub}" if sub else "ncadapt")
 
 
-@click.group(cls=_Main, context_settings={"help_option_names": ["-h", "--help"]},
-             epilog="Exit codes: 0 success; 1 refused by a safety check, nothing written; 2 bad input or "
-                    "usage, located (path:line:col or --option); 3 internal error, a bug (rerun with --debug "
-                    "for the traceback).")
+@click.group(
+    cls=_Main,
+    context_settings={"help_option_names": ["-h", "--help"]},
+    epilog="Exit codes: 0 success; 1 refused by a safety check, nothing written; 2 bad input or "
+    "usage, located (path:line:col or --option); 3 internal error, a bug (rerun with --debug "
+    "for the traceback).",
+)
 @click.version_option(__version__, prog_name="ncadapt")
 @click.option("--debug", is_flag=True, help="Show the traceback of an internal error (also NCADAPT_DEBUG=1).")
 @click.pass_context

@@ -17,8 +17,8 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from ..constants import COORD_MAX
 from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries, write_target
+from ..constants import COORD_MAX
 from ..errors import InputError, NcadaptError, RefusedError, cut
 
 #: Exit codes: success, refused by a safety check (nothing written), bad input or usage, internal error.
@@ -30,10 +30,19 @@ _state = {"summary_to_stderr": False}
 
 
 #: The options many commands share.
-json_option = click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-                           help="Write the figures as JSON (- for standard output).")
-seed_option = click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=1, show_default=True,
-                           help="Seed of the simulation's random numbers: the same seed gives the same run.")
+json_option = click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the figures as JSON (- for standard output).",
+)
+seed_option = click.option(
+    "--seed",
+    type=click.IntRange(0, 2**63 - 1),
+    default=1,
+    show_default=True,
+    help="Seed of the simulation's random numbers: the same seed gives the same run.",
+)
 
 
 def echo_err(msg: str) -> None:
@@ -69,8 +78,10 @@ def internal_error(e: BaseException, what: str) -> None:
     if debugging():
         traceback.print_exception(e)
     msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
-    echo_err(f"error: internal error in {what}: {type(e).__name__}{': ' + msg[:200] if msg else ''}; "
-             "this is a bug; rerun with --debug for the traceback")
+    echo_err(
+        f"error: internal error in {what}: {type(e).__name__}{': ' + msg[:200] if msg else ''}; "
+        "this is a bug; rerun with --debug for the traceback"
+    )
     sys.exit(EXIT_INTERNAL)
 
 
@@ -94,8 +105,11 @@ def _on_signal(signum, frame):  # noqa: ARG001 - a signal handler's signature
 
 #: The optional parts of ncadapt (pyproject's extras): the module a command imports when it needs
 #: one, the extra that installs it and what it is for.
-EXTRAS = {"OCP": ("cad", "OpenCASCADE (STEP and IGES files)"), "asyncua": ("opcua", "asyncua (OPC UA)"),
-          "matplotlib": ("report", "matplotlib (reports and plots)")}
+EXTRAS = {
+    "OCP": ("cad", "OpenCASCADE (STEP and IGES files)"),
+    "asyncua": ("opcua", "asyncua (OPC UA)"),
+    "matplotlib": ("report", "matplotlib (reports and plots)"),
+}
 
 
 def handle_errors(f=None, *, staged: bool = True):
@@ -130,8 +144,13 @@ def handle_errors(f=None, *, staged: bool = True):
         except NcadaptError as e:  # pragma: no cover - every error has a subclass above
             echo_err(f"error: {e}")
             sys.exit(EXIT_BAD_INPUT)
-        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort, SystemExit,
-                KeyboardInterrupt):
+        except (
+            click.exceptions.ClickException,
+            click.exceptions.Exit,
+            click.exceptions.Abort,
+            SystemExit,
+            KeyboardInterrupt,
+        ):
             raise
         except ModuleNotFoundError as e:
             extra = EXTRAS.get((e.name or "").split(".")[0])
@@ -153,12 +172,15 @@ def _detail(d) -> str:
     if isinstance(d, dict):
         if "construct" in d:
             return f"line {d['line']}:{d['col']}: {d['construct']}" + (
-                f" ({d['blocks']} motion block(s))" if d.get("blocks") else "")
+                f" ({d['blocks']} motion block(s))" if d.get("blocks") else ""
+            )
         parts = [f"line {d['line']}"] if "line" in d else []
         if "position" in d:
             parts.append("at " + " ".join(f"{a}{v:.4f}" for a, v in zip("XYZ", d["position"])))
         if "displacement" in d:
-            parts.append("displacement " + " ".join(f"{a}{v:+.4f}" for a, v in zip(("dX", "dY", "dZ"), d["displacement"])))
+            parts.append(
+                "displacement " + " ".join(f"{a}{v:+.4f}" for a, v in zip(("dX", "dY", "dZ"), d["displacement"]))
+            )
             parts.append(f"|d|={d['magnitude']:.4f} mm")
         return ", ".join(parts)
     return str(d)
@@ -214,8 +236,13 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
-_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-          (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"))
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
 def _check_output(name: str, path: Path) -> None:
@@ -230,19 +257,22 @@ def _check_output(name: str, path: Path) -> None:
         raise click.BadParameter(f"{cut(str(path))}: {e.strerror}", param_hint=f"'{name}'") from None
     if st is not None and not stat.S_ISREG(st.st_mode):
         kind = next((k for test, k in _KINDS if test(st.st_mode)), "not a regular file")
-        raise click.BadParameter(f"{cut(str(path))} is {kind}; ncadapt writes regular files only",
-                                 param_hint=f"'{name}'")
+        raise click.BadParameter(
+            f"{cut(str(path))} is {kind}; ncadapt writes regular files only", param_hint=f"'{name}'"
+        )
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
-        raise click.BadParameter(f"{cut(str(path))}: the folder {cut(str(folder))} does not exist",
-                                 param_hint=f"'{name}'")
+        raise click.BadParameter(
+            f"{cut(str(path))}: the folder {cut(str(folder))} does not exist", param_hint=f"'{name}'"
+        )
     try:  # what the command will do: a temporary file in the folder
         fd, probe = tempfile.mkstemp(prefix=TMP_PREFIX, dir=folder)
         os.close(fd)
         os.unlink(probe)
     except OSError as e:
-        raise click.BadParameter(f"{cut(str(path))}: cannot write in {cut(str(folder))}: {e.strerror}",
-                                 param_hint=f"'{name}'") from None
+        raise click.BadParameter(
+            f"{cut(str(path))}: cannot write in {cut(str(folder))}: {e.strerror}", param_hint=f"'{name}'"
+        ) from None
 
 
 def check_outputs(inputs: dict, outputs: dict) -> None:
@@ -257,8 +287,9 @@ def check_outputs(inputs: dict, outputs: dict) -> None:
             continue
         if str(p) == "-":
             if name != "--json":
-                raise click.BadParameter("'-' (standard output) is only for --json; name a file",
-                                         param_hint=f"'{name}'")
+                raise click.BadParameter(
+                    "'-' (standard output) is only for --json; name a file", param_hint=f"'{name}'"
+                )
             _state["summary_to_stderr"] = True
             continue
         _check_output(name, Path(p))
@@ -269,7 +300,7 @@ def check_outputs(inputs: dict, outputs: dict) -> None:
             if _same(out, inp):
                 raise InputError(f"refusing to overwrite the {what} with {name}; choose another output", str(out))
     for i, (a, pa) in enumerate(outs):
-        for b, pb in outs[i + 1:]:
+        for b, pb in outs[i + 1 :]:
             if _same(pa, pb):
                 raise click.UsageError(f"{a} and {b} name the same file")
 
@@ -296,8 +327,15 @@ def progress(console: Console | None = None):
     if not con.is_terminal:
         yield lambda msg, done=None, total=None: None
         return
-    bar = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(),
-                   TimeRemainingColumn(), console=con, transient=True)
+    bar = Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TaskProgressColumn(),
+        TimeRemainingColumn(),
+        console=con,
+        transient=True,
+    )
     task = bar.add_task("", total=None)
 
     def say(msg, done=None, total=None):

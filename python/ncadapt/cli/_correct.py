@@ -6,9 +6,8 @@ from pathlib import Path
 
 import click
 
-from .. import constants
+from .. import constants, nc
 from .. import fields as _fields
-from .. import nc
 from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
 
 
@@ -18,23 +17,80 @@ def _shift(ctx, param, value):
 
 @click.command()
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--field", "field_path", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Correction field: grid CSV (x,y,dz), scattered CSV (x,y,z,dx,dy,dz), bCNC .probe, LinuxCNC "
-                   "probe log, grbl [PRB:] log, OpenCNCPilot .hmap, Candle .map or a Fanuc DPRNT log.")
+@click.option(
+    "--field",
+    "field_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Correction field: grid CSV (x,y,dz), scattered CSV (x,y,z,dx,dy,dz), bCNC .probe, LinuxCNC "
+    "probe log, grbl [PRB:] log, OpenCNCPilot .hmap, Candle .map or a Fanuc DPRNT log.",
+)
 @click.option("--shift", callback=_shift, metavar="DX,DY,DZ", help="A constant displacement in mm instead of a field.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Corrected program to write.")
-@click.option("--max-segment", type=FiniteRange(*constants.MAX_SEGMENT_RANGE), default=constants.MAX_SEGMENT, show_default=True, help="Longest corrected piece, mm.")
-@click.option("--chord-tol", type=FiniteRange(*constants.CHORD_TOL_RANGE), default=constants.CHORD_TOL, show_default=True, help="Arc chord tolerance, mm.")
-@click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True, help="Refuse if any displacement exceeds this, mm.")
-@click.option("--outside", type=click.Choice(_fields.OUTSIDE), default="error", show_default=True, help="Points outside the field's domain.")
-@click.option("--interp", "method", type=click.Choice(["linear", "cubic"]), default="linear", show_default=True, help="Grid interpolation.")
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Corrected program to write."
+)
+@click.option(
+    "--max-segment",
+    type=FiniteRange(*constants.MAX_SEGMENT_RANGE),
+    default=constants.MAX_SEGMENT,
+    show_default=True,
+    help="Longest corrected piece, mm.",
+)
+@click.option(
+    "--chord-tol",
+    type=FiniteRange(*constants.CHORD_TOL_RANGE),
+    default=constants.CHORD_TOL,
+    show_default=True,
+    help="Arc chord tolerance, mm.",
+)
+@click.option(
+    "--limit",
+    type=FiniteRange(min=0, min_open=True),
+    default=constants.LIMIT,
+    show_default=True,
+    help="Refuse if any displacement exceeds this, mm.",
+)
+@click.option(
+    "--outside",
+    type=click.Choice(_fields.OUTSIDE),
+    default="error",
+    show_default=True,
+    help="Points outside the field's domain.",
+)
+@click.option(
+    "--interp",
+    "method",
+    type=click.Choice(["linear", "cubic"]),
+    default="linear",
+    show_default=True,
+    help="Grid interpolation.",
+)
 @click.option("--rapids", is_flag=True, help="Correct rapid (G0) moves too.")
-@click.option("--keep-unsupported", is_flag=True, help="Copy blocks with unsupported constructs unchanged instead of refusing.")
-@click.option("--clearance", type=FiniteRange(), default=None, help="Report uncorrected rapids ending below this Z inside the field.")
+@click.option(
+    "--keep-unsupported", is_flag=True, help="Copy blocks with unsupported constructs unchanged instead of refusing."
+)
+@click.option(
+    "--clearance",
+    type=FiniteRange(),
+    default=None,
+    help="Report uncorrected rapids ending below this Z inside the field.",
+)
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
-def correct(program, field_path, shift, output, max_segment, chord_tol, limit, outside, method, rapids,
-            keep_unsupported, clearance, json_path):
+def correct(
+    program,
+    field_path,
+    shift,
+    output,
+    max_segment,
+    chord_tol,
+    limit,
+    outside,
+    method,
+    rapids,
+    keep_unsupported,
+    clearance,
+    json_path,
+):
     """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
 
     Unchanged blocks are copied byte for byte; nothing is written when a safety check refuses
@@ -50,13 +106,25 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
         else:
             field = _fields.Shift(shift)
         c = nc.correct_file(
-            program, output, field, chord_tol=chord_tol, max_segment=max_segment, limit=limit, rapids=rapids,
-            keep_unsupported=keep_unsupported, clearance=clearance, progress=say)
+            program,
+            output,
+            field,
+            chord_tol=chord_tol,
+            max_segment=max_segment,
+            limit=limit,
+            rapids=rapids,
+            keep_unsupported=keep_unsupported,
+            clearance=clearance,
+            progress=say,
+        )
     summary(f"{program} -> {output}")
-    summary(f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
-             f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}")
-    summary(f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm "
-             f"over {c.n_points:,} points")
+    summary(
+        f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
+        f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"
+    )
+    summary(
+        f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm over {c.n_points:,} points"
+    )
     if c.unsupported_kept:
         summary(f"  unsupported constructs kept unchanged ({len(c.unsupported_kept)}), their blocks not corrected:")
         for u in c.unsupported_kept[:20]:
@@ -70,10 +138,20 @@ def correct(program, field_path, shift, output, max_segment, chord_tol, limit, o
     for w in c.warnings:
         echo_err(f"  warning: {w}")
     if json_path is not None:
-        payload = {"input": str(program), "output": str(output),
-                   "field": str(field_path) if field_path else {"shift": shift}}
+        payload = {
+            "input": str(program),
+            "output": str(output),
+            "field": str(field_path) if field_path else {"shift": shift},
+        }
         payload.update(c.as_dict())
-        payload["options"] = {"max_segment": max_segment, "chord_tol": chord_tol, "limit": limit,
-                              "outside": outside, "interp": method, "rapids": rapids,
-                              "keep_unsupported": keep_unsupported, "clearance": clearance}
+        payload["options"] = {
+            "max_segment": max_segment,
+            "chord_tol": chord_tol,
+            "limit": limit,
+            "outside": outside,
+            "interp": method,
+            "rapids": rapids,
+            "keep_unsupported": keep_unsupported,
+            "clearance": clearance,
+        }
         write_json(json_path, payload)

@@ -8,29 +8,55 @@ import click
 
 from .. import constants
 from ..errors import InputError
-from ._common import (FiniteRange, check_outputs, echo_err, extent_value, handle_errors, progress, summary,
-                      write_json)
+from ._common import FiniteRange, check_outputs, echo_err, extent_value, handle_errors, progress, summary, write_json
 
 
 def _moran_options(f):
     opts = [
-        click.option("--weights", type=click.Choice(["auto", "idw", "knn"]), default="auto", show_default=True,
-                     help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours; auto: 1/d^K over "
-                          "all pairs up to 3,000 points (or with --threshold), 8 nearest neighbours above."),
+        click.option(
+            "--weights",
+            type=click.Choice(["auto", "idw", "knn"]),
+            default="auto",
+            show_default=True,
+            help="Moran's I weights: inverse distance 1/d^K, or the N nearest neighbours; auto: 1/d^K over "
+            "all pairs up to 3,000 points (or with --threshold), 8 nearest neighbours above.",
+        ),
         click.option("--power", type=FiniteRange(min=1), default=1.0, show_default=True, help="K of idw weights."),
-        click.option("--threshold", type=FiniteRange(min=0, min_open=True), default=None,
-                     help="Distance band for idw weights, mm (default: all pairs)."),
+        click.option(
+            "--threshold",
+            type=FiniteRange(min=0, min_open=True),
+            default=None,
+            help="Distance band for idw weights, mm (default: all pairs).",
+        ),
         click.option("--neighbors", type=click.IntRange(min=1), default=8, show_default=True, help="N of knn weights."),
-        click.option("--alpha", type=FiniteRange(1e-12, 0.5), default=0.05, show_default=True,
-                     help="Significance of the 'systematic' decision, 1e-12 to 0.5 (Moran's I and the offset test "
-                          "each at alpha/2)."),
-        click.option("--probe-radius", type=FiniteRange(0, constants.COORD_MAX), default=0.0, show_default=True,
-                     help="The measured points are probe-tip centres of this radius, mm."),
-        click.option("--units", type=click.Choice(["mm", "inch"]), default=None,
-                     help="Length unit of a measurement file that does not declare one (CSV, XYZIJK; DMIS or QIF "
-                          "without a units statement) [default: mm]; a file's own must agree."),
-        click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."),
-        click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."),
+        click.option(
+            "--alpha",
+            type=FiniteRange(1e-12, 0.5),
+            default=0.05,
+            show_default=True,
+            help="Significance of the 'systematic' decision, 1e-12 to 0.5 (Moran's I and the offset test each "
+            "at alpha/2).",
+        ),
+        click.option(
+            "--probe-radius",
+            type=FiniteRange(0, constants.COORD_MAX),
+            default=0.0,
+            show_default=True,
+            help="The measured points are probe-tip centres of this radius, mm.",
+        ),
+        click.option(
+            "--units",
+            type=click.Choice(["mm", "inch"]),
+            default=None,
+            help="Length unit of a measurement file that does not declare one (CSV, XYZIJK; DMIS or QIF "
+            "without a units statement) [default: mm]; a file's own must agree.",
+        ),
+        click.option(
+            "--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON."
+        ),
+        click.option(
+            "--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Write an HTML report."
+        ),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -52,19 +78,30 @@ def _print_analysis(a) -> None:
 
     m, d = a.moran, a.deviation
     summary(f"points: {a.n_points:,}; weights: {m.weights.describe()}")
-    summary(f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}")
+    summary(
+        f"deviation (mm): mean {d['mean']:+.4f}, std {d['std']:.4f}, min {d['min']:+.4f}, max {d['max']:+.4f}, rms {d['rms']:.4f}"
+    )
     o, v = a.offset, a.verdict
     if m.p_permutation is None:
         p_said = f"p {m.p_said()} (one-sided, normal approximation)"
     else:
-        p_said = (f"p {m.p_said()} (one-sided, {m.permutations} permutations; normal approximation "
-                  f"{p_text(m.p_randomization)})")
-    summary(f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
-            f"{m.z_normality:.2f} (normality), {p_said}")
+        p_said = (
+            f"p {m.p_said()} (one-sided, {m.permutations} permutations; normal approximation "
+            f"{p_text(m.p_randomization)})"
+        )
+    summary(
+        f"Moran's I {m.I:.4f} (E[I] {m.expected:.4f}), z {m.z_randomization:.2f} (randomisation), "
+        f"{m.z_normality:.2f} (normality), {p_said}"
+    )
     summary(f"offset: mean {o.mean:+.4f} mm, t {o.t:.2f}, p {p_text(o.p_value)}")
-    summary(f"systematic at alpha {v.alpha:g} (Moran's I and the offset each at {v.alpha / 2:g}): "
-            + (f"yes, by {' and '.join('the offset' if b == 'offset' else 'Moran' + chr(39) + 's I' for b in v.by)}"
-               if v.systematic else "no"))
+    summary(
+        f"systematic at alpha {v.alpha:g} (Moran's I and the offset each at {v.alpha / 2:g}): "
+        + (
+            f"yes, by {' and '.join('the offset' if b == 'offset' else 'Moran' + chr(39) + 's I' for b in v.by)}"
+            if v.systematic
+            else "no"
+        )
+    )
 
 
 @click.command()
@@ -77,64 +114,144 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3.
     """
     from .. import measure
+    from ..probing import companion_inputs
     from ..processes import freeform as pf
 
-    from ..probing import companion_inputs
-
-    check_outputs({"measurements": measurements, **companion_inputs(measurements)},
-                  {"--json": json_path, "--report": report_path})
+    check_outputs(
+        {"measurements": measurements, **companion_inputs(measurements)}, {"--json": json_path, "--report": report_path}
+    )
     with progress() as say:
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
-        a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"),
-                       **_moran_kw(weights, power, threshold, neighbors, alpha))
+        a = pf.analyze(
+            meas,
+            frame=frame,
+            progress=_said(say, "Moran's I"),
+            **_moran_kw(weights, power, threshold, neighbors, alpha),
+        )
     _print_analysis(a)
     if json_path:
         write_json(json_path, {"input": str(measurements), **a.as_dict()})
     if report_path:
-        from ..report import freeform as rep, write
+        from ..report import freeform as rep
+        from ..report import write
 
         d = pf.decompose(meas, frame=frame, **_moran_kw(weights, power, threshold, neighbors, alpha))
-        write(report_path, rep.render(title=f"Deviation analysis: {measurements.name}", analysis=a, decomposition=d,
-                                      xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation))
+        write(
+            report_path,
+            rep.render(
+                title=f"Deviation analysis: {measurements.name}",
+                analysis=a,
+                decomposition=d,
+                xy=frame.uv(meas.nominal),
+                names=frame.names,
+                deviation=meas.deviation,
+            ),
+        )
 
 
 @click.command()
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--filter", "method", type=click.Choice(["bilateral", "spline"]), default="bilateral", show_default=True,
-              help="How the systematic part is separated from noise.")
-@click.option("--sigma-c", type=FiniteRange(min=0, min_open=True), help="Bilateral spatial sigma, mm (default 1.5 x spacing).")
-@click.option("--sigma-s", type=FiniteRange(min=0, min_open=True), help="Bilateral range sigma, mm (default 3 x noise).")
+@click.option(
+    "--filter",
+    "method",
+    type=click.Choice(["bilateral", "spline"]),
+    default="bilateral",
+    show_default=True,
+    help="How the systematic part is separated from noise.",
+)
+@click.option(
+    "--sigma-c", type=FiniteRange(min=0, min_open=True), help="Bilateral spatial sigma, mm (default 1.5 x spacing)."
+)
+@click.option(
+    "--sigma-s", type=FiniteRange(min=0, min_open=True), help="Bilateral range sigma, mm (default 3 x noise)."
+)
 @click.option("--p", "p", type=FiniteRange(0, 1), help="Smoothing-spline parameter (csaps' p).")
 @click.option("--auto", is_flag=True, help="Smoothest filter whose random part has no significant Moran's I.")
 @click.option("--program", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="NC program to correct.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Corrected NC program.")
-@click.option("--tool-radius", type=FiniteRange(0, constants.COORD_MAX), default=None,
-              help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre); required with "
-                   "--program (0: the programmed point is the contact point).")
-@click.option("--extent", callback=extent_value, metavar="XMIN,XMAX,YMIN,YMAX",
-              help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
-                   "extrapolated into it (default: the measured area).")
-@click.option("--border", type=click.Choice(["hold", "cubic"]), default="hold", show_default=True,
-              help="The systematic error in the unmeasured border of the surface: the nearest measured value, or "
-                   "the paper's cubic extrapolation (bounded by the measured range widened by 25 %).")
-@click.option("--extrapolate-nominal", is_flag=True,
-              help="Accept a surface reaching beyond the measured points (--extent, or the corners of a scatter): "
-                   "there the nominal is extrapolated from them, not measured; the JSON and the report say how far.")
-@click.option("--limit", type=FiniteRange(min=0, min_open=True), default=constants.LIMIT, show_default=True,
-              help="Refuse if any program displacement exceeds this, mm.")
-@click.option("--outside", type=click.Choice(["error", "clamp", "extrapolate"]), default="error", show_default=True,
-              help="Program points beyond the compensated surface (the measured area, or --extent): refuse, hold "
-                   "the nearest edge value, or extrapolate the thin-plate spline.")
-@click.option("--surface", "surface_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Compensated surface, .step/.stp or .igs/.iges.")
-@click.option("--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points.")
+@click.option(
+    "--tool-radius",
+    type=FiniteRange(0, constants.COORD_MAX),
+    default=None,
+    help="Ball-end radius of the program's tool, mm (its tip is R below the ball centre); required with "
+    "--program (0: the programmed point is the contact point).",
+)
+@click.option(
+    "--extent",
+    callback=extent_value,
+    metavar="XMIN,XMAX,YMIN,YMAX",
+    help="The part's area in (u, v), mm — (x, y) for a part measured from +z; the systematic error is "
+    "extrapolated into it (default: the measured area).",
+)
+@click.option(
+    "--border",
+    type=click.Choice(["hold", "cubic"]),
+    default="hold",
+    show_default=True,
+    help="The systematic error in the unmeasured border of the surface: the nearest measured value, or "
+    "the paper's cubic extrapolation (bounded by the measured range widened by 25 %).",
+)
+@click.option(
+    "--extrapolate-nominal",
+    is_flag=True,
+    help="Accept a surface reaching beyond the measured points (--extent, or the corners of a scatter): "
+    "there the nominal is extrapolated from them, not measured; the JSON and the report say how far.",
+)
+@click.option(
+    "--limit",
+    type=FiniteRange(min=0, min_open=True),
+    default=constants.LIMIT,
+    show_default=True,
+    help="Refuse if any program displacement exceeds this, mm.",
+)
+@click.option(
+    "--outside",
+    type=click.Choice(["error", "clamp", "extrapolate"]),
+    default="error",
+    show_default=True,
+    help="Program points beyond the compensated surface (the measured area, or --extent): refuse, hold "
+    "the nearest edge value, or extrapolate the thin-plate spline.",
+)
+@click.option(
+    "--surface",
+    "surface_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Compensated surface, .step/.stp or .igs/.iges.",
+)
+@click.option(
+    "--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points."
+)
 @_moran_options
 @handle_errors
-def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output, tool_radius, extent, border,
-               extrapolate_nominal, limit, outside, surface_path, points_out, weights, power, threshold, neighbors, alpha, probe_radius, units,
-               json_path, report_path):
+def compensate(
+    measurements,
+    method,
+    sigma_c,
+    sigma_s,
+    p,
+    auto,
+    program,
+    output,
+    tool_radius,
+    extent,
+    border,
+    extrapolate_nominal,
+    limit,
+    outside,
+    surface_path,
+    points_out,
+    weights,
+    power,
+    threshold,
+    neighbors,
+    alpha,
+    probe_radius,
+    units,
+    json_path,
+    report_path,
+):
     """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
     surface and compensated points."""
     from .. import cad, measure
@@ -146,12 +263,21 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
         raise click.UsageError("--program and -o go together")
     from ..probing import companion_inputs
 
-    check_outputs({"measurements": measurements, "input program": program, **companion_inputs(measurements)},
-                  {"-o": output, "--surface": surface_path, "--points-out": points_out, "--json": json_path,
-                   "--report": report_path})
+    check_outputs(
+        {"measurements": measurements, "input program": program, **companion_inputs(measurements)},
+        {
+            "-o": output,
+            "--surface": surface_path,
+            "--points-out": points_out,
+            "--json": json_path,
+            "--report": report_path,
+        },
+    )
     if program is not None and tool_radius is None:
-        raise click.UsageError("--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
-                               "programmed point is the contact point); the correction is evaluated at the tool's tip")
+        raise click.UsageError(
+            "--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
+            "programmed point is the contact point); the correction is evaluated at the tool's tip"
+        )
     kw = _moran_kw(weights, power, threshold, neighbors, alpha)
     with progress() as say:
         say(f"reading {measurements}")
@@ -167,30 +293,42 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
                 f"the compensated surface would reach {ext.max_distance:.3g} mm beyond the measured points "
                 f"({ext.area_fraction:.0%} of its grid, {'the --extent' if extent else 'the corners of the scatter'}): "
                 "there its nominal would be extrapolated from them, not measured; give --extrapolate-nominal to "
-                "accept that, or an --extent within the measured area", str(measurements))
+                "accept that, or an --extent within the measured area",
+                str(measurements),
+            )
         c = pf.compensate(surf, meas, d.systematic, frame=frame, border=border)
         corr = None
         if program is not None:
             say(f"correcting {program}")
-            corr = ncmod.read(program).correct_to(output, c.field(tool_radius or 0.0, outside), limit=limit, progress=say)
+            corr = ncmod.read(program).correct_to(
+                output, c.field(tool_radius or 0.0, outside), limit=limit, progress=say
+            )
         if surface_path is not None:
             say(f"writing {surface_path}")
             cad.write(c.compensated, surface_path)
     _print_analysis(a)
     sysd = d.as_dict()
-    summary(f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
-               f"({d.method}); random part: std {d.noise.std:.4f} mm")
+    summary(
+        f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
+        f"({d.method}); random part: std {d.noise.std:.4f} mm"
+    )
     if not a.systematic:
         echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
     if d.auto is not None and not d.auto["passed"]:
-        summary(f"warning: --auto found no {d.method} setting whose random part is free of systematic error; "
-                f"the default setting ({', '.join(f'{k} {v:g}' for k, v in d.auto['setting'].items())}) is used")
+        summary(
+            f"warning: --auto found no {d.method} setting whose random part is free of systematic error; "
+            f"the default setting ({', '.join(f'{k} {v:g}' for k, v in d.auto['setting'].items())}) is used"
+        )
     elif not d.noise.passed:
-        summary(f"warning: the random part still holds systematic error (Moran z {d.noise.moran_z:.2f}, lag-1 "
-                f"r {d.noise.lag1_r:.2f}); smooth less, or try --auto")
+        summary(
+            f"warning: the random part still holds systematic error (Moran z {d.noise.moran_z:.2f}, lag-1 "
+            f"r {d.noise.lag1_r:.2f}); smooth less, or try --auto"
+        )
     if corr is not None:
-        summary(f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
-                   f"max displacement {corr.max_displacement:.4f} mm")
+        summary(
+            f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
+            f"max displacement {corr.max_displacement:.4f} mm"
+        )
     if points_out is not None:
         rows = ["x,y,z,deviation,systematic,random,cx,cy,cz"]
         for q, e, s, r, cp in zip(meas.nominal, meas.deviation, d.systematic, d.random, c.points_compensated):
@@ -199,17 +337,30 @@ def compensate(measurements, method, sigma_c, sigma_s, p, auto, program, output,
     payload = {"input": str(measurements), **a.as_dict(), **sysd}
     if ext.max_distance > 0:
         payload["extrapolation"] = ext.as_dict()
-        echo_err(f"warning: the nominal is extrapolated up to {ext.max_distance:.3g} mm beyond the measured points "
-                 f"over {ext.area_fraction:.0%} of the surface (--extrapolate-nominal)")
+        echo_err(
+            f"warning: the nominal is extrapolated up to {ext.max_distance:.3g} mm beyond the measured points "
+            f"over {ext.area_fraction:.0%} of the surface (--extrapolate-nominal)"
+        )
     if corr is not None:
         payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
     if json_path:
         write_json(json_path, payload)
     if report_path:
-        from ..report import freeform as rep, write
+        from ..report import freeform as rep
+        from ..report import write
 
-        write(report_path, rep.render(title=f"Freeform compensation: {measurements.name}", analysis=a, decomposition=d,
-                                      xy=frame.uv(meas.nominal), names=frame.names, deviation=meas.deviation,
-                                      files={k: str(v) for k, v in (("program", output), ("surface", surface_path),
-                                                                    ("points", points_out)) if v},
-                                      extrapolation=ext if ext.max_distance > 0 else None))
+        write(
+            report_path,
+            rep.render(
+                title=f"Freeform compensation: {measurements.name}",
+                analysis=a,
+                decomposition=d,
+                xy=frame.uv(meas.nominal),
+                names=frame.names,
+                deviation=meas.deviation,
+                files={
+                    k: str(v) for k, v in (("program", output), ("surface", surface_path), ("points", points_out)) if v
+                },
+                extrapolation=ext if ext.max_distance > 0 else None,
+            ),
+        )

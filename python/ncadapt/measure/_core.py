@@ -42,8 +42,17 @@ class Measurements:
             raise InputError(f"{what} needs at least {n} points, the measurements have {len(self)}", self.source)
 
 
-def from_arrays(nominal, normal, measured=None, deviation=None, *, ids=None, probe_radius: float = 0.0,
-                lines=None, source: str | None = None) -> Measurements:
+def from_arrays(
+    nominal,
+    normal,
+    measured=None,
+    deviation=None,
+    *,
+    ids=None,
+    probe_radius: float = 0.0,
+    lines=None,
+    source: str | None = None,
+) -> Measurements:
     """Check and combine arrays into :class:`Measurements` (give ``measured`` or ``deviation``).
 
     ``probe_radius`` > 0: the measured points are probe-tip centres, moved back along the normal.

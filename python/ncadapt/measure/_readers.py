@@ -13,8 +13,20 @@ from ._core import Measurements, from_arrays
 
 #: Millimetres per unit of the length units measurement files declare (DMIS UNITS/…, QIF
 #: LinearUnit UnitName) or ``--units`` names.
-UNITS_MM = {"mm": 1.0, "millimeter": 1.0, "millimetre": 1.0, "cm": 10.0, "meter": 1000.0, "metre": 1000.0,
-            "m": 1000.0, "inch": 25.4, "in": 25.4, "feet": 304.8, "foot": 304.8, "ft": 304.8}
+UNITS_MM = {
+    "mm": 1.0,
+    "millimeter": 1.0,
+    "millimetre": 1.0,
+    "cm": 10.0,
+    "meter": 1000.0,
+    "metre": 1000.0,
+    "m": 1000.0,
+    "inch": 25.4,
+    "in": 25.4,
+    "feet": 304.8,
+    "foot": 304.8,
+    "ft": 304.8,
+}
 
 NOMINAL = ("x", "y", "z")
 NORMAL = ("i", "j", "k")
@@ -60,7 +72,8 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     has_m = all(c in cols for c in MEASURED)
     if missing or not (has_m or "dev" in cols):
         raise InputError(
-            f"header must name x,y,z,i,j,k and mx,my,mz or dev (optional id); got {','.join(header)}", src, 1)
+            f"header must name x,y,z,i,j,k and mx,my,mz or dev (optional id); got {','.join(header)}", src, 1
+        )
     if has_m and "dev" in cols:
         raise InputError("header names both mx,my,mz and dev; give one", src, 1)
     want = NOMINAL + NORMAL + (MEASURED if has_m else ("dev",))
@@ -68,9 +81,16 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     if fast is not None:
         a, ids, lines = fast
         a = _lengths(a, has_m, _scale(units))
-        return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if has_m else None,
-                           deviation=None if has_m else a[:, 6], ids=ids, probe_radius=probe_radius,
-                           lines=lines, source=src)
+        return from_arrays(
+            a[:, 0:3],
+            a[:, 3:6],
+            measured=a[:, 6:9] if has_m else None,
+            deviation=None if has_m else a[:, 6],
+            ids=ids,
+            probe_radius=probe_radius,
+            lines=lines,
+            source=src,
+        )
     values, ids, lines = [], [], []
     for row in rows:
         line = rows.line_num
@@ -85,9 +105,16 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     if not values:
         raise InputError("no points", src)
     a = _lengths(np.array(values), has_m, _scale(units))
-    return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if has_m else None,
-                       deviation=None if has_m else a[:, 6], ids=ids or None, probe_radius=probe_radius,
-                       lines=lines, source=src)
+    return from_arrays(
+        a[:, 0:3],
+        a[:, 3:6],
+        measured=a[:, 6:9] if has_m else None,
+        deviation=None if has_m else a[:, 6],
+        ids=ids or None,
+        probe_radius=probe_radius,
+        lines=lines,
+        source=src,
+    )
 
 
 def _plain_csv(path, width: int, idx: list[int], id_col: int | None):
@@ -123,7 +150,9 @@ def read_xyzijk(path, probe_radius: float = 0.0, units: str | None = None) -> Me
         if not parts or not re.match(r"^[-+]?(\d|\.\d)", parts[0]):
             continue
         if len(parts) not in (7, 9):
-            raise InputError(f"expected 7 (x y z i j k dev) or 9 (x y z i j k mx my mz) numbers, got {len(parts)}", src, ln)
+            raise InputError(
+                f"expected 7 (x y z i j k dev) or 9 (x y z i j k mx my mz) numbers, got {len(parts)}", src, ln
+            )
         if width is None:
             width = len(parts)
         elif len(parts) != width:
@@ -133,8 +162,15 @@ def read_xyzijk(path, probe_radius: float = 0.0, units: str | None = None) -> Me
     if not values:
         raise InputError("no point rows (x y z i j k ...)", src)
     a = _lengths(np.array(values), width == 9, _scale(units))
-    return from_arrays(a[:, 0:3], a[:, 3:6], measured=a[:, 6:9] if width == 9 else None,
-                       deviation=a[:, 6] if width == 7 else None, probe_radius=probe_radius, lines=lines, source=src)
+    return from_arrays(
+        a[:, 0:3],
+        a[:, 3:6],
+        measured=a[:, 6:9] if width == 9 else None,
+        deviation=a[:, 6] if width == 7 else None,
+        probe_radius=probe_radius,
+        lines=lines,
+        source=src,
+    )
 
 
 _DMIS = re.compile(r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*POINT\s*,\s*(\w+)\s*,(.*)$", re.I)
@@ -172,7 +208,9 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
         if u:
             name = u.group(1).upper()
             if name not in _DMIS_LENGTH:
-                raise InputError(f"UNITS/{name}: unknown length unit; expected one of {', '.join(_DMIS_LENGTH)}", src, ln)
+                raise InputError(
+                    f"UNITS/{name}: unknown length unit; expected one of {', '.join(_DMIS_LENGTH)}", src, ln
+                )
             if units and _DMIS_LENGTH[name] != _scale(units):
                 raise InputError(f"UNITS/{name} disagrees with --units {units}", src, ln)
             k = _DMIS_LENGTH[name]
@@ -182,8 +220,9 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
             continue
         kind, label, system, rest = m.group(1).upper(), m.group(2).strip(), m.group(3).upper(), m.group(4)
         if system != "CART":
-            raise InputError(f"FEAT/POINT,{system}: only Cartesian (CART) points are read; export the points in CART",
-                             src, ln)
+            raise InputError(
+                f"FEAT/POINT,{system}: only Cartesian (CART) points are read; export the points in CART", src, ln
+            )
         nums = [_number(v, src, ln, "coordinate") for v in rest.split(",") if v.strip()]
         if len(nums) != 6:
             raise InputError(f"FEAT/POINT needs x,y,z,i,j,k (6 numbers), got {len(nums)}", src, ln)
@@ -201,8 +240,15 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
     labels = list(nominal)
     nom = np.array([nominal[k][1] for k in labels])
     act = np.array([actual[k][1] for k in labels])
-    return from_arrays(nom[:, :3], nom[:, 3:], measured=act[:, :3], ids=labels, probe_radius=probe_radius,
-                       lines=[nominal[k][0] for k in labels], source=src)
+    return from_arrays(
+        nom[:, :3],
+        nom[:, 3:],
+        measured=act[:, :3],
+        ids=labels,
+        probe_radius=probe_radius,
+        lines=[nominal[k][0] for k in labels],
+        source=src,
+    )
 
 
 def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
@@ -236,8 +282,11 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
         if isinstance(el.tag, str) and local(el) == "LinearUnit":
             name = next((c.text or "" for c in el if isinstance(c.tag, str) and local(c) == "UnitName"), "").strip()
             if name.lower() not in UNITS_MM:
-                raise InputError(f"LinearUnit {name!r}: unknown length unit; expected one of {', '.join(UNITS_MM)}",
-                                 src, el.sourceline)
+                raise InputError(
+                    f"LinearUnit {name!r}: unknown length unit; expected one of {', '.join(UNITS_MM)}",
+                    src,
+                    el.sourceline,
+                )
             if units and UNITS_MM[name.lower()] != _scale(units):
                 raise InputError(f"LinearUnit {name!r} disagrees with --units {units}", src, el.sourceline)
             k = UNITS_MM[name.lower()]
@@ -290,8 +339,15 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
         if nid not in by_nominal:
             raise InputError(f"nominal point {nid} has no measurement", src, nom[0])
         rows.append((nid, nom, by_nominal[nid]))
-    return from_arrays([r[1][1] for r in rows], [r[1][2] for r in rows], measured=[r[2] for r in rows],
-                       ids=[r[0] for r in rows], probe_radius=probe_radius, lines=[r[1][0] for r in rows], source=src)
+    return from_arrays(
+        [r[1][1] for r in rows],
+        [r[1][2] for r in rows],
+        measured=[r[2] for r in rows],
+        ids=[r[0] for r in rows],
+        probe_radius=probe_radius,
+        lines=[r[1][0] for r in rows],
+        source=src,
+    )
 
 
 def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:

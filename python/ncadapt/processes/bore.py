@@ -68,8 +68,14 @@ class Circle:
     n: int
 
     def as_dict(self) -> dict:
-        return {"plane": self.plane, "z": self.z, "centre": list(self.centre), "diameter": self.diameter,
-                "roundness": self.roundness if math.isfinite(self.roundness) else None, "points": self.n}
+        return {
+            "plane": self.plane,
+            "z": self.z,
+            "centre": list(self.centre),
+            "diameter": self.diameter,
+            "roundness": self.roundness if math.isfinite(self.roundness) else None,
+            "points": self.n,
+        }
 
 
 def fit_circle(x, y, plane: str = "", z: float = 0.0) -> Circle:
@@ -194,7 +200,9 @@ def _fit_planes(groups: dict, path: str, entry: str) -> BoreMeasurement:
     for key, pts in groups.items():
         a = np.array([p[:3] for p in pts])
         if len(a) < MIN_POINTS_PER_PLANE:
-            raise InputError(f"plane {key!r} has {len(a)} points; a circle needs {MIN_POINTS_PER_PLANE}", path, pts[0][3])
+            raise InputError(
+                f"plane {key!r} has {len(a)} points; a circle needs {MIN_POINTS_PER_PLANE}", path, pts[0][3]
+            )
         try:
             circles.append(fit_circle(a[:, 0], a[:, 1], key, float(a[:, 2].mean())))
         except InputError as err:
@@ -205,8 +213,9 @@ def _fit_planes(groups: dict, path: str, entry: str) -> BoreMeasurement:
     return BoreMeasurement(tuple(circles), path)
 
 
-_DMIS_CIRCLE = re.compile(r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*CIRCLE\s*,\s*(INNER|OUTER)\s*,\s*CART\s*,(.*)$",
-                          re.I)
+_DMIS_CIRCLE = re.compile(
+    r"^\s*(FA|F)\(([^)]*)\)\s*=\s*FEAT\s*/\s*CIRCLE\s*,\s*(INNER|OUTER)\s*,\s*CART\s*,(.*)$", re.I
+)
 _PCDMIS_HEAD = re.compile(r"LOCATION\s+OF\s+CIRCLE\s+(\S+)", re.I)
 
 
@@ -336,7 +345,9 @@ def read_circle_table(path, entry: str = "top") -> BoreMeasurement:
     return _circles(items, path, entry)
 
 
-_NUMBERS_LINE = re.compile(r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(\s+[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?){2,}\s*$")
+_NUMBERS_LINE = re.compile(
+    r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(\s+[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?){2,}\s*$"
+)
 
 
 def read_probe_log(path, entry: str = "top") -> BoreMeasurement:
@@ -373,8 +384,16 @@ def read_measurement(path, entry: str = "top") -> BoreMeasurement:
     return read_probe(path, entry)
 
 
-def probing_program(diameter: float, planes, *, dialect: str = "linuxcnc", points: int = 8, clearance: float = 2.0,
-                    feed: float = 100.0, safe_z: float = 5.0) -> str:
+def probing_program(
+    diameter: float,
+    planes,
+    *,
+    dialect: str = "linuxcnc",
+    points: int = 8,
+    clearance: float = 2.0,
+    feed: float = 100.0,
+    safe_z: float = 5.0,
+) -> str:
     """A program probing the bore in the planes ``planes`` (z, mm, face A first) with ``points``
     touches each: from the bore's centre (X0 Y0, the work offset at the bore's axis) the probe moves
     radially towards the wall, stopping on contact — LinuxCNC ``G38.2`` (the position is logged by
@@ -390,11 +409,22 @@ def probing_program(diameter: float, planes, *, dialect: str = "linuxcnc", point
     r = diameter / 2 + 1.0
     out = []
     if dialect == "linuxcnc":
-        out += ["(ncadapt bore probing: G38.2 from the bore's centre, X0 Y0 on its axis)", "G21 G90 G17 G40 G54",
-                "(PROBEOPEN bore_probe.txt)", f"G0 Z{safe_z:.3f}", "G0 X0 Y0"]
+        out += [
+            "(ncadapt bore probing: G38.2 from the bore's centre, X0 Y0 on its axis)",
+            "G21 G90 G17 G40 G54",
+            "(PROBEOPEN bore_probe.txt)",
+            f"G0 Z{safe_z:.3f}",
+            "G0 X0 Y0",
+        ]
     else:
-        out += ["%", "O2000 (NCADAPT BORE PROBING: G31 SKIP, X0 Y0 ON THE AXIS)", "G21 G90 G17 G40 G54",
-                "POPEN", f"G0 Z{safe_z:.3f}", "G0 X0 Y0"]
+        out += [
+            "%",
+            "O2000 (NCADAPT BORE PROBING: G31 SKIP, X0 Y0 ON THE AXIS)",
+            "G21 G90 G17 G40 G54",
+            "POPEN",
+            f"G0 Z{safe_z:.3f}",
+            "G0 X0 Y0",
+        ]
     for z in planes:
         z = float(z)
         if not math.isfinite(z):
@@ -424,8 +454,10 @@ def class_limits(diameter: float, cls: str) -> tuple[float, float]:
 
 def _hole_class(cls: str, what: str) -> None:
     if not isinstance(cls, str) or not cls[:1].isalpha() or not cls[:1].isupper():
-        raise InputError(f"{what} class {cls!r} is not a hole class: a bore takes upper-case letters (H6, H9); "
-                         "lower case (h6) is a shaft class")
+        raise InputError(
+            f"{what} class {cls!r} is not a hole class: a bore takes upper-case letters (H6, H9); "
+            "lower case (h6) is a shaft class"
+        )
 
 
 @dataclass(frozen=True)
@@ -488,8 +520,10 @@ class Plan:
     @property
     def predicted_diameters(self) -> tuple[float, float]:
         """(near A, near B) after the last pass: D_target − 2(δ_n − δ_K,n)."""
-        return (self.target_diameter - 2 * (self.predicted[-1] - self.last_shift),
-                self.target_diameter - 2 * (self.predicted_b[-1] - self.last_shift))
+        return (
+            self.target_diameter - 2 * (self.predicted[-1] - self.last_shift),
+            self.target_diameter - 2 * (self.predicted_b[-1] - self.last_shift),
+        )
 
     @property
     def predicted_ok(self) -> bool:
@@ -503,24 +537,37 @@ class Plan:
 
     def as_dict(self) -> dict:
         return {
-            "diameter": self.diameter, "final": self.final, "prefinish": self.prefinish, "t0": self.t0,
-            "allowance": self.allowance, "delta_a": self.delta_a, "delta_b": self.delta_b, "k": self.k,
+            "diameter": self.diameter,
+            "final": self.final,
+            "prefinish": self.prefinish,
+            "t0": self.t0,
+            "allowance": self.allowance,
+            "delta_a": self.delta_a,
+            "delta_b": self.delta_b,
+            "k": self.k,
             "target_diameter": self.target_diameter,
-            "it_final": self.it_final, "it_prefinish": self.it_prefinish,
+            "it_final": self.it_final,
+            "it_prefinish": self.it_prefinish,
             "final_limits": list(self.final_limits),
             "form_before": self.form_before,
             "applicable": self.applicable,
             "applicability_limit": self.applicability_limit,
-            "t_max": self.t_max, "passes": self.passes, "depth_per_pass": self.depth_per_pass,
-            "predicted": self.predicted, "predicted_b": self.predicted_b, "predicted_paper": self.predicted_paper,
-            "predicted_form": self.predicted_form, "predicted_form_limit": self.form_limit,
-            "predicted_diameters": list(self.predicted_diameters), "predicted_ok": self.predicted_ok,
+            "t_max": self.t_max,
+            "passes": self.passes,
+            "depth_per_pass": self.depth_per_pass,
+            "predicted": self.predicted,
+            "predicted_b": self.predicted_b,
+            "predicted_paper": self.predicted_paper,
+            "predicted_form": self.predicted_form,
+            "predicted_form_limit": self.form_limit,
+            "predicted_diameters": list(self.predicted_diameters),
+            "predicted_ok": self.predicted_ok,
             "warnings": list(self.warnings),
             "history": list(self.history),
         }
 
     @classmethod
-    def from_dict(cls, d, source: str | None = None) -> "Plan":
+    def from_dict(cls, d, source: str | None = None) -> Plan:
         """The plan from its JSON (as :meth:`as_dict` writes it): the inputs are read and checked,
         the figures recomputed; the recorded passes (``history``) are kept."""
         if not isinstance(d, dict):
@@ -542,7 +589,7 @@ class Plan:
             if key not in d:
                 raise InputError(f"not a bore plan: missing key {key!r}", source)
             if not isinstance(d[key], str):
-                raise InputError(f"not a bore plan: {key!r} must be a class such as \"H6\", got {cut(d[key])}", source)
+                raise InputError(f'not a bore plan: {key!r} must be a class such as "H6", got {cut(d[key])}', source)
             return d[key]
 
         hist = d.get("history", [])
@@ -556,13 +603,24 @@ class Plan:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
                     raise InputError(f"not a bore plan: history[{i}].{key} must be a finite number", source)
                 if key == "correction" and abs(v) > DEVIATION_MAX:
-                    raise InputError(f"not a bore plan: history[{i}].correction must be within ±{DEVIATION_MAX:g} mm, "
-                                     f"got {v:g}", source)
+                    raise InputError(
+                        f"not a bore plan: history[{i}].correction must be within ±{DEVIATION_MAX:g} mm, got {v:g}",
+                        source,
+                    )
             if h["pass"] != i:
                 raise InputError(f"not a bore plan: history[{i}] records pass {h['pass']}, expected {i}", source)
         try:
-            p = plan(num("diameter"), text("final"), text("prefinish"), num("t0"), num("allowance"), num("delta_a"),
-                     num("delta_b"), k=num("k"), target_diameter=num("target_diameter", optional=True))
+            p = plan(
+                num("diameter"),
+                text("final"),
+                text("prefinish"),
+                num("t0"),
+                num("allowance"),
+                num("delta_a"),
+                num("delta_b"),
+                k=num("k"),
+                target_diameter=num("target_diameter", optional=True),
+            )
         except InputError as err:
             raise InputError(f"not a usable bore plan: {err.message}", source) from None
         return replace(p, history=tuple(hist))
@@ -611,8 +669,18 @@ T0_MIN, T0_MAX = 0.001, 10.0
 K_MIN = 0.01
 
 
-def plan(diameter: float, final: str = "H6", prefinish: str = "H9", t0: float = 0.1, allowance: float = 0.1,
-         delta_a: float = 0.0, delta_b: float = 0.0, *, k: float = 0.25, target_diameter: float | None = None) -> Plan:
+def plan(
+    diameter: float,
+    final: str = "H6",
+    prefinish: str = "H9",
+    t0: float = 0.1,
+    allowance: float = 0.1,
+    delta_a: float = 0.0,
+    delta_b: float = 0.0,
+    *,
+    k: float = 0.25,
+    target_diameter: float | None = None,
+) -> Plan:
     """The corrective-pass plan (all lengths mm, deviations and depths radial).
 
     ``final``, ``prefinish``: hole classes ("H6", "H9"); ``t0``: depth of the last pre-finish pass;
@@ -640,27 +708,34 @@ def plan(diameter: float, final: str = "H6", prefinish: str = "H9", t0: float = 
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)):
             raise InputError(f"{name} must be a number, got {v!r}")
         if abs(v) > DEVIATION_MAX:
-            raise InputError(f"{name} must be within ±{DEVIATION_MAX:g} mm (a radial deviation after pre-finishing), "
-                             f"got {v:g}")
+            raise InputError(
+                f"{name} must be within ±{DEVIATION_MAX:g} mm (a radial deviation after pre-finishing), got {v:g}"
+            )
     _hole_class(final, "the final")
     _hole_class(prefinish, "the pre-finish")
     lo_f, hi_f = class_limits(diameter, final)
     lo_p, hi_p = class_limits(diameter, prefinish)
     it_f, it_p = hi_f - lo_f, hi_p - lo_p
     if it_f >= it_p:
-        raise InputError(f"the final class {final} ({it_f * 1000:g} µm) must be finer than the pre-finish {prefinish} "
-                         f"({it_p * 1000:g} µm)")
+        raise InputError(
+            f"the final class {final} ({it_f * 1000:g} µm) must be finer than the pre-finish {prefinish} "
+            f"({it_p * 1000:g} µm)"
+        )
     if target_diameter is None:
         target = diameter + (lo_f + hi_f) / 2
     else:
         target = float(target_diameter)
         if not (math.isfinite(target) and diameter + lo_f - 1e-12 <= target <= diameter + hi_f + 1e-12):
-            raise InputError(f"the target diameter {target:g} mm is outside Ø{diameter:g} {final} "
-                             f"({diameter + lo_f:.4f} … {diameter + hi_f:.4f} mm)")
+            raise InputError(
+                f"the target diameter {target:g} mm is outside Ø{diameter:g} {final} "
+                f"({diameter + lo_f:.4f} … {diameter + hi_f:.4f} mm)"
+            )
     t_max = t0 * k * it_f / it_p
     if allowance / t_max > MAX_PASSES:
-        raise InputError(f"an allowance of {allowance:g} mm needs {allowance / t_max:.3g} corrective passes of at most "
-                         f"{t_max * 1000:.3g} µm; at most {MAX_PASSES} are planned: pre-finish closer to size")
+        raise InputError(
+            f"an allowance of {allowance:g} mm needs {allowance / t_max:.3g} corrective passes of at most "
+            f"{t_max * 1000:.3g} µm; at most {MAX_PASSES} are planned: pre-finish closer to size"
+        )
     if allowance >= diameter / 2:
         raise InputError(f"the allowance {allowance:g} mm (radial) is not smaller than the radius {diameter / 2:g} mm")
     passes = max(1, math.ceil(allowance / t_max - 1e-9))
@@ -669,45 +744,83 @@ def plan(diameter: float, final: str = "H6", prefinish: str = "H9", t0: float = 
     for name, dv in (("delta_a", delta_a), ("delta_b", delta_b)):
         coeff = (t + dv + shift) / t0
         if dv > 0 and coeff >= 1:
-            raise InputError(f"the correction does not converge: {name} = {dv * 1000:.1f} µm with t₀ = {t0:g} mm and "
-                             f"passes of {t * 1000:.1f} µm gives the refinement coefficient (t + δ + δ_K)/t₀ = "
-                             f"{coeff:.2f} >= 1, so each pass would leave a larger deviation than the last; "
-                             "pre-finish closer to size (a smaller deviation) or with a deeper last pass")
+            raise InputError(
+                f"the correction does not converge: {name} = {dv * 1000:.1f} µm with t₀ = {t0:g} mm and "
+                f"passes of {t * 1000:.1f} µm gives the refinement coefficient (t + δ + δ_K)/t₀ = "
+                f"{coeff:.2f} >= 1, so each pass would leave a larger deviation than the last; "
+                "pre-finish closer to size (a smaller deviation) or with a deeper last pass"
+            )
     warn = []
     for name, dv in (("δA", delta_a), ("δB", delta_b)):
         if dv < 0:
-            warn.append(f"{name} = {dv * 1000:.1f} µm is negative: the bore is over the pre-finish aim there (no "
-                        "material left); the method assumes material left")
+            warn.append(
+                f"{name} = {dv * 1000:.1f} µm is negative: the bore is over the pre-finish aim there (no "
+                "material left); the method assumes material left"
+            )
         if abs(dv) > it_p:
-            warn.append(f"|{name}| = {abs(dv) * 1000:.1f} µm is larger than IT({prefinish}) = {it_p * 1000:g} µm: "
-                        f"the bore is not a pre-finished {prefinish} one")
+            warn.append(
+                f"|{name}| = {abs(dv) * 1000:.1f} µm is larger than IT({prefinish}) = {it_p * 1000:g} µm: "
+                f"the bore is not a pre-finished {prefinish} one"
+            )
     pa, pb = predict(delta_a, delta_b, t, t0, passes)
-    p = Plan(float(diameter), final, prefinish, float(t0), float(allowance), float(delta_a), float(delta_b), float(k),
-             target, it_f, it_p, (lo_f, hi_f), t_max, passes, t, pa, pb, predict_paper(delta_a, t, t0, passes))
+    p = Plan(
+        float(diameter),
+        final,
+        prefinish,
+        float(t0),
+        float(allowance),
+        float(delta_a),
+        float(delta_b),
+        float(k),
+        target,
+        it_f,
+        it_p,
+        (lo_f, hi_f),
+        t_max,
+        passes,
+        t,
+        pa,
+        pb,
+        predict_paper(delta_a, t, t0, passes),
+    )
     if not p.applicable:
-        warn.append(f"condition (3) does not hold: |δA − δB| = {p.form_before * 1000:.1f} µm > "
-                    f"{p.applicability_limit * 1000:.1f} µm; the plan's predictions are not reliable")
+        warn.append(
+            f"condition (3) does not hold: |δA − δB| = {p.form_before * 1000:.1f} µm > "
+            f"{p.applicability_limit * 1000:.1f} µm; the plan's predictions are not reliable"
+        )
     if not all(math.isfinite(v) for v in pa + pb):  # cannot happen within the bounds above
         raise InputError("the predicted deviations are not finite for these inputs")
     return replace(p, warnings=tuple(warn))
 
 
-def plan_from_measurement(diameter: float, meas: BoreMeasurement, *, final: str = "H6", prefinish: str = "H9",
-                          t0: float, allowance: float, k: float = 0.25,
-                          target_diameter: float | None = None) -> Plan:
+def plan_from_measurement(
+    diameter: float,
+    meas: BoreMeasurement,
+    *,
+    final: str = "H6",
+    prefinish: str = "H9",
+    t0: float,
+    allowance: float,
+    k: float = 0.25,
+    target_diameter: float | None = None,
+) -> Plan:
     """A plan with δ_A, δ_B taken from the probed pre-finished bore: δ = (D_aimed − D)/2 at the
     planes nearest faces A and B, D_aimed = D_target − 2z the diameter the pre-finish aimed at."""
     if len(meas.circles) < 2:
-        raise InputError(f"the plan needs the bore probed near faces A and B (two planes at least), got "
-                         f"{len(meas.circles)}", meas.source)
+        raise InputError(
+            f"the plan needs the bore probed near faces A and B (two planes at least), got {len(meas.circles)}",
+            meas.source,
+        )
     lo_f, hi_f = class_limits(diameter, final)
     target = diameter + (lo_f + hi_f) / 2 if target_diameter is None else float(target_diameter)
     dev = meas.deviations(target - 2 * allowance)
     p = plan(diameter, final, prefinish, t0, allowance, float(dev[0]), float(dev[-1]), k=k, target_diameter=target)
     warn = list(p.warnings)
     if len(dev) >= 3 and float(dev.max()) > max(dev[0], dev[-1]) + 1e-12:
-        warn.append(f"the largest deviation ({float(dev.max()) * 1000:.1f} µm) is mid-bore: the first correction "
-                    "takes it, the plan's prediction uses the faces' values")
+        warn.append(
+            f"the largest deviation ({float(dev.max()) * 1000:.1f} µm) is mid-bore: the first correction "
+            "takes it, the plan's prediction uses the faces' values"
+        )
     return replace(p, warnings=tuple(warn))
 
 
@@ -724,13 +837,21 @@ class Correction:
     stiffness_ratio: float | None = None  # hardened material: compliance before / now, from pass 1
 
     def as_dict(self) -> dict:
-        return {"pass_done": self.pass_done, "next_pass": self.next_pass, "errors": self.errors,
-                "deviations": self.deviations, "correction": self.correction, "rule": self.rule,
-                "radial_position": self.radial_position, "stiffness_ratio": self.stiffness_ratio}
+        return {
+            "pass_done": self.pass_done,
+            "next_pass": self.next_pass,
+            "errors": self.errors,
+            "deviations": self.deviations,
+            "correction": self.correction,
+            "rule": self.rule,
+            "radial_position": self.radial_position,
+            "stiffness_ratio": self.stiffness_ratio,
+        }
 
 
-def next_correction(p: Plan, meas: BoreMeasurement, pass_done: int = 0, *, applied: float = 0.0,
-                    hardened: bool = False) -> Correction:
+def next_correction(
+    p: Plan, meas: BoreMeasurement, pass_done: int = 0, *, applied: float = 0.0, hardened: bool = False
+) -> Correction:
     """δ_K,i+1 from the bore measured after pass ``pass_done`` (0: after the pre-finish), which was
     made with the tool shifted by ``applied`` (its δ_K; 0 for the pre-finish).
 
@@ -739,15 +860,21 @@ def next_correction(p: Plan, meas: BoreMeasurement, pass_done: int = 0, *, appli
     near face A) is identified: (δ_A0 / t₀) / (δ_A1 / (t + δ_A0)).
     """
     if not 0 <= pass_done < p.passes:
-        raise InputError(f"pass must be 0 … {p.passes - 1} (the plan has {p.passes} corrective passes; after pass "
-                         f"{p.passes} the bore is finished: see judge), got {pass_done}", meas.source)
+        raise InputError(
+            f"pass must be 0 … {p.passes - 1} (the plan has {p.passes} corrective passes; after pass "
+            f"{p.passes} the bore is finished: see judge), got {pass_done}",
+            meas.source,
+        )
     err = meas.deviations(p.nominal_diameter_after(pass_done))
     dev = err + applied
     ratio = None
     if pass_done == 0 or hardened:
         if len(dev) < 3:
-            raise InputError(f"{'hardened material' if hardened else 'the first corrective pass'} needs three planes "
-                             f"measured (near A, middle, near B), got {len(dev)}", meas.source)
+            raise InputError(
+                f"{'hardened material' if hardened else 'the first corrective pass'} needs three planes "
+                f"measured (near A, middle, near B), got {len(dev)}",
+                meas.source,
+            )
         dk, rule = float(dev.max()), "largest deviation of the three planes"
         if hardened and pass_done == 0:
             dk, rule = 0.0, "hardened: the first corrective pass without correction"
@@ -756,7 +883,9 @@ def next_correction(p: Plan, meas: BoreMeasurement, pass_done: int = 0, *, appli
     else:
         dk, rule = float(dev[0]), "deviation near face A"
     nxt = pass_done + 1
-    return Correction(pass_done, nxt, err.tolist(), dev.tolist(), dk, rule, p.nominal_diameter_after(nxt) / 2 + dk, ratio)
+    return Correction(
+        pass_done, nxt, err.tolist(), dev.tolist(), dk, rule, p.nominal_diameter_after(nxt) / 2 + dk, ratio
+    )
 
 
 @dataclass(frozen=True)
@@ -785,9 +914,18 @@ class Finished:
         return self.inside and self.form_ok
 
     def as_dict(self) -> dict:
-        return {"finished": True, "diameters": self.diameters, "limits": list(self.limits), "inside": self.inside,
-                "form": self.form, "form_limit": self.form_limit, "form_ok": self.form_ok, "ok": self.ok,
-                "predicted_diameters": list(self.predicted_diameters), "predicted_form": self.predicted_form}
+        return {
+            "finished": True,
+            "diameters": self.diameters,
+            "limits": list(self.limits),
+            "inside": self.inside,
+            "form": self.form,
+            "form_limit": self.form_limit,
+            "form_ok": self.form_ok,
+            "ok": self.ok,
+            "predicted_diameters": list(self.predicted_diameters),
+            "predicted_form": self.predicted_form,
+        }
 
 
 def judge(p: Plan, meas: BoreMeasurement) -> Finished:
@@ -795,16 +933,21 @@ def judge(p: Plan, meas: BoreMeasurement) -> Finished:
     d = [float(v) for v in meas.diameters]
     lo, hi = p.final_limits
     form = (d[-1] - d[0]) / 2 if len(d) >= 2 else 0.0
-    return Finished(d, (p.diameter + lo, p.diameter + hi), form, p.form_limit, p.predicted_diameters,
-                    p.predicted_form)
+    return Finished(d, (p.diameter + lo, p.diameter + hi), form, p.form_limit, p.predicted_diameters, p.predicted_form)
 
 
 #: The controllers an offset block is written for (see :func:`offset_block`).
 CONTROLLERS = ("linuxcnc", "fanuc", "fanuc-geometry", "fanuc-lathe", "sinumerik", "plain")
 
 
-def offset_block(correction: float, *, controller: str = "linuxcnc", tool: int = 1, radius: float | None = None,
-                 previous: float = 0.0) -> str:
+def offset_block(
+    correction: float,
+    *,
+    controller: str = "linuxcnc",
+    tool: int = 1,
+    radius: float | None = None,
+    previous: float = 0.0,
+) -> str:
     """The correction δ_K (the tool's radial shift into the body, mm) as a controller block.
 
     Milling (a bore programmed on its contour with cutter-radius compensation G41/G42, so the tool
@@ -827,8 +970,9 @@ def offset_block(correction: float, *, controller: str = "linuxcnc", tool: int =
         raise InputError(f"the correction is not a finite number: {correction!r}")
     if controller in ("linuxcnc", "fanuc-geometry"):
         if radius is None:
-            raise InputError(f"the {controller} block sets the tool's radius: give the tool's nominal radius "
-                             "(--tool-radius)")
+            raise InputError(
+                f"the {controller} block sets the tool's radius: give the tool's nominal radius (--tool-radius)"
+            )
         if radius - correction <= 0:
             raise InputError(f"the tool radius {radius:g} mm less the correction {correction:g} mm is not positive")
         return f"G10 {'L1' if controller == 'linuxcnc' else 'L12'} P{tool} R{radius - correction:.4f}"

@@ -56,8 +56,13 @@ class Analysis:
         return self.verdict.systematic
 
     def as_dict(self) -> dict:
-        return {"n_points": self.n_points, "moran": self.moran.as_dict(), "deviation": self.deviation,
-                "offset": self.offset.as_dict(), "verdict": self.verdict.as_dict()}
+        return {
+            "n_points": self.n_points,
+            "moran": self.moran.as_dict(),
+            "deviation": self.deviation,
+            "offset": self.offset.as_dict(),
+            "verdict": self.verdict.as_dict(),
+        }
 
 
 def spacing(points) -> float:
@@ -84,8 +89,11 @@ def require_area(uv, source: str | None = None) -> None:
     across = np.linalg.svd(c, full_matrices=False)[2][-1]
     width = float(np.abs(c @ across).max()) if len(q) else 0.0
     if width < 0.5 * spacing(q):
-        raise InputError(f"the {len(q)} measured points lie along one line (all within half their spacing of it): "
-                         "a surface needs points over an area", source)
+        raise InputError(
+            f"the {len(q)} measured points lie along one line (all within half their spacing of it): "
+            "a surface needs points over an area",
+            source,
+        )
 
 
 def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
@@ -93,14 +101,16 @@ def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
     return frame if frame is not None else Frame.fit(meas.normal, meas.source)
 
 
-def analyze(meas: Measurements, *, frame: Frame | None = None, progress=None, alpha: float = 0.05,
-            **moran_options) -> Analysis:
+def analyze(
+    meas: Measurements, *, frame: Frame | None = None, progress=None, alpha: float = 0.05, **moran_options
+) -> Analysis:
     """Deviation statistics, Moran's I of the deviations over (u, v) (options of
     :func:`ncadapt.stats.moran`; ``progress(done, total)`` follows its all-pairs weights) and the
     offset test; the verdict at ``alpha`` (each test at α/2)."""
     meas.require(MIN_POINTS, "the analysis")
-    m = stats.moran(frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, alpha=alpha / 2,
-                    **moran_options)
+    m = stats.moran(
+        frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, alpha=alpha / 2, **moran_options
+    )
     o = stats.offset(meas.deviation)
     return Analysis(len(meas), m, stats.summary(meas.deviation), o, stats.verdict(m, o, alpha))
 
@@ -119,10 +129,20 @@ class Decomposition:
 
     def as_dict(self) -> dict:
         d = {
-            "method": self.method, "parameters": self.parameters,
-            "systematic": {"rms": float(np.sqrt((self.systematic**2).mean())), "max_abs": float(np.abs(self.systematic).max())},
-            "random": {"std": self.noise.std, "pearson_p": self.noise.pearson_p, "student_p": self.noise.student_p,
-                       "moran_z": self.noise.moran_z, "moran_p": self.noise.moran_p, "passed": self.noise.passed},
+            "method": self.method,
+            "parameters": self.parameters,
+            "systematic": {
+                "rms": float(np.sqrt((self.systematic**2).mean())),
+                "max_abs": float(np.abs(self.systematic).max()),
+            },
+            "random": {
+                "std": self.noise.std,
+                "pearson_p": self.noise.pearson_p,
+                "student_p": self.noise.student_p,
+                "moran_z": self.noise.moran_z,
+                "moran_p": self.noise.moran_p,
+                "passed": self.noise.passed,
+            },
         }
         if self.auto is not None:
             d["auto"] = self.auto
@@ -156,9 +176,17 @@ def _filter(method, xy, e, par):
     return filters.smoothing_spline(xy, e, par["p"])
 
 
-def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float | None = None,
-              sigma_s: float | None = None, p: float | None = None, auto: bool = False,
-              frame: Frame | None = None, **moran_options) -> Decomposition:
+def decompose(
+    meas: Measurements,
+    method: str = "bilateral",
+    *,
+    sigma_c: float | None = None,
+    sigma_s: float | None = None,
+    p: float | None = None,
+    auto: bool = False,
+    frame: Frame | None = None,
+    **moran_options,
+) -> Decomposition:
     """Split the deviations into a systematic part and random noise.
 
     ``bilateral``: σ_c defaults to 1.5 × the point spacing, σ_s to 3 × the estimated noise std.
@@ -184,12 +212,16 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
     else:
         p0 = p if p is not None else filters.csaps_auto_p(h)
         ladder = [{"p": q} for q in (1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.3, 0.6, 0.9)] if auto else [{"p": p0}]
+
     def split(par):
         s = _filter(method, xy, e, par)
         r = e - s
         if np.ptp(r) == 0:
-            raise InputError(f"the {method} filter with {', '.join(f'{k} {v:g}' for k, v in par.items())} keeps every "
-                             "deviation as systematic (nothing is left as noise); smooth more", meas.source)
+            raise InputError(
+                f"the {method} filter with {', '.join(f'{k} {v:g}' for k, v in par.items())} keeps every "
+                "deviation as systematic (nothing is left as noise); smooth more",
+                meas.source,
+            )
         return s, r, par, stats.noise(xy, r, **moran_options)
 
     chosen = next((c for c in map(split, ladder) if c[3].passed), None) if auto else split(ladder[0])
@@ -198,8 +230,14 @@ def decompose(meas: Measurements, method: str = "bilateral", *, sigma_c: float |
         chosen = split(base if method == "bilateral" else {"p": p0})
     s, r, par, nz = chosen
     params = {k: float(v) for k, v in par.items()}
-    return Decomposition(s, r, method, params | {"auto": auto, "noise_estimate": sig}, nz,
-                         {"passed": found, "setting": params} if auto else None)
+    return Decomposition(
+        s,
+        r,
+        method,
+        params | {"auto": auto, "noise_estimate": sig},
+        nz,
+        {"passed": found, "setting": params} if auto else None,
+    )
 
 
 @dataclass(frozen=True)
@@ -213,7 +251,7 @@ class Compensation:
     points_compensated: np.ndarray  # (n, 3) the measured points' nominals moved by −dF n
     frame: Frame  # the (u, v) of the surface grid
 
-    def field(self, tool_radius: float = 0.0, outside: str = "error") -> "FramedField":
+    def field(self, tool_radius: float = 0.0, outside: str = "error") -> FramedField:
         """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R
         (its axis along z), interpolated over the frame's (u, v): the tips of a wall seen from +x
         are spread over (y, z). ``outside`` (error|clamp|extrapolate): tool positions beyond the
@@ -223,8 +261,12 @@ class Compensation:
         p = s.point(U, V).reshape(-1, 3)
         n = s.normal(U, V).reshape(-1, 3)
         tip = p + tool_radius * n - tool_radius * np.array([0.0, 0.0, 1.0])
-        return FramedField(self.frame, ScatteredField(self.frame.local(tip), -self.df_grid.reshape(-1, 1) * n,
-                                                      outside=outside, source="compensation"))
+        return FramedField(
+            self.frame,
+            ScatteredField(
+                self.frame.local(tip), -self.df_grid.reshape(-1, 1) * n, outside=outside, source="compensation"
+            ),
+        )
 
 
 class FramedField:
@@ -244,8 +286,9 @@ class FramedField:
         return f"FramedField({self.frame.names}, {self.inner!r})"
 
 
-def compensate(surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None,
-               border: str = BORDER) -> Compensation:
+def compensate(
+    surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None, border: str = BORDER
+) -> Compensation:
     """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface.
 
     The surface's (u, v) must be the frame's (u, v) of the measured points (as
@@ -265,8 +308,9 @@ def compensate(surface: Surface, meas: Measurements, systematic, *, frame: Frame
         xs, ys, flat = grid
         g = np.empty(len(xs) * len(ys))
         g[flat] = sysv
-        inside = RegularGridInterpolator((xs, ys), g.reshape(len(xs), len(ys)), bounds_error=False,
-                                         fill_value=np.nan)(np.stack([U, V], axis=-1))
+        inside = RegularGridInterpolator((xs, ys), g.reshape(len(xs), len(ys)), bounds_error=False, fill_value=np.nan)(
+            np.stack([U, V], axis=-1)
+        )
     else:
         inside = LinearNDInterpolator(xy, sysv)(U, V)
     known = np.isfinite(inside)
@@ -343,16 +387,20 @@ def fit_height_surface(points, extent=None, step: float | None = None, frame: Fr
         raise InputError(f"{area} is narrower than the point spacing {h:.4g} mm: no surface to fit")
     nu, nv = (max(4, int(round(span / h)) + 1) for span in (x1 - x0, y1 - y0))
     if nu * nv > MAX_GRID_NODES:
-        raise InputError(f"{area} at the point spacing {h:.4g} mm needs a surface grid of {nu:,} x {nv:,} nodes, "
-                         f"more than {MAX_GRID_NODES:,}; "
-                         + ("give a smaller extent" if extent else "check the coordinates or give the part's extent"))
+        raise InputError(
+            f"{area} at the point spacing {h:.4g} mm needs a surface grid of {nu:,} x {nv:,} nodes, "
+            f"more than {MAX_GRID_NODES:,}; "
+            + ("give a smaller extent" if extent else "check the coordinates or give the part's extent")
+        )
     xs = np.linspace(x0, x1, nu)
     ys = np.linspace(y0, y1, nv)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     zi = CloughTocher2DInterpolator(p[:, :2], p[:, 2])(X, Y)
     known = np.isfinite(zi)
     if known.sum() < 16:
-        raise InputError(f"the measured points cover {known.sum()} nodes of the surface grid over {area}, fewer "
-                         "than 16: the extent must overlap the measured area")
+        raise InputError(
+            f"the measured points cover {known.sum()} nodes of the surface grid over {area}, fewer "
+            "than 16: the extent must overlap the measured area"
+        )
     Z = extrapolate_border(xs, ys, np.where(known, zi, 0.0), known)
     return Surface(xs, ys, frame.to_world(X, Y, Z))

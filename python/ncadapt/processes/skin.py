@@ -48,9 +48,20 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["MirrorCompensator", "SecantCompensator", "KalmanCompensator", "COMPENSATORS", "GAUGES", "default_method",
-           "make", "Interlocks",
-           "LoopStopped", "GAUGE_LIMIT", "GAUGE_TOLERANCE", "thickness_field"]
+__all__ = [
+    "MirrorCompensator",
+    "SecantCompensator",
+    "KalmanCompensator",
+    "COMPENSATORS",
+    "GAUGES",
+    "default_method",
+    "make",
+    "Interlocks",
+    "LoopStopped",
+    "GAUGE_LIMIT",
+    "GAUGE_TOLERANCE",
+    "thickness_field",
+]
 
 # physically possible slopes dδ/da_p: δ = a_g − a_p + f(a_p) with 0 ≤ f' ≤ 0.9 (the Kalman filter's
 # κ_max) ⇒ −1 ≤ s ≤ −0.1; a shallower secant slope would step more than 10 × the mirror step
@@ -120,8 +131,15 @@ class SecantCompensator(_Base):
     name = "secant"
     uses_noise = True
 
-    def __init__(self, target_depth: float, *, noise: float = 0.005, max_step: float = 0.5,
-                 s_min: float = S_MIN, s_max: float = S_MAX):
+    def __init__(
+        self,
+        target_depth: float,
+        *,
+        noise: float = 0.005,
+        max_step: float = 0.5,
+        s_min: float = S_MIN,
+        s_max: float = S_MAX,
+    ):
         self.noise = float(noise)
         self.s_min, self.s_max = s_min, s_max
         super().__init__(target_depth, max_step=max_step)
@@ -154,8 +172,15 @@ class KalmanCompensator(_Base):
     name = "kalman"
     uses_noise = True
 
-    def __init__(self, target_depth: float, *, noise: float = 0.005, q: float = 1e-4, max_step: float = 0.5,
-                 kappa_max: float = 0.9):
+    def __init__(
+        self,
+        target_depth: float,
+        *,
+        noise: float = 0.005,
+        q: float = 1e-4,
+        max_step: float = 0.5,
+        kappa_max: float = 0.9,
+    ):
         self.noise, self.q, self.kappa_max = max(float(noise), 1e-6), float(q), kappa_max
         super().__init__(target_depth, max_step=max_step)
 
@@ -256,8 +281,9 @@ class LoopStopped(Exception):
 
     def __init__(self, faults: int, reason: str, w1: float, index: int):
         self.faults, self.reason, self.w1, self.index = faults, reason, w1, index
-        super().__init__(f"loop stopped after {faults} rejected readings in a row (last: {reason}); "
-                         f"W1 held at {w1:+.4f} mm")
+        super().__init__(
+            f"loop stopped after {faults} rejected readings in a row (last: {reason}); W1 held at {w1:+.4f} mm"
+        )
 
 
 class Interlocks:
@@ -279,16 +305,27 @@ class Interlocks:
         Rejected readings in a row that stop the loop.
     """
 
-    def __init__(self, target: float, depth: float, *, w1_max: float | None = None, w1_step_max: float | None = None,
-                 max_faults: int = MAX_FAULTS, limit: float = GAUGE_LIMIT, tolerance: float = GAUGE_TOLERANCE,
-                 stuck: int = STUCK):
+    def __init__(
+        self,
+        target: float,
+        depth: float,
+        *,
+        w1_max: float | None = None,
+        w1_step_max: float | None = None,
+        max_faults: int = MAX_FAULTS,
+        limit: float = GAUGE_LIMIT,
+        tolerance: float = GAUGE_TOLERANCE,
+        stuck: int = STUCK,
+    ):
         for name, v in (("target", target), ("depth", depth)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number > 0 mm, got {v}")
         w1_max = default_w1_max(target, depth) if w1_max is None else float(w1_max)
         if not (math.isfinite(w1_max) and 0 < w1_max < target):
-            raise ValueError(f"w1_max must be > 0 and below the target thickness {target:g} mm (a W1 of the "
-                             f"target would cut through the wall), got {w1_max:g}")
+            raise ValueError(
+                f"w1_max must be > 0 and below the target thickness {target:g} mm (a W1 of the "
+                f"target would cut through the wall), got {w1_max:g}"
+            )
         w1_step_max = W1_STEP_MAX if w1_step_max is None else float(w1_step_max)
         if not (math.isfinite(w1_step_max) and w1_step_max > 0):
             raise ValueError(f"w1_step_max must be > 0 mm, got {w1_step_max:g}")
@@ -297,7 +334,12 @@ class Interlocks:
         self.target, self.depth = float(target), float(depth)
         self.w1_max, self.w1_step_max = w1_max, w1_step_max
         self.w1_min = -min(w1_max, 0.5 * self.depth)
-        self.max_faults, self.limit, self.tolerance, self.stuck = int(max_faults), float(limit), float(tolerance), int(stuck)
+        self.max_faults, self.limit, self.tolerance, self.stuck = (
+            int(max_faults),
+            float(limit),
+            float(tolerance),
+            int(stuck),
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -358,15 +400,24 @@ class Interlocks:
         return w
 
     def as_dict(self) -> dict:
-        return {"rejected": self.rejected, "max_abs_w1": self.max_abs_w1, "clamped": self.clamped,
-                "rejected_by_reason": dict(self.reasons), "w1_max": self.w1_max, "w1_step_max": self.w1_step_max,
-                "max_faults": self.max_faults, "gauge_limit": self.limit, "gauge_tolerance": self.tolerance,
-                "stuck": self.stuck}
+        return {
+            "rejected": self.rejected,
+            "max_abs_w1": self.max_abs_w1,
+            "clamped": self.clamped,
+            "rejected_by_reason": dict(self.reasons),
+            "w1_max": self.w1_max,
+            "w1_step_max": self.w1_step_max,
+            "max_faults": self.max_faults,
+            "gauge_limit": self.limit,
+            "gauge_tolerance": self.tolerance,
+            "stuck": self.stuck,
+        }
 
 
 # ------------------------------------------------------------------------------ offline mode
-def thickness_field(path, target: float, *, allowance: float = 0.0, into: str = "-z", method: str = "linear",
-                    outside: str = "error"):
+def thickness_field(
+    path, target: float, *, allowance: float = 0.0, into: str = "-z", method: str = "linear", outside: str = "error"
+):
     """The correction of a finishing program from a thickness map (offline mode).
 
     ``path`` is a CSV with columns ``x,y,thickness`` (mm), measured after the previous pass: on a
@@ -399,9 +450,13 @@ def thickness_field(path, target: float, *, allowance: float = 0.0, into: str = 
     if len(bad):
         from ..errors import InputError
 
-        raise InputError(f"column thickness: a thickness must be > 0 mm, found {c['thickness'][bad[0]]:g}", str(path),
-                         int(lines[bad[0]]))
+        raise InputError(
+            f"column thickness: a thickness must be > 0 mm, found {c['thickness'][bad[0]]:g}",
+            str(path),
+            int(lines[bad[0]]),
+        )
     excess = c["thickness"] - float(target) - float(allowance)
     sign = -1.0 if into == "-z" else 1.0
-    return fields.from_values(c["x"], c["y"], sign * excess, method=method, outside=outside, source=str(path),
-                              linenos=lines), excess
+    return fields.from_values(
+        c["x"], c["y"], sign * excess, method=method, outside=outside, source=str(path), linenos=lines
+    ), excess

@@ -135,8 +135,9 @@ def load(path) -> Config:
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise InputError(f"not valid TOML: {e}", str(path), getattr(e, "lineno", 0) or 0,
-                         getattr(e, "colno", 0) or 0) from None
+        raise InputError(
+            f"not valid TOML: {e}", str(path), getattr(e, "lineno", 0) or 0, getattr(e, "colno", 0) or 0
+        ) from None
     lines = text.splitlines()
 
     def where(section, key) -> int:
@@ -202,8 +203,12 @@ def load(path) -> Config:
         fail("plan", "end", "needs 0 <= start < end <= shaft length")
     stations = (end - start) / step
     if stations > STATIONS_MAX or stations * speeds > WORK_MAX:
-        fail("plan", "step", f"gives {stations:,.0f} stations x {speeds} speeds; at most {STATIONS_MAX:,} "
-                             f"stations and {WORK_MAX:,} stations x speeds")
+        fail(
+            "plan",
+            "step",
+            f"gives {stations:,.0f} stations x {speeds} speeds; at most {STATIONS_MAX:,} "
+            f"stations and {WORK_MAX:,} stations x speeds",
+        )
     if stations < 1:
         fail("plan", "step", f"must be at most end - start = {end - start:g} mm (two stations at least)")
     depth = number("cut", "depth", positive=True)
@@ -211,26 +216,40 @@ def load(path) -> Config:
         fail("cut", "depth", f"must be < {diameter / 2:g} mm, the bar's radius, got {depth:g}")
     lam = numbers("cut", "lambda", 3, hi=LAMBDA_MAX)
     if not (lam[0] > 0 and lam[1] > 0 and lam[2] >= 0):
-        fail("cut", "lambda", "must be (radial > 0, tangential > 0, axial >= 0): the radial force pushes the tool "
-                              f"away from the work and the tangential force opposes the cut, got {lam}")
-    stiff = {key: numbers("stiffness", key, 6, lo=-STIFFNESS_MAX, hi=STIFFNESS_MAX)
-             for key in ("chuck", "tailstock", "tool")}
+        fail(
+            "cut",
+            "lambda",
+            "must be (radial > 0, tangential > 0, axial >= 0): the radial force pushes the tool "
+            f"away from the work and the tangential force opposes the cut, got {lam}",
+        )
+    stiff = {
+        key: numbers("stiffness", key, 6, lo=-STIFFNESS_MAX, hi=STIFFNESS_MAX) for key in ("chuck", "tailstock", "tool")
+    }
     feed_bounds = numbers("bounds", "feed", 2, positive=True, hi=FEED_MAX)
     rpm_bounds = numbers("bounds", "spindle_rpm", 2, positive=True, hi=RPM_MAX)
     cfg = Config(
-        diameter=diameter * mm, length=length * mm,
+        diameter=diameter * mm,
+        length=length * mm,
         youngs=number("shaft", "youngs_modulus", positive=True, hi=1e7) * 1e6,
         depth=depth * mm,
         phi=math.radians(number("cut", "plan_angle", positive=True, hi=179)),
         phi1=math.radians(number("cut", "trailing_angle", positive=True, hi=179)),
-        lam=np.asarray(lam, float), rho_speed=rs, rho=rho * KGF * 1e6,
-        chuck=_sym(stiff["chuck"], KGF / mm), tail=_sym(stiff["tailstock"], KGF / mm),
+        lam=np.asarray(lam, float),
+        rho_speed=rs,
+        rho=rho * KGF * 1e6,
+        chuck=_sym(stiff["chuck"], KGF / mm),
+        tail=_sym(stiff["tailstock"], KGF / mm),
         tool=_sym(stiff["tool"], KGF / mm),
         feed_bounds=tuple(x * mm for x in feed_bounds),
         rpm_bounds=tuple(rpm_bounds),
         feed_change=number("bounds", "feed_change", positive=True, hi=FEED_MAX) * mm,
         rpm_change=number("bounds", "rpm_change", positive=True, hi=RPM_MAX) * 1.0,
-        start=start * mm, end=end * mm, step=step * mm, speeds=speeds, source=str(path))
+        start=start * mm,
+        end=end * mm,
+        step=step * mm,
+        speeds=speeds,
+        source=str(path),
+    )
     if not 0 < cfg.feed_bounds[0] < cfg.feed_bounds[1] or not 0 < cfg.rpm_bounds[0] <= cfg.rpm_bounds[1]:
         fail("bounds", "feed", "and spindle_rpm must be increasing positive pairs")
     # the roughness bound: Rz = S²/(8 r_ε) ≤ rz_max caps the feed at √(8 r_ε rz_max)
@@ -241,8 +260,12 @@ def load(path) -> Config:
         re_ = number("cut", "nose_radius", positive=True, hi=10) * mm
         s_rz = math.sqrt(8 * re_ * rz)
         if s_rz <= cfg.feed_bounds[0]:
-            fail("bounds", "rz_max", f"allows feeds up to {s_rz * 1e3:.4f} mm/rev (Rz = S²/(8 r_ε)), not above the "
-                                     f"smallest feed of the bounds {cfg.feed_bounds[0] * 1e3:g} mm/rev")
+            fail(
+                "bounds",
+                "rz_max",
+                f"allows feeds up to {s_rz * 1e3:.4f} mm/rev (Rz = S²/(8 r_ε)), not above the "
+                f"smallest feed of the bounds {cfg.feed_bounds[0] * 1e3:g} mm/rev",
+            )
         cfg.nose_radius, cfg.rz_max = re_, rz
         cfg.feed_max_rough = cfg.feed_bounds[1]
         cfg.feed_bounds = (cfg.feed_bounds[0], min(cfg.feed_bounds[1], s_rz))
@@ -250,7 +273,7 @@ def load(path) -> Config:
         cfg.nose_radius = number("cut", "nose_radius", positive=True, hi=10) * mm
     model = d.get("model", {})
     if not isinstance(model, dict):
-        fail("model", "", "must be a table: [model] with stepped = true|false, chuck = \"pinned\"|\"clamped\"")
+        fail("model", "", 'must be a table: [model] with stepped = true|false, chuck = "pinned"|"clamped"')
     for key in model:
         if key not in ("stepped", "chuck"):
             fail("model", key, "is not a model option (stepped, chuck)")
@@ -260,7 +283,7 @@ def load(path) -> Config:
         cfg.stepped = model["stepped"]
     if "chuck" in model:
         if model["chuck"] not in ("pinned", "clamped"):
-            fail("model", "chuck", f"must be \"pinned\" or \"clamped\", got {cut(model['chuck'])}")
+            fail("model", "chuck", f'must be "pinned" or "clamped", got {cut(model["chuck"])}')
         cfg.chuck_support = model["chuck"]
     if "finish_depth" in d.get("plan", {}):
         fd = number("plan", "finish_depth", positive=True)
@@ -279,8 +302,12 @@ def load(path) -> Config:
     x3 = np.linspace(0, cfg.length, 201)
     g = Model(cfg).radial_compliance(x3)
     if not np.all(g > 0):
-        fail("cut", "lambda", f"with these stiffness matrices gives a radial compliance <= 0 at x3 = "
-                              f"{x3[np.argmin(g)] * 1e3:g} mm: the force would pull the tool into the work")
+        fail(
+            "cut",
+            "lambda",
+            f"with these stiffness matrices gives a radial compliance <= 0 at x3 = "
+            f"{x3[np.argmin(g)] * 1e3:g} mm: the force would pull the tool into the work",
+        )
     return cfg
 
 
@@ -290,11 +317,11 @@ class Model:
     def __init__(self, cfg: Config, *, rho_scale: float = 1.0, stiffness_scale: float = 1.0):
         self.cfg = cfg
         d, E = cfg.diameter, cfg.youngs
-        self.EI = E * math.pi * d ** 4 / 64
-        self.EA = E * math.pi * d ** 2 / 4
+        self.EI = E * math.pi * d**4 / 64
+        self.EA = E * math.pi * d**2 / 4
         df = d - 2 * cfg.depth  # the turned diameter
-        self.EI_f = E * math.pi * df ** 4 / 64
-        self.EA_f = E * math.pi * df ** 2 / 4
+        self.EI_f = E * math.pi * df**4 / 64
+        self.EA_f = E * math.pi * df**2 / 4
         self.stepped = cfg.stepped
         self.chuck_clamped = cfg.chuck_support == "clamped"
         self._cache: dict = {}  # x3 bytes → S_Y: the planner asks for the same stations many times
@@ -329,6 +356,7 @@ class Model:
             return tot
 
         if not self.chuck_clamped:  # pinned–pinned: statically determinate, M(x) of a unit load at a
+
             def m(x):
                 return np.where(x < a, x * (L - a) / L, a * (L - x) / L)
 
@@ -359,7 +387,7 @@ class Model:
             wc = 1.0 - wt
         else:
             wc, wt = x3 / L, 1.0 - x3 / L
-            b = u ** 2 * (L - u) ** 2 / (3 * self.EI * L)
+            b = u**2 * (L - u) ** 2 / (3 * self.EI * L)
         if self.stepped:  # axially: the two ends in parallel, the tailstock side partly turned
             turned = np.clip(x3 - self.cfg.start, 0, None)
             s1, s2 = (x3 - turned) / self.EA + turned / self.EA_f, u / self.EA
@@ -389,7 +417,7 @@ class Model:
         """S = S_p t − ζ S_p² (eq. 4), m², at depth t (default the nominal t_p)."""
         s = np.asarray(feed, float)
         t = self.cfg.depth if depth is None else np.asarray(depth, float)
-        return s * t - self.zeta * s ** 2
+        return s * t - self.zeta * s**2
 
     def nominal_deflection(self, x3, feed, rpm) -> np.ndarray:
         """w = g ρ (S_p t_p − ζ S_p²), m: the radial deflection when the depth of cut is the
@@ -491,8 +519,11 @@ class Plan:
             "diameter_variation": self.diameter_variation * mm,
             "diameter_error_constant_feed": self.diameter_error_constant_feed * mm,
             "diameter_variation_constant_feed": self.diameter_variation_constant_feed * mm,
-            "diameter_variation_ratio": (self.diameter_variation / self.diameter_variation_constant_feed
-                                         if self.diameter_variation_constant_feed else 0.0),
+            "diameter_variation_ratio": (
+                self.diameter_variation / self.diameter_variation_constant_feed
+                if self.diameter_variation_constant_feed
+                else 0.0
+            ),
             "machining_time_s": self.machining_time_s,
             "machining_time_constant_feed_s": self.machining_time_constant_feed_s,
             "constant_feed": self.constant_feed * mm,
@@ -502,19 +533,31 @@ class Plan:
             "machining_time_same_error_s": self.machining_time_same_error_s if same else None,
             "deflection_target": self.delta * mm,
             "baselines": [dict(b) for b in self.baselines],
-            "profile": [{"x3": float(a * mm), "feed": float(s * mm), "spindle_rpm": float(n), "deflection": float(d * mm),
-                         "x1_offset": float(o * mm)}
-                        for a, s, n, d, o in zip(self.x3, self.feed, self.rpm, self.deflection, self.x1_offset)],
+            "profile": [
+                {
+                    "x3": float(a * mm),
+                    "feed": float(s * mm),
+                    "spindle_rpm": float(n),
+                    "deflection": float(d * mm),
+                    "x1_offset": float(o * mm),
+                }
+                for a, s, n, d, o in zip(self.x3, self.feed, self.rpm, self.deflection, self.x1_offset)
+            ],
         }
 
-    def constant_feed_plan(self) -> "Plan":
+    def constant_feed_plan(self) -> Plan:
         """The comparison: this plan's stations at the constant feed and speed, with the best
         constant X offset (what a careful programmer without the model would get)."""
         import dataclasses
 
         n = len(self.x3)
-        return dataclasses.replace(self, mode="constant", feed=np.full(n, self.constant_feed),
-                                   rpm=np.full(n, self.constant_rpm), x1_offset=np.full(n, -self.constant_offset))
+        return dataclasses.replace(
+            self,
+            mode="constant",
+            feed=np.full(n, self.constant_feed),
+            rpm=np.full(n, self.constant_rpm),
+            x1_offset=np.full(n, -self.constant_offset),
+        )
 
 
 def _time(x3, feed, rpm) -> float:
@@ -552,8 +595,15 @@ def _dp(cost, feeds, rpms, dx, feed_change, rpm_change, progress=None):
     return np.array(path[::-1])
 
 
-def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c: float = 300.0,
-         taylor_m: float = 0.25, progress=None) -> Plan:
+def plan(
+    cfg: Config,
+    mode: str = "feed",
+    *,
+    wear_weight: float = 0.0,
+    taylor_c: float = 300.0,
+    taylor_m: float = 0.25,
+    progress=None,
+) -> Plan:
     """Plan the trajectory (``mode`` "feed": S_p(x3) and n(x3); "path": X₁(x3) at constant feed)."""
     if mode not in ("feed", "path"):
         raise ValueError(f'mode must be "feed" or "path", got {mode!r}')
@@ -583,10 +633,10 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
         st_feed = np.empty((len(st_rpm), len(x3)))
         for k in range(len(rpms)):
             st_feed[k * (len(grid) + 1)] = np.nan_to_num(family[k], nan=smin)
-            st_feed[k * (len(grid) + 1) + 1:(k + 1) * (len(grid) + 1)] = grid[:, None]
+            st_feed[k * (len(grid) + 1) + 1 : (k + 1) * (len(grid) + 1)] = grid[:, None]
         dfl_states = np.array([m.deflection(x3, st_feed[i], st_rpm[i], -delta) for i in range(len(st_rpm))])
         allowed = (dfl_states <= delta * (1 + 1e-9)) & (dfl_states >= floor * (1 - 1e-9))
-        allowed[::len(grid) + 1] &= np.isfinite(family)
+        allowed[:: len(grid) + 1] &= np.isfinite(family)
         dx = np.gradient(x3)
         v = math.pi * cfg.diameter * st_rpm  # m/min
         life = (taylor_c / v) ** (1 / taylor_m) * 60.0  # s: Taylor's tool life V T^m = C
@@ -624,10 +674,29 @@ def plan(cfg: Config, mode: str = "feed", *, wear_weight: float = 0.0, taylor_c:
         else:
             lo = mid
     s_same = lo
-    return Plan(mode, x3, feed, rpm, dfl, x1, s_bar, n_bar, c_const, err, var, err_const, var_const,
-                _time(x3, feed, rpm), _time(x3, np.full_like(x3, s_bar), np.full_like(x3, n_bar)), s_same,
-                _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)), rpms, family, delta,
-                baselines(cfg, m, x3, n_bar))
+    return Plan(
+        mode,
+        x3,
+        feed,
+        rpm,
+        dfl,
+        x1,
+        s_bar,
+        n_bar,
+        c_const,
+        err,
+        var,
+        err_const,
+        var_const,
+        _time(x3, feed, rpm),
+        _time(x3, np.full_like(x3, s_bar), np.full_like(x3, n_bar)),
+        s_same,
+        _time(x3, np.full_like(x3, s_same), np.full_like(x3, n_bar)),
+        rpms,
+        family,
+        delta,
+        baselines(cfg, m, x3, n_bar),
+    )
 
 
 def baselines(cfg: Config, m: Model, x3, rpm: float) -> tuple:
@@ -660,11 +729,25 @@ def baselines(cfg: Config, m: Model, x3, rpm: float) -> tuple:
     cf, wf = m.constant_offset(x3, s_fin, rpm, depth=tf, left=left)
     t_r = _time(x3, np.full_like(x3, s_rough), n)
     return (
-        {"name": "constant-feed finish", "feed": s_fin * mm, "spindle_rpm": rpm, "passes": 1,
-         "diameter_variation": 2 * float(np.ptp(w1)) * mm, "machining_time_s": t_fin},
-        {"name": "rough + finish", "feed": s_rough * mm, "finish_feed": s_fin * mm, "finish_depth": tf * mm,
-         "spindle_rpm": rpm, "passes": 2, "diameter_variation": 2 * float(np.ptp(wf)) * mm,
-         "rough_diameter_variation": 2 * float(np.ptp(wr)) * mm, "machining_time_s": t_r + t_fin},
+        {
+            "name": "constant-feed finish",
+            "feed": s_fin * mm,
+            "spindle_rpm": rpm,
+            "passes": 1,
+            "diameter_variation": 2 * float(np.ptp(w1)) * mm,
+            "machining_time_s": t_fin,
+        },
+        {
+            "name": "rough + finish",
+            "feed": s_rough * mm,
+            "finish_feed": s_fin * mm,
+            "finish_depth": tf * mm,
+            "spindle_rpm": rpm,
+            "passes": 2,
+            "diameter_variation": 2 * float(np.ptp(wf)) * mm,
+            "rough_diameter_variation": 2 * float(np.ptp(wr)) * mm,
+            "machining_time_s": t_r + t_fin,
+        },
     )
 
 
@@ -672,8 +755,9 @@ def baselines(cfg: Config, m: Model, x3, rpm: float) -> tuple:
 DIALECTS = ("linuxcnc", "fanuc", "sinumerik")
 
 
-def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False, tool: int = 1,
-            dialect: str = "linuxcnc") -> str:
+def program(
+    p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = False, tool: int = 1, dialect: str = "linuxcnc"
+) -> str:
     """Lathe G-code for a plan, for ``dialect``:
 
     - ``linuxcnc``: G18 G21 G90 G40 G80 G54, G7 (diameter) or G8 (radius), G95 feed per revolution,
@@ -698,22 +782,32 @@ def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = Fal
     if dialect not in DIALECTS:
         raise ValueError(f"dialect must be one of {', '.join(DIALECTS)}, got {dialect!r}")
     if dialect == "fanuc" and not diameter_mode:
-        raise InputError("a Fanuc lathe programs X as a diameter (radius programming is a machine parameter, not a "
-                         "G code): drop --radius-mode for --dialect fanuc")
+        raise InputError(
+            "a Fanuc lathe programs X as a diameter (radius programming is a machine parameter, not a "
+            "G code): drop --radius-mode for --dialect fanuc"
+        )
     mm = 1e3
     r_final = (cfg.diameter / 2 - cfg.depth) * mm
     r_clear = cfg.diameter / 2 * mm + 2
     xw = (lambda r: 2 * r) if diameter_mode else (lambda r: r)
     limit = max(cfg.rpm_bounds[1], float(np.max(p.rpm)))
-    what = (f"ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode"
-            f"{', constant surface speed' if css else ''}")
+    what = (
+        f"ncadapt turning plan: {p.mode} mode, {'diameter' if diameter_mode else 'radius'} mode"
+        f"{', constant surface speed' if css else ''}"
+    )
     if dialect == "linuxcnc":
         out = [f"({what})", "G18 G21 G90 G40 G80 G54", "G7" if diameter_mode else "G8", "G95", f"T{tool} M6 G43"]
     elif dialect == "fanuc":
         out = ["%", f"O1000 ({what.upper()})", "G18 G21 G40 G54 G99", f"T{tool:02d}{tool:02d}", f"G50 S{limit:.0f}"]
     else:
-        out = [f"; {what}", "G18 G71 G90 G40 G54", "DIAMON" if diameter_mode else "DIAMOF", "G95", f"T{tool} D1",
-               f"LIMS={limit:.0f}"]
+        out = [
+            f"; {what}",
+            "G18 G71 G90 G40 G54",
+            "DIAMON" if diameter_mode else "DIAMOF",
+            "G95",
+            f"T{tool} D1",
+            f"LIMS={limit:.0f}",
+        ]
 
     dp = 3 if dialect == "fanuc" else 4  # Fanuc IS-B: least input increment 0.001 mm
 
@@ -728,8 +822,12 @@ def program(p: Plan, cfg: Config, *, diameter_mode: bool = True, css: bool = Fal
     else:
         last_s = round(n0)
         out.append(f"G97 S{n0:.0f} {m3}")
-    out += ["M08" if dialect == "fanuc" else "M8", f"G0 X{xw(r_clear):.{dp}f}", f"G0 Z{-p.x3[0] * mm:.{dp}f}",
-            f"G0 X{xw(r_clear - 1):.{dp}f}"]
+    out += [
+        "M08" if dialect == "fanuc" else "M8",
+        f"G0 X{xw(r_clear):.{dp}f}",
+        f"G0 Z{-p.x3[0] * mm:.{dp}f}",
+        f"G0 X{xw(r_clear - 1):.{dp}f}",
+    ]
     out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.{dp}f} F{cfg.feed_bounds[0] * mm:.4f}")
     for j in range(1, len(p.x3)):
         f = min(p.feed[j - 1], p.feed[j])

@@ -59,9 +59,28 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["segments", "fit_segments", "Tilt", "tilt", "read_tracking", "read_thickness", "DepthField", "Sum",
-           "feedback_correction", "play", "drive", "copy", "copying_error", "estimate_backlash",
-           "Backlash", "SelfTuning", "reversal_travels", "CellState", "plan_cells", "Z_TOL"]
+__all__ = [
+    "segments",
+    "fit_segments",
+    "Tilt",
+    "tilt",
+    "read_tracking",
+    "read_thickness",
+    "DepthField",
+    "Sum",
+    "feedback_correction",
+    "play",
+    "drive",
+    "copy",
+    "copying_error",
+    "estimate_backlash",
+    "Backlash",
+    "SelfTuning",
+    "reversal_travels",
+    "CellState",
+    "plan_cells",
+    "Z_TOL",
+]
 
 
 # ------------------------------------------------------------------------------ spindle tilt
@@ -126,11 +145,15 @@ class Tilt:
 
     def as_dict(self) -> dict:
         e = self.error
-        return {"points": [{"B": float(b), "Z": float(z), "tan_alpha": float(t), "error": float(x)}
-                           for b, z, t, x in zip(self.b, self.z, self.tan_alpha, e)],
-                "segments": int(self.segment.max() + 1) if len(self.segment) else 0,
-                "max_abs_error": float(np.abs(e).max()) if len(e) else 0.0,
-                "rms_error": float(np.sqrt(np.mean(e ** 2))) if len(e) else 0.0}
+        return {
+            "points": [
+                {"B": float(b), "Z": float(z), "tan_alpha": float(t), "error": float(x)}
+                for b, z, t, x in zip(self.b, self.z, self.tan_alpha, e)
+            ],
+            "segments": int(self.segment.max() + 1) if len(self.segment) else 0,
+            "max_abs_error": float(np.abs(e).max()) if len(e) else 0.0,
+            "rms_error": float(np.sqrt(np.mean(e**2))) if len(e) else 0.0,
+        }
 
 
 def tilt(b, z, v, *, tool_radius: float, diameter: float, segment: int = 10, z_tol: float = Z_TOL) -> Tilt:
@@ -179,7 +202,9 @@ def read_tracking(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c, lines = fields.read_columns(path, ("b", "z", "v"))
     if len(c["b"]) < 2:
         raise InputError(f"a tracking log needs at least 2 rows, found {len(c['b'])}", str(path))
-    _check_ranges(path, c, lines, {"b": (B_RANGE, "deg"), "z": (Z_RANGE, "mm"), "v": (V_RANGE, "mm (the sensor's travel)")})
+    _check_ranges(
+        path, c, lines, {"b": (B_RANGE, "deg"), "z": (Z_RANGE, "mm"), "v": (V_RANGE, "mm (the sensor's travel)")}
+    )
     return c["b"], c["z"], c["v"]
 
 
@@ -189,15 +214,18 @@ def read_thickness(path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     from .. import fields
 
     c, lines = fields.read_columns(path, ("b", "z", "thickness"))
-    _check_ranges(path, c, lines, {"b": (B_RANGE, "deg"), "z": (Z_RANGE, "mm"), "thickness": (THICKNESS_RANGE, "mm", True)})
+    _check_ranges(
+        path, c, lines, {"b": (B_RANGE, "deg"), "z": (Z_RANGE, "mm"), "thickness": (THICKNESS_RANGE, "mm", True)}
+    )
     pts = np.column_stack([c["b"], c["z"]])
     _, first, inverse = np.unique(pts, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
     rep = np.flatnonzero(first[inverse] != np.arange(len(pts)))
     if len(rep):
         i, j = int(rep[0]), int(first[inverse[rep[0]]])
-        raise InputError(f"point B={pts[i, 0]:g} Z={pts[i, 1]:g} repeats the point at line {int(lines[j])}", str(path),
-                         int(lines[i]))
+        raise InputError(
+            f"point B={pts[i, 0]:g} Z={pts[i, 1]:g} repeats the point at line {int(lines[j])}", str(path), int(lines[i])
+        )
     return c["b"], c["z"], c["thickness"], lines
 
 
@@ -216,12 +244,26 @@ class DepthField:
 
     uses_axes = True
 
-    def __init__(self, b, z, k, *, diameter: float, depth_axis: str = "Y", axial_axis: str = "Z",
-                 rotary_axis: str = "B", outside: str = "error"):
+    def __init__(
+        self,
+        b,
+        z,
+        k,
+        *,
+        diameter: float,
+        depth_axis: str = "Y",
+        axial_axis: str = "Z",
+        rotary_axis: str = "B",
+        outside: str = "error",
+    ):
         from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 
         axes = "XYZABCUVW"
-        for name, a, allowed in (("depth", depth_axis, "XYZ"), ("axial", axial_axis, "XYZUVW"), ("rotary", rotary_axis, "ABC")):
+        for name, a, allowed in (
+            ("depth", depth_axis, "XYZ"),
+            ("axial", axial_axis, "XYZUVW"),
+            ("rotary", rotary_axis, "ABC"),
+        ):
             if a.upper() not in allowed:
                 raise ValueError(f"the {name} axis must be one of {', '.join(allowed)}, got {a!r}")
         if outside not in ("error", "clamp", "extrapolate"):
@@ -245,8 +287,10 @@ class DepthField:
             order = np.argsort(pts[:, varying])
             self._1d = (varying, pts[order, varying], vals[order])
         elif np.linalg.matrix_rank(pts - pts.mean(axis=0), tol=1e-9 * max(1.0, float(np.abs(pts).max()))) < 2:
-            raise ValueError(f"the {len(pts)} points lie on one line that is neither one pass (one Z) nor one B: "
-                             "a depth correction needs points spanning B and Z")
+            raise ValueError(
+                f"the {len(pts)} points lie on one line that is neither one pass (one Z) nor one B: "
+                "a depth correction needs points spanning B and Z"
+            )
         elif len(pts) == len(xs) * len(zs):
             # a full grid (a pre-measurement along B at regular Z): bilinear, fast for any size
             from scipy.interpolate import RegularGridInterpolator
@@ -275,8 +319,11 @@ class DepthField:
             if self.outside == "error":
                 from ..fields import OutsideError
 
-                raise OutsideError(np.flatnonzero(bad), f"the measured area B {self.bounds[0]:g}..{self.bounds[1]:g} deg, "
-                                                        f"Z {self.bounds[2]:g}..{self.bounds[3]:g} mm")
+                raise OutsideError(
+                    np.flatnonzero(bad),
+                    f"the measured area B {self.bounds[0]:g}..{self.bounds[1]:g} deg, "
+                    f"Z {self.bounds[2]:g}..{self.bounds[3]:g} mm",
+                )
             out[bad] = self._near(q[bad]) if self.outside == "clamp" else self._extrapolate(q[bad])
         return out
 
@@ -373,8 +420,13 @@ class Backlash:
     web_error: np.ndarray  # V_ideal − w, the web-thickness error the copying system leaves
 
     def as_dict(self) -> dict:
-        return {"gap": self.gap, "tau": self.tau, "offset": self.offset, "residual_rms": self.residual_rms,
-                "web_error_max_abs": float(np.abs(self.web_error).max())}
+        return {
+            "gap": self.gap,
+            "tau": self.tau,
+            "offset": self.offset,
+            "residual_rms": self.residual_rms,
+            "web_error_max_abs": float(np.abs(self.web_error).max()),
+        }
 
 
 def estimate_backlash(v_ideal, v_measured, dt: float = 1.0, *, fit_tau: bool = True) -> Backlash:
@@ -394,8 +446,10 @@ def estimate_backlash(v_ideal, v_measured, dt: float = 1.0, *, fit_tau: bool = T
         raise ValueError("V_ideal does not change: the gap cannot be identified from a constant signal")
     travels = reversal_travels(vi)
     if not len(travels):
-        raise ValueError("V_ideal never reverses: one way, the gap only delays the signal by g/2, which a "
-                         "constant offset absorbs; record the pair across reversals (a zig-zag cell)")
+        raise ValueError(
+            "V_ideal never reverses: one way, the gap only delays the signal by g/2, which a "
+            "constant offset absorbs; record the pair across reversals (a zig-zag cell)"
+        )
 
     def model(p):
         g, tau = abs(p[0]), (abs(p[1]) if fit_tau else 0.0)
@@ -408,14 +462,16 @@ def estimate_backlash(v_ideal, v_measured, dt: float = 1.0, *, fit_tau: bool = T
 
     best = None
     for g0 in np.linspace(0.0, 0.5 * span, 11)[1:]:  # the play makes the cost piecewise: several starts
-        for t0 in ((dt, 10 * dt) if fit_tau else (0.0,)):
+        for t0 in (dt, 10 * dt) if fit_tau else (0.0,):
             r = least_squares(resid, [g0, t0], x_scale=[span, dt], diff_step=1e-4)
             if best is None or r.cost < best.cost:
                 best = r
     g, tau = abs(best.x[0]), (abs(best.x[1]) if fit_tau else 0.0)
     if not travels.max() > g:
-        raise ValueError(f"V_ideal reverses by at most {travels.max() * 1000:.3g} µm, not more than the fitted gap "
-                         f"({g * 1000:.3g} µm): the shelf never ends, so the gap is not identified")
+        raise ValueError(
+            f"V_ideal reverses by at most {travels.max() * 1000:.3g} µm, not more than the fitted gap "
+            f"({g * 1000:.3g} µm): the shelf never ends, so the gap is not identified"
+        )
     w, c = model(best.x)
     return Backlash(g, tau, c, float(np.sqrt(np.mean((w + c - vm) ** 2))), vi - (w + c))
 
@@ -500,8 +556,16 @@ class CellState:
     source: str | None = None
 
     def as_dict(self) -> dict:
-        return {"row": self.row, "cell": self.cell, "status": self.status, "semi_finish": self.semi_finish,
-                "t_min": self.t_min, "t_max": self.t_max, "in_band": self.in_band, "source": self.source}
+        return {
+            "row": self.row,
+            "cell": self.cell,
+            "status": self.status,
+            "semi_finish": self.semi_finish,
+            "t_min": self.t_min,
+            "t_max": self.t_max,
+            "in_band": self.in_band,
+            "source": self.source,
+        }
 
 
 def plan_cells(finished: dict, rows: int, cells: int, t_min: float, t_max: float) -> list[CellState]:
@@ -516,15 +580,19 @@ def plan_cells(finished: dict, rows: int, cells: int, t_min: float, t_max: float
     order = [(r, c) for r in range(1, rows + 1) for c in range(1, cells + 1)]
     extra = sorted(set(finished) - set(order))
     if extra:
-        raise ValueError(f"a finished map of row {extra[0][0]} cell {extra[0][1]} is outside the {rows} x {cells} shell")
+        raise ValueError(
+            f"a finished map of row {extra[0][0]} cell {extra[0][1]} is outside the {rows} x {cells} shell"
+        )
     out: list[CellState] = []
     retune, next_seen = True, False
     for r, c in order:
         if (r, c) in finished:
             if next_seen:
                 gap = next(s for s in out if s.status == "next")
-                raise ValueError(f"row {r} cell {c} is finished but row {gap.row} cell {gap.cell}, machined before "
-                                 "it, has no finished map")
+                raise ValueError(
+                    f"row {r} cell {c} is finished but row {gap.row} cell {gap.cell}, machined before "
+                    "it, has no finished map"
+                )
             t, src = finished[(r, c)]
             t = np.asarray(t, float)
             lo, hi = float(t.min()), float(t.max())

@@ -53,8 +53,19 @@ def _strip(extrapolation, xy, names):
     return figure_png(fig)
 
 
-def render(*, title, analysis, decomposition, xy, deviation, after=None, summary=None, files=None,
-           names=("x", "y"), extrapolation=None) -> str:
+def render(
+    *,
+    title,
+    analysis,
+    decomposition,
+    xy,
+    deviation,
+    after=None,
+    summary=None,
+    files=None,
+    names=("x", "y"),
+    extrapolation=None,
+) -> str:
     """The report as HTML text. ``xy``: the points' (u, v), named ``names`` on the maps; ``after``:
     deviations of the re-machined part at the same points."""
     m = analysis.moran
@@ -62,46 +73,103 @@ def render(*, title, analysis, decomposition, xy, deviation, after=None, summary
     w_txt = m.weights.describe() + ", row-standardised"
     v, o = analysis.verdict, analysis.offset
     o_txt = p_text(o.p_value, 2)
-    verdict = (f"<p class='verdict {'yes' if v.systematic else 'no'}'>The deviations are "
-               f"{'<b>systematic</b>' if v.systematic else '<b>not systematic</b>'} "
-               f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt[0] in '<≤' else '= ' + p_txt}; "
-               f"mean offset {o.mean * 1000:+.2f} µm, t = {o.t:.2f}, p {o_txt if o_txt.startswith('<') else '= ' + o_txt}; "
-               f"each test at α/2 = {v.alpha / 2:g})</p>")
+    verdict = (
+        f"<p class='verdict {'yes' if v.systematic else 'no'}'>The deviations are "
+        f"{'<b>systematic</b>' if v.systematic else '<b>not systematic</b>'} "
+        f"(Moran's I = {m.I:.4f}, z = {m.z_randomization:.2f}, p {p_txt if p_txt[0] in '<≤' else '= ' + p_txt}; "
+        f"mean offset {o.mean * 1000:+.2f} µm, t = {o.t:.2f}, p {o_txt if o_txt.startswith('<') else '= ' + o_txt}; "
+        f"each test at α/2 = {v.alpha / 2:g})</p>"
+    )
     sections = []
     if summary:
         cards = "".join(f"<div class='card'><div>{k}</div><div class='big'>{v}</div></div>" for k, v in summary.items())
         sections.append(("Result", f"<div class='cards'>{cards}</div>"))
-    sections.append(("Is the error systematic?", verdict + table([
-        ("Moran's I", m.I), ("E[I]", m.expected), ("Var[I], normality", m.variance_normality),
-        ("Var[I], randomisation", m.variance_randomization), ("z, normality", m.z_normality),
-        ("z, randomisation", m.z_randomization), ("p (one-sided, " + (f"{m.permutations} permutations)" if m.permutations else "randomisation)"),
-         m.p_said()),
-        ("p (one-sided, normal approximation)", p_text(m.p_randomization, 4)),
-        ("mean offset, mm", o.mean), ("offset t", o.t), ("offset p (two-sided)", p_text(o.p_value, 4)),
-        ("weights", w_txt),
-        ("points", m.n)], ["statistic", "value"])))
+    sections.append(
+        (
+            "Is the error systematic?",
+            verdict
+            + table(
+                [
+                    ("Moran's I", m.I),
+                    ("E[I]", m.expected),
+                    ("Var[I], normality", m.variance_normality),
+                    ("Var[I], randomisation", m.variance_randomization),
+                    ("z, normality", m.z_normality),
+                    ("z, randomisation", m.z_randomization),
+                    (
+                        "p (one-sided, " + (f"{m.permutations} permutations)" if m.permutations else "randomisation)"),
+                        m.p_said(),
+                    ),
+                    ("p (one-sided, normal approximation)", p_text(m.p_randomization, 4)),
+                    ("mean offset, mm", o.mean),
+                    ("offset t", o.t),
+                    ("offset p (two-sided)", p_text(o.p_value, 4)),
+                    ("weights", w_txt),
+                    ("points", m.n),
+                ],
+                ["statistic", "value"],
+            ),
+        )
+    )
     d = analysis.deviation
-    sections.append(("Deviations", table([(k, f"{v * 1000:.2f}") for k, v in d.items()], ["", "µm"])
-                     + _maps(xy, [("measured", deviation), ("systematic", decomposition.systematic),
-                                  ("random", decomposition.random)], "Deviation along the outward normal (> 0: material left)", names)))
+    sections.append(
+        (
+            "Deviations",
+            table([(k, f"{v * 1000:.2f}") for k, v in d.items()], ["", "µm"])
+            + _maps(
+                xy,
+                [("measured", deviation), ("systematic", decomposition.systematic), ("random", decomposition.random)],
+                "Deviation along the outward normal (> 0: material left)",
+                names,
+            ),
+        )
+    )
     nz = decomposition.noise
-    sections.append(("Separating systematic from random error", table([
-        ("filter", decomposition.method), *((k, v) for k, v in decomposition.parameters.items()),
-        ("random part: std, mm", nz.std), ("Pearson χ² normality p", p_text(nz.pearson_p, 4)),
-        ("lag-1 autocorrelation r", nz.lag1_r), ("Student t test p (one-sided)", p_text(nz.student_p, 4)),
-        ("Moran's I of the random part: z", nz.moran_z), ("... p (one-sided)", p_text(nz.moran_p, 4)),
-        ("no systematic error left", "yes" if nz.passed else "no")], ["", "value"])))
+    sections.append(
+        (
+            "Separating systematic from random error",
+            table(
+                [
+                    ("filter", decomposition.method),
+                    *((k, v) for k, v in decomposition.parameters.items()),
+                    ("random part: std, mm", nz.std),
+                    ("Pearson χ² normality p", p_text(nz.pearson_p, 4)),
+                    ("lag-1 autocorrelation r", nz.lag1_r),
+                    ("Student t test p (one-sided)", p_text(nz.student_p, 4)),
+                    ("Moran's I of the random part: z", nz.moran_z),
+                    ("... p (one-sided)", p_text(nz.moran_p, 4)),
+                    ("no systematic error left", "yes" if nz.passed else "no"),
+                ],
+                ["", "value"],
+            ),
+        )
+    )
     if after is not None:
-        sections.append(("After compensation", _maps(xy, [("before", deviation), ("after", after)],
-                                                     "Deviation of the first part and of the re-machined part", names)
-                         + _hist([("before", deviation), ("after", after)])))
+        sections.append(
+            (
+                "After compensation",
+                _maps(
+                    xy,
+                    [("before", deviation), ("after", after)],
+                    "Deviation of the first part and of the re-machined part",
+                    names,
+                )
+                + _hist([("before", deviation), ("after", after)]),
+            )
+        )
     if extrapolation is not None:
-        sections.append(("Extrapolated nominal", (
-            f"<p class='verdict no'>The compensated surface reaches up to <b>{extrapolation.max_distance:.3g} mm</b> "
-            f"beyond the measured points, over <b>{100 * extrapolation.area_fraction:.0f} %</b> of its grid. In that "
-            "strip its nominal is extrapolated from the measured points, not measured, and so is the systematic "
-            "error: check it against the CAD model before machining there.</p>")
-            + _strip(extrapolation, xy, names)))
+        sections.append(
+            (
+                "Extrapolated nominal",
+                (
+                    f"<p class='verdict no'>The compensated surface reaches up to <b>{extrapolation.max_distance:.3g} mm</b> "
+                    f"beyond the measured points, over <b>{100 * extrapolation.area_fraction:.0f} %</b> of its grid. In that "
+                    "strip its nominal is extrapolated from the measured points, not measured, and so is the systematic "
+                    "error: check it against the CAD model before machining there.</p>"
+                )
+                + _strip(extrapolation, xy, names),
+            )
+        )
     if files:
         sections.append(("Files", table([(k, v) for k, v in files.items()], ["", "file"])))
     return page(title, "ncadapt freeform compensation report", sections)

@@ -179,14 +179,13 @@ def forces(depth, k_c11: float, m_c: float, **chip_kw) -> tuple[np.ndarray, np.n
     return fc, THRUST_RATIO * fc * np.cos(c.lead_angle)
 
 
-def bar_compliance(diameter: float | None = None, overhang: float | None = None,
-                   modulus: float | None = None) -> float:
+def bar_compliance(diameter: float | None = None, overhang: float | None = None, modulus: float | None = None) -> float:
     """Radial compliance of a solid round cantilever at its tip, L³/(3EI), I = πd⁴/64 (mm/N);
     by default the testbed's bar (``BAR_DIAMETER``, ``BAR_OVERHANG``, ``BAR_MODULUS``)."""
     d = BAR_DIAMETER if diameter is None else diameter
     length = BAR_OVERHANG if overhang is None else overhang
     e = BAR_MODULUS if modulus is None else modulus
-    return length ** 3 / (3 * e * math.pi * d ** 4 / 64)
+    return length**3 / (3 * e * math.pi * d**4 / 64)
 
 
 def deflection(nominal_depth, compliance, k_c11: float, m_c: float, iterations: int = 48) -> np.ndarray:
@@ -267,8 +266,9 @@ def probe(rng, radius_at, zetas=PLANES, z_length: float = BORE_LENGTH) -> pb.Bor
         cx, cy = sol[0] / 2, sol[1] / 2
         rr = np.sqrt(sol[2] + cx * cx + cy * cy)
         dev = np.hypot(x - cx, y - cy) - rr
-        circles.append(pb.Circle(f"{zeta:g}", z_length * (1 - zeta), (cx, cy), 2 * rr, float(dev.max() - dev.min()),
-                                 PROBE_POINTS))
+        circles.append(
+            pb.Circle(f"{zeta:g}", z_length * (1 - zeta), (cx, cy), 2 * rr, float(dev.max() - dev.min()), PROBE_POINTS)
+        )
     return pb.BoreMeasurement(tuple(circles))
 
 
@@ -283,8 +283,18 @@ class PartResult:
     stiffness_ratio: float | None
 
 
-def run_part(rng, *, diameter: float = 40.0, final: str = "H6", prefinish: str = "H9", t0: float = 0.5,
-             allowance: float = 0.1, k: float = 0.25, material: str = "steel", model: str = "beam") -> PartResult:
+def run_part(
+    rng,
+    *,
+    diameter: float = 40.0,
+    final: str = "H6",
+    prefinish: str = "H9",
+    t0: float = 0.5,
+    allowance: float = 0.1,
+    k: float = 0.25,
+    material: str = "steel",
+    model: str = "beam",
+) -> PartResult:
     """One part: pre-finish (depth t₀, uncorrected), the plan from the probed bore, the corrective
     passes each set by :func:`ncadapt.processes.bore.next_correction` from the probed result of
     the pass before; beside it, the whole allowance in one uncorrected pass."""
@@ -297,8 +307,9 @@ def run_part(rng, *, diameter: float = 40.0, final: str = "H6", prefinish: str =
     r = part.cut(r_aim, np.full_like(ZETA, r_aim - t0), 1.0, prefinish=True)
     meas = probe(rng, lambda zz: np.interp(zz, ZETA, r))
     try:
-        plan = pb.plan_from_measurement(diameter, meas, final=final, prefinish=prefinish, t0=t0, allowance=allowance,
-                                        k=k, target_diameter=target)
+        plan = pb.plan_from_measurement(
+            diameter, meas, final=final, prefinish=prefinish, t0=t0, allowance=allowance, k=k, target_diameter=target
+        )
     except InputError:  # the plan refuses this part (a correction that would not converge): not machined
         return PartResult(False, 0, r, r, False, False, None)
     r_pre = r.copy()
@@ -325,8 +336,9 @@ def run_part(rng, *, diameter: float = 40.0, final: str = "H6", prefinish: str =
     return PartResult(plan.applicable, plan.passes, d, d1, ok(d), ok(d1), ratio)
 
 
-def simulate(parts: int = 1000, seed: int = 1, *, material: str = "steel", model: str = "beam", progress=None,
-             **kw) -> dict:
+def simulate(
+    parts: int = 1000, seed: int = 1, *, material: str = "steel", model: str = "beam", progress=None, **kw
+) -> dict:
     """``parts`` parts for which the plan's applicability condition holds (others are drawn and
     counted, not machined further). Returns the summary as a dict."""
     if model not in MODELS:
@@ -341,16 +353,22 @@ def simulate(parts: int = 1000, seed: int = 1, *, material: str = "steel", model
             if progress and len(done) % 100 == 0:
                 progress(f"{len(done)}/{parts} parts", len(done), parts)
         if drawn > 20 * parts:
-            raise InputError(f"condition (3) held for {len(done)} of the {drawn} parts drawn with these settings "
-                             f"(t0 = {kw.get('t0', 0.5):g} mm: the pre-finish deflection grows with t0); use a "
-                             "smaller --t0")
+            raise InputError(
+                f"condition (3) held for {len(done)} of the {drawn} parts drawn with these settings "
+                f"(t0 = {kw.get('t0', 0.5):g} mm: the pre-finish deflection grows with t0); use a "
+                "smaller --t0"
+            )
     d = np.array([r.diameters for r in done])
     diameter, final = kw.get("diameter", 40.0), kw.get("final", "H6")
     target = diameter + sum(pb.class_limits(diameter, final)) / 2
     d1 = np.array([r.one_pass for r in done])
     ratios = [r.stiffness_ratio for r in done if r.stiffness_ratio is not None]
     return {
-        "parts": parts, "seed": seed, "material": material, "model": model, "drawn": drawn,
+        "parts": parts,
+        "seed": seed,
+        "material": material,
+        "model": model,
+        "drawn": drawn,
         "applicable_share": parts / drawn,
         "within_tolerance": float(np.mean([r.ok for r in done])),
         "mean_passes": float(np.mean([r.passes for r in done])),

@@ -134,8 +134,14 @@ def _ball(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     return np.where(inside, np.sqrt(np.maximum(radius * radius - d2, 0.0)), 0.0), inside
 
 
-def finishing_program(surface: Surface, tool_radius: float = 4.0, stepover: float = 0.5, step: float = 0.5,
-                      feed: float = 1200.0, clearance: float = 20.0) -> str:
+def finishing_program(
+    surface: Surface,
+    tool_radius: float = 4.0,
+    stepover: float = 0.5,
+    step: float = 0.5,
+    feed: float = 1200.0,
+    clearance: float = 20.0,
+) -> str:
     """A zig-zag raster finishing program (G21 G90) along x for a ball-end tool, by drop cutter."""
     h = min(step, stepover) / 2
     xs = np.arange(surface.u[0], surface.u[-1] + 1e-9, h)
@@ -146,10 +152,18 @@ def finishing_program(surface: Surface, tool_radius: float = 4.0, stepover: floa
     # outside the part the surface is continued flat at its border height (mode="nearest")
     tip = ndimage.grey_dilation(Z, footprint=inside, structure=cap, mode="nearest") - tool_radius
     ix = np.round(np.arange(surface.u[0], surface.u[-1] + 1e-9, step) / h).astype(int) - int(round(surface.u[0] / h))
-    iy = np.round(np.arange(surface.v[0], surface.v[-1] + 1e-9, stepover) / h).astype(int) - int(round(surface.v[0] / h))
+    iy = np.round(np.arange(surface.v[0], surface.v[-1] + 1e-9, stepover) / h).astype(int) - int(
+        round(surface.v[0] / h)
+    )
     ix = ix[ix < len(xs)]
-    lines = ["%", "(ncadapt demo: ball-end finishing, R %.3f mm, stepover %.3f mm)" % (tool_radius, stepover),
-             "G21 G90 G17 G94", "T1 M6", "S12000 M3", f"G0 Z{clearance:.4f}"]
+    lines = [
+        "%",
+        f"(ncadapt demo: ball-end finishing, R {tool_radius:.3f} mm, stepover {stepover:.3f} mm)",
+        "G21 G90 G17 G94",
+        "T1 M6",
+        "S12000 M3",
+        f"G0 Z{clearance:.4f}",
+    ]
     for r, j in enumerate(iy):
         cols = ix if r % 2 == 0 else ix[::-1]
         x0 = xs[cols[0]]
@@ -177,12 +191,19 @@ class ZMap:
 
     def height(self, x, y) -> np.ndarray:
         """Bilinear height at (x, y)."""
-        return ndimage.map_coordinates(self.z, [(np.asarray(x) - self.x0) / self.h, (np.asarray(y) - self.y0) / self.h],
-                                       order=1, mode="nearest")
+        return ndimage.map_coordinates(
+            self.z, [(np.asarray(x) - self.x0) / self.h, (np.asarray(y) - self.y0) / self.h], order=1, mode="nearest"
+        )
 
 
-def machine(program, surface: Surface, error: "ErrorModel | MachineError | None", tool_radius: float,
-            cell: float = 0.25, step: float = 0.25) -> ZMap:
+def machine(
+    program,
+    surface: Surface,
+    error: ErrorModel | MachineError | None,
+    tool_radius: float,
+    cell: float = 0.25,
+    step: float = 0.25,
+) -> ZMap:
     """Cut ``program`` (an :class:`ncadapt.nc.Program`) into a z-map of the part's area, the tool
     displaced by ``error``: an :class:`ErrorModel` along the normal, or a :class:`MachineError`."""
     tp = program.toolpath(max_segment=step, rapids=False)

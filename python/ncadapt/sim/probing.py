@@ -95,8 +95,9 @@ def _contact(zmap, start, end, offs, cap, step=0.2):
     return start + hi * u
 
 
-def run(program: str, zmap: ZMap, *, stylus_radius: float, noise: float = 0.0, trigger_delay: float = 0.0,
-        seed: int = 0) -> ProbeRun:
+def run(
+    program: str, zmap: ZMap, *, stylus_radius: float, noise: float = 0.0, trigger_delay: float = 0.0, seed: int = 0
+) -> ProbeRun:
     """Run a LinuxCNC probing program written by :mod:`ncadapt.probing` (G0, G38.2, G90/G91,
     PROBEOPEN/LOGOPEN/LOG comments) on ``zmap``. ``noise`` mm (standard deviation along the move),
     ``trigger_delay`` s."""

@@ -75,8 +75,19 @@ GAUGE_MAX = 10.0
 GAUGE_BAND = 0.3
 STEP = 0.25  # mm of path per sample
 CHECKPOINTS = (
-    (0, 0.0, 0.0), (0, 75, 50), (0, -75, 50), (0, 75, -50), (0, -75, -50), (0, 100, 0), (0, -100, 0),
-    (1, 0.0, 0.0), (1, 75, 50), (1, -75, 50), (1, 75, -50), (1, -75, -50), (1, 100, 0),
+    (0, 0.0, 0.0),
+    (0, 75, 50),
+    (0, -75, 50),
+    (0, 75, -50),
+    (0, -75, -50),
+    (0, 100, 0),
+    (0, -100, 0),
+    (1, 0.0, 0.0),
+    (1, 75, 50),
+    (1, -75, 50),
+    (1, 75, -50),
+    (1, -75, -50),
+    (1, 100, 0),
 )
 
 
@@ -225,7 +236,7 @@ def readable(path: np.ndarray) -> np.ndarray:
     idx = np.flatnonzero(turn)
     near = np.zeros(len(path), bool)
     for i in idx:
-        near[max(0, i - h):i + h] = True
+        near[max(0, i - h) : i + h] = True
     return ~near
 
 
@@ -271,8 +282,7 @@ def protocol(method: str, compensations: int = 2) -> dict:
             deltas.append(float(error(x, y, a)))
         rows.append({"pocket": pocket + 1, "x": x, "y": y, "errors": deltas})
     last = np.array([abs(r["errors"][-1]) for r in rows])
-    return {"method": method, "compensations": compensations, "max_abs_error": float(last.max()),
-            "checkpoints": rows}
+    return {"method": method, "compensations": compensations, "max_abs_error": float(last.max()), "checkpoints": rows}
 
 
 # ------------------------------------------------------------------------------ real time along the path
@@ -311,10 +321,21 @@ class Run:
 
     def as_dict(self) -> dict:
         e = np.abs([c["error"] for c in self.checkpoints])
-        return {"method": self.method, "noise": self.noise, "latency_ms": self.latency_ms, "seed": self.seed,
-                "max_abs_error": float(e.max()), "min_abs_error": float(e.min()), "mean_abs_error": float(e.mean()),
-                "checkpoints": self.checkpoints, "fallbacks": self.fallbacks, "rejected_readings": self.rejected,
-                "compensator_steps": self.steps, "max_abs_w1": self.max_abs_w1, "clamped": self.clamped}
+        return {
+            "method": self.method,
+            "noise": self.noise,
+            "latency_ms": self.latency_ms,
+            "seed": self.seed,
+            "max_abs_error": float(e.max()),
+            "min_abs_error": float(e.min()),
+            "mean_abs_error": float(e.mean()),
+            "checkpoints": self.checkpoints,
+            "fallbacks": self.fallbacks,
+            "rejected_readings": self.rejected,
+            "compensator_steps": self.steps,
+            "max_abs_w1": self.max_abs_w1,
+            "clamped": self.clamped,
+        }
 
 
 class Machine:
@@ -352,7 +373,7 @@ class Machine:
         self.a_eff = A_G  # the depth in force (the servo's output)
         self.pending: list = []  # (sample index it lands at, depth), in order
         self.landed = 0  # the sample at which the latest command landed
-        self.last_read = -10**9
+        self.last_read = -(10**9)
         self.thickness = np.full(len(self.path), np.nan)
 
     @property
@@ -388,7 +409,7 @@ class Machine:
             if due:
                 self.last_read = i
                 ahead = self._cut(i, np.arange(i + 1, i + h + 1))
-                return self.gauge.read(np.concatenate([self.thickness[i - h:i + 1], ahead]))
+                return self.gauge.read(np.concatenate([self.thickness[i - h : i + 1], ahead]))
         return None
 
 
@@ -397,7 +418,9 @@ def machines(*, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1, v
     rng = np.random.default_rng(seed)
     t_var = thickness_variation(seed)
     v = VARIANTS[variant]
-    return [Machine(k, noise=noise, latency_ms=latency_ms, rng=rng, t_var=t_var, variant=v) for k in range(len(POCKETS))]
+    return [
+        Machine(k, noise=noise, latency_ms=latency_ms, rng=rng, t_var=t_var, variant=v) for k in range(len(POCKETS))
+    ]
 
 
 def compensator(method: str, noise: float = 0.005):
@@ -421,12 +444,21 @@ def result(method: str, ms: list, comps: list, *, noise: float, latency_ms: floa
         for p, x, y in CHECKPOINTS:
             if p == m.pocket:
                 k = int(np.argmin(np.hypot(m.path[:, 0] - x, m.path[:, 1] - y)))
-                out.checkpoints.append({"pocket": p + 1, "x": float(cx + x), "y": float(cy + y), "error": float(err[k])})
+                out.checkpoints.append(
+                    {"pocket": p + 1, "x": float(cx + x), "y": float(cy + y), "error": float(err[k])}
+                )
     return out
 
 
-def run(method: str = "kalman", *, noise: float = 0.005, latency_ms: float = 45.0, seed: int = 1,
-        on_progress=None, variant: str = "paper") -> Run:
+def run(
+    method: str = "kalman",
+    *,
+    noise: float = 0.005,
+    latency_ms: float = 45.0,
+    seed: int = 1,
+    on_progress=None,
+    variant: str = "paper",
+) -> Run:
     """Finish both pockets along the toolpath with a compensator (``none``: without), in process,
     behind the loop's interlocks with their defaults (:class:`ncadapt.processes.skin.Interlocks`);
     if they stop the loop, the pocket is finished with W1 held. ``on_progress(done, total)`` gets
@@ -461,8 +493,12 @@ def finishing_program(pocket: int = 0, depth: float = A_G) -> str:
     Z = −``depth`` below the roughed floor (Z = 0), in panel coordinates."""
     cx, cy = POCKETS[pocket]
     rpm = FEED * 60 / (F_Z * TEETH)
-    out = [f"(ncadapt skin testbed: finish pocket {pocket + 1} to Z-{depth:g}, zig-zag along X)",
-           "G21 G90 G17 G94", f"S{rpm:.0f} M3", "G0 Z5.000"]
+    out = [
+        f"(ncadapt skin testbed: finish pocket {pocket + 1} to Z-{depth:g}, zig-zag along X)",
+        "G21 G90 G17 G94",
+        f"S{rpm:.0f} M3",
+        "G0 Z5.000",
+    ]
     xs = (-140.0, 140.0)
     for j, y in enumerate(_line_y()):
         x0, x1 = xs if j % 2 == 0 else xs[::-1]

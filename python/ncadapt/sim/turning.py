@@ -88,13 +88,18 @@ class Profile:
         return float(np.ptp(self.diameter))
 
     def as_dict(self) -> dict:
-        return {"measure": "diameter, mm (error: max |D - D_target|; variation: max D - min D)",
-                "diameter_target": self.target, "diameter_error_max": self.error_max,
-                "diameter_variation": self.variation, "diameter_min": float(self.diameter.min()),
-                "diameter_max": float(self.diameter.max()), "machining_time_s": self.time_s,
-                "revolutions": self.revolutions,
-                "no_contact": [{"x3_from": a, "x3_to": b, "revolutions": n} for a, b, n in self.no_contact],
-                "profile": [{"x3": float(a), "diameter": float(d)} for a, d in zip(self.x3[::10], self.diameter[::10])]}
+        return {
+            "measure": "diameter, mm (error: max |D - D_target|; variation: max D - min D)",
+            "diameter_target": self.target,
+            "diameter_error_max": self.error_max,
+            "diameter_variation": self.variation,
+            "diameter_min": float(self.diameter.min()),
+            "diameter_max": float(self.diameter.max()),
+            "machining_time_s": self.time_s,
+            "revolutions": self.revolutions,
+            "no_contact": [{"x3_from": a, "x3_to": b, "revolutions": n} for a, b, n in self.no_contact],
+            "profile": [{"x3": float(a), "diameter": float(d)} for a, d in zip(self.x3[::10], self.diameter[::10])],
+        }
 
 
 _KNOWN_G = {
@@ -136,13 +141,15 @@ def read_program(path, length: float | None = None, dialect: str = "linuxcnc") -
                 else:
                     v = float(mt.group(2))
                     if not 0 < v <= RPM_MAX:
-                        raise InputError(f"LIMS={mt.group(2)} must be > 0 and at most {RPM_MAX:g} rpm", path, ln,
-                                         mt.start() + 1)
+                        raise InputError(
+                            f"LIMS={mt.group(2)} must be > 0 and at most {RPM_MAX:g} rpm", path, ln, mt.start() + 1
+                        )
                     cap = v
             line = _SINUMERIK_WORD.sub(" ", line)
             if "=" in line:
-                raise InputError("an assignment (NAME=…) is not simulated on the virtual lathe", path, ln,
-                                 line.find("=") + 1)
+                raise InputError(
+                    "an assignment (NAME=…) is not simulated on the virtual lathe", path, ln, line.find("=") + 1
+                )
         x_new, z_new, xw = x, z, None
         g50 = False
         for mt in _WORD.finditer(line):
@@ -155,15 +162,25 @@ def read_program(path, length: float | None = None, dialect: str = "linuxcnc") -
                 if g in (2, 3):
                     raise InputError("arcs are not simulated on the virtual lathe", path, ln, col)
                 if g == 94 and not fanuc:
-                    raise InputError("feed per minute (G94): the virtual lathe needs feed per revolution (G95)",
-                                     path, ln, col)
+                    raise InputError(
+                        "feed per minute (G94): the virtual lathe needs feed per revolution (G95)", path, ln, col
+                    )
                 if g == 98 and fanuc:
-                    raise InputError("feed per minute (G98): the virtual lathe needs feed per revolution (G99 on a "
-                                     "Fanuc lathe)", path, ln, col)
+                    raise InputError(
+                        "feed per minute (G98): the virtual lathe needs feed per revolution (G99 on a Fanuc lathe)",
+                        path,
+                        ln,
+                        col,
+                    )
                 if g in (98, 99) and not fanuc:
-                    raise InputError(f"G{g:g}: feed per {'minute' if g == 98 else 'revolution'} on a Fanuc lathe "
-                                     f"(G-code system A), not in {dialect}; read as --dialect fanuc, or use G95 "
-                                     "feed per revolution", path, ln, col)
+                    raise InputError(
+                        f"G{g:g}: feed per {'minute' if g == 98 else 'revolution'} on a Fanuc lathe "
+                        f"(G-code system A), not in {dialect}; read as --dialect fanuc, or use G95 "
+                        "feed per revolution",
+                        path,
+                        ln,
+                        col,
+                    )
                 if g == 20 or (sinu and g == 70):
                     raise InputError(f"inch units (G{g:g}): the virtual lathe reads millimetre programs", path, ln, col)
                 if g == 91:
@@ -209,14 +226,19 @@ def read_program(path, length: float | None = None, dialect: str = "linuxcnc") -
             raise InputError("G50 with X or Z sets the coordinate system: not simulated", path, ln, 1)
         if xw is not None:
             if diam is None:
-                raise InputError("an X word before G7 (diameter) or G8 (radius) mode is set" if not sinu else
-                                 "an X word before DIAMON (diameter) or DIAMOF (radius) is set", path, ln, xw[1])
+                raise InputError(
+                    "an X word before G7 (diameter) or G8 (radius) mode is set"
+                    if not sinu
+                    else "an X word before DIAMON (diameter) or DIAMOF (radius) is set",
+                    path,
+                    ln,
+                    xw[1],
+                )
             x_new = xw[0] / 2 if diam else xw[0]
             if x_new < 0:
                 raise InputError(f"X{xw[0]:g} is below the axis", path, ln, xw[1])
         if length is not None and z_new is not None and z_new < -length - 1e-9:
-            raise InputError(f"Z{z_new:g} is beyond the chuck face (Z{-length:g})", path, ln,
-                             line.find("Z") + 1 or 1)
+            raise InputError(f"Z{z_new:g} is beyond the chuck face (Z{-length:g})", path, ln, line.find("Z") + 1 or 1)
         moved = x_new != x or z_new != z
         if motion == 1 and moved and x is not None and z is not None:
             if not per_rev:
@@ -224,13 +246,20 @@ def read_program(path, length: float | None = None, dialect: str = "linuxcnc") -
             if f is None or s is None:
                 raise InputError("a cut before F and S are set", path, ln, 1)
             if css and not math.isfinite(cap):
-                raise InputError("G96 without a spindle-speed limit (" + {"linuxcnc": "D", "fanuc": "G50 S",
-                                 "sinumerik": "LIMS="}[dialect] + "): the speed would grow without bound near the "
-                                 "axis", path, ln, 1)
+                raise InputError(
+                    "G96 without a spindle-speed limit ("
+                    + {"linuxcnc": "D", "fanuc": "G50 S", "sinumerik": "LIMS="}[dialect]
+                    + "): the speed would grow without bound near the "
+                    "axis",
+                    path,
+                    ln,
+                    1,
+                )
             moves.append(Move(ln, z, z_new, x, x_new, f, s, css, cap))
         elif motion == 0 and moved and x_new is not None and z_new is not None:  # a rapid: checked, not cut
-            moves.append(Move(ln, z_new if z is None else z, z_new, x_new if x is None else x, x_new, 0.0, 0.0, False,
-                              math.inf))
+            moves.append(
+                Move(ln, z_new if z is None else z, z_new, x_new if x is None else x, x_new, 0.0, 0.0, False, math.inf)
+            )
         x, z = x_new, z_new
     return moves
 
@@ -267,8 +296,17 @@ def _force(rho, g, g3, s, a_prev, t0, zeta) -> float:
     return F
 
 
-def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_sigma: float = 0.0,
-             seed: int = 1, progress=None, dialect: str = "linuxcnc", entry_transient: bool = True) -> Profile:
+def simulate(
+    cfg: tu.Config,
+    program_path,
+    *,
+    rho_sigma: float = 0.0,
+    stiffness_sigma: float = 0.0,
+    seed: int = 1,
+    progress=None,
+    dialect: str = "linuxcnc",
+    entry_transient: bool = True,
+) -> Profile:
     """Turn the shaft of ``cfg`` with the program (see the module); ``progress(fraction)`` is
     called as the revolutions go by.
 
@@ -308,8 +346,11 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
     if not any(-mv.z1 > -mv.z0 + 1e-12 and mv.feed > 0 for mv in moves):
         raise InputError("no cut along the shaft (G1 towards negative Z)", src)
     if revs_total > REVOLUTIONS_MAX:
-        raise InputError(f"the program asks for {revs_total:,} revolutions of cutting; the virtual lathe turns at "
-                         f"most {REVOLUTIONS_MAX:,} (a feed too small?)", src)
+        raise InputError(
+            f"the program asks for {revs_total:,} revolutions of cutting; the virtual lathe turns at "
+            f"most {REVOLUTIONS_MAX:,} (a feed too small?)",
+            src,
+        )
 
     zeta = m.zeta
     lam = cfg.lam
@@ -324,8 +365,13 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
         a0, a1 = -mv.z0, -mv.z1
         if mv.feed == 0:  # a rapid must end clear of the stock as it is now
             if 0 <= a1 <= L and mv.r1 < stock_at(a1) - 1e-6:
-                raise InputError(f"a rapid move (G0) into the stock: radius {mv.r1:.4f} mm at Z{mv.z1:g} inside "
-                                 f"the work (radius {stock_at(a1):.4f} mm there)", src, mv.line, 1)
+                raise InputError(
+                    f"a rapid move (G0) into the stock: radius {mv.r1:.4f} mm at Z{mv.z1:g} inside "
+                    f"the work (radius {stock_at(a1):.4f} mm there)",
+                    src,
+                    mv.line,
+                    1,
+                )
             continue
         n_const = mv.speed if not mv.css else None
         if a1 <= a0 + 1e-12:  # a radial move (plunge or retract): time only
@@ -378,6 +424,12 @@ def simulate(cfg: tu.Config, program_path, *, rho_sigma: float = 0.0, stiffness_
             no_contact.append(tuple(nc_run))
             nc_run = None
     x_cut = grid[covered]
-    return Profile(x_cut, 2 * stock[covered], defl[covered], t,
-                   (cfg.diameter - 2 * cfg.depth) * 1e3,
-                   [(float(a), float(b), int(c)) for a, b, c in no_contact], done)
+    return Profile(
+        x_cut,
+        2 * stock[covered],
+        defl[covered],
+        t,
+        (cfg.diameter - 2 * cfg.depth) * 1e3,
+        [(float(a), float(b), int(c)) for a, b, c in no_contact],
+        done,
+    )

@@ -95,17 +95,27 @@ class Shell:
     bow: float
 
     @classmethod
-    def make(cls, seed: int) -> "Shell":
+    def make(cls, seed: int) -> Shell:
         rng = np.random.default_rng(seed)
-        return cls(seed, rng.uniform(0.5, 1.0), rng.uniform(0.2, 0.5), rng.uniform(0, 2 * np.pi),
-                   rng.uniform(0, 2 * np.pi), [(rng.uniform(0, 360), rng.uniform(0.2, 0.4)) for _ in range(2)],
-                   rng.uniform(-0.2, 0.2))
+        return cls(
+            seed,
+            rng.uniform(0.5, 1.0),
+            rng.uniform(0.2, 0.5),
+            rng.uniform(0, 2 * np.pi),
+            rng.uniform(0, 2 * np.pi),
+            [(rng.uniform(0, 360), rng.uniform(0.2, 0.4)) for _ in range(2)],
+            rng.uniform(-0.2, 0.2),
+        )
 
     def v(self, b, z):
         b = np.asarray(b, float)
         r = np.radians(b)
         zmax = ROWS * ROW_PITCH / 2
-        out = self.a2 * np.cos(2 * r + self.p2) + self.a3 * np.cos(3 * r + self.p3) + self.bow * (np.asarray(z) / zmax) ** 2
+        out = (
+            self.a2 * np.cos(2 * r + self.p2)
+            + self.a3 * np.cos(3 * r + self.p3)
+            + self.bow * (np.asarray(z) / zmax) ** 2
+        )
         for bw, h in self.welds:
             ds = ((b - bw + 180) % 360 - 180) * MM_PER_DEG
             out = out + h * np.exp(-0.5 * (ds / 25.0) ** 2)
@@ -118,7 +128,7 @@ class Shell:
         d = (-2 * self.a2 * np.sin(2 * r + self.p2) - 3 * self.a3 * np.sin(3 * r + self.p3)) / (D / 2)
         for bw, h in self.welds:
             ds = ((b - bw + 180) % 360 - 180) * MM_PER_DEG
-            d = d - h * ds / 25.0 ** 2 * np.exp(-0.5 * (ds / 25.0) ** 2)
+            d = d - h * ds / 25.0**2 * np.exp(-0.5 * (ds / 25.0) ** 2)
         return d + 0 * np.asarray(z)
 
 
@@ -164,16 +174,35 @@ class Result:
     def as_dict(self, tolerance: float = BAND) -> dict:
         e = self.maps
         out = self.out_of_tolerance(tolerance)
-        cells = [{"row": int(r + 1), "cell": int(c + 1), "B": cell_centre(r, c)[0], "Z": cell_centre(r, c)[1],
-                  "rms_error": float(np.sqrt(np.mean(e[r, c] ** 2))), "max_abs_error": float(np.abs(e[r, c]).max()),
-                  "points_out_of_tolerance": int(out[r, c]), "retuned": bool(self.retuned[r, c])}
-                 for r in range(e.shape[0]) for c in range(e.shape[1])]
-        return {"strategy": self.strategy, "seed": self.seed, "rms_error": float(np.sqrt(np.mean(e ** 2))),
-                "max_abs_error": float(np.abs(e).max()), "retunes": int(self.retuned.sum()),
-                "cells_total": int(self.retuned.size), "rms_error_uncorrected": float(np.sqrt(np.mean(self.before ** 2))),
-                "tolerance": tolerance, "cells_out_of_tolerance": int((out > 0).sum()),
-                "points_out_of_tolerance": int(out.sum()), "points_total": int(e.size),
-                "backlash": self.backlash, "cells": cells}
+        cells = [
+            {
+                "row": int(r + 1),
+                "cell": int(c + 1),
+                "B": cell_centre(r, c)[0],
+                "Z": cell_centre(r, c)[1],
+                "rms_error": float(np.sqrt(np.mean(e[r, c] ** 2))),
+                "max_abs_error": float(np.abs(e[r, c]).max()),
+                "points_out_of_tolerance": int(out[r, c]),
+                "retuned": bool(self.retuned[r, c]),
+            }
+            for r in range(e.shape[0])
+            for c in range(e.shape[1])
+        ]
+        return {
+            "strategy": self.strategy,
+            "seed": self.seed,
+            "rms_error": float(np.sqrt(np.mean(e**2))),
+            "max_abs_error": float(np.abs(e).max()),
+            "retunes": int(self.retuned.sum()),
+            "cells_total": int(self.retuned.size),
+            "rms_error_uncorrected": float(np.sqrt(np.mean(self.before**2))),
+            "tolerance": tolerance,
+            "cells_out_of_tolerance": int((out > 0).sum()),
+            "points_out_of_tolerance": int(out.sum()),
+            "points_total": int(e.size),
+            "backlash": self.backlash,
+            "cells": cells,
+        }
 
 
 def simulate(strategy: str = "combined", seed: int = 1, *, on_cell=None) -> Result:
@@ -221,8 +250,12 @@ def simulate(strategy: str = "combined", seed: int = 1, *, on_cell=None) -> Resu
             if use_fb:
                 if tuner.needs_semi_finish:
                     # semi-finishing pass with allowance b (carrying K_dist), gauged
-                    semi = (T_REF + ALLOWANCE + cell_error(shell, r, c, k=k_dist, w=w)
-                            + gauge_rng.normal(0, NOISE_CUT, uu.shape))
+                    semi = (
+                        T_REF
+                        + ALLOWANCE
+                        + cell_error(shell, r, c, k=k_dist, w=w)
+                        + gauge_rng.normal(0, NOISE_CUT, uu.shape)
+                    )
                     gauged = semi + gauge_rng.normal(0, NOISE_UT, uu.shape)
                     tuner.tune(gaussian_filter1d(gauged, 2.0, axis=1, mode="nearest"))
                     retuned[r, c] = True
@@ -272,7 +305,7 @@ def _neighbourhoods():
     out = []
     k = 0
     while k * dz < R_TOOL:
-        half = math.sqrt(R_TOOL ** 2 - (k * dz) ** 2) / ds
+        half = math.sqrt(R_TOOL**2 - (k * dz) ** 2) / ds
         out += [(k, half)] if k == 0 else [(k, half), (-k, half)]
         k += 1
     return out
@@ -282,9 +315,9 @@ def _shift(a: np.ndarray, n: int) -> np.ndarray:
     """a[:, j + n] at j (−inf beyond the line's ends)."""
     out = np.full(a.shape, -np.inf)
     if n >= 0:
-        out[:, :a.shape[1] - n] = a[:, n:]
+        out[:, : a.shape[1] - n] = a[:, n:]
     else:
-        out[:, -n:] = a[:, :a.shape[1] + n]
+        out[:, -n:] = a[:, : a.shape[1] + n]
     return out
 
 
@@ -336,7 +369,7 @@ def cell_error(shell: Shell, row: int, cell: int, k=None, w=None) -> np.ndarray:
     for dk, half in _neighbourhoods():
         m = _sweep_max(yb, half)
         lo, hi = max(0, -dk), min(lines, lines - dk)
-        floor[lo:hi] = np.maximum(floor[lo:hi], m[lo + dk:hi + dk])
+        floor[lo:hi] = np.maximum(floor[lo:hi], m[lo + dk : hi + dk])
     floor_path = np.empty_like(floor)
     np.put_along_axis(floor_path, order, floor, axis=1)
     order_n = row * CELLS + cell
@@ -422,7 +455,7 @@ def shell_map(maps: np.ndarray):
         for c in range(cells):
             m = maps[r, c].copy()
             m[1::2] = m[1::2, ::-1]  # the zig-zag's odd lines run backwards
-            img[r * lines:(r + 1) * lines, c * samples:(c + 1) * samples] = m
+            img[r * lines : (r + 1) * lines, c * samples : (c + 1) * samples] = m
     z0 = cell_centre(0, 0)[1] + Z_LINES[0]
     z1 = cell_centre(rows - 1, 0)[1] + Z_LINES[-1]
     return img, (0.0, 360.0, z0, z1)
@@ -434,8 +467,14 @@ def cell_program(row: int = 0, cell: int = 0, depth: float = 8.0, step: float = 
     reference points every ``step`` degrees."""
     bc, zc = cell_centre(row, cell)
     u = np.arange(-HALF_B, HALF_B + 1e-9, step)
-    out = [f"(ncadapt waffle testbed: finish row {row + 1} cell {cell + 1}, zig-zag along B)", "G21 G90 G94 G17",
-           "S6000 M3", "G0 X0.000 Y0.000", f"G0 B{bc + u[0]:.3f} Z{zc + Z_LINES[0]:.3f}", f"G1 Y{depth:.3f} F300"]
+    out = [
+        f"(ncadapt waffle testbed: finish row {row + 1} cell {cell + 1}, zig-zag along B)",
+        "G21 G90 G94 G17",
+        "S6000 M3",
+        "G0 X0.000 Y0.000",
+        f"G0 B{bc + u[0]:.3f} Z{zc + Z_LINES[0]:.3f}",
+        f"G1 Y{depth:.3f} F300",
+    ]
     for k, w in enumerate(Z_LINES):
         line = u if k % 2 == 0 else u[::-1]
         if k:
