@@ -220,7 +220,8 @@ def face_uv_bounds(face) -> tuple[float, float, float, float]:
     """(umin, umax, vmin, vmax) of a face's parameters."""
     from OCP.BRepTools import BRepTools
 
-    return tuple(float(v) for v in BRepTools.UVBounds_s(face))
+    u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+    return float(u0), float(u1), float(v0), float(v1)
 
 
 def face_evaluate(face, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -674,10 +674,10 @@ def _shaft_um(size: float, letter: str, grade: str) -> tuple[float, float]:
         ei = _EI_MAIN[letter][_range(size, MAIN)]
         return float(ei), ei + t
     if letter in _EI_SUB:
-        ei = _EI_SUB[letter][_range(size, SUB)]
-        if ei is None:
+        sub = _EI_SUB[letter][_range(size, SUB)]
+        if sub is None:
             raise InputError(f"fundamental deviation {letter} starts above 24 mm, not for {size:g} mm")
-        return float(ei), ei + t
+        return float(sub), sub + t
     raise InputError(f"unknown shaft letter {letter!r}; supported: {', '.join(SHAFT_LETTERS)}")
 
 

@@ -551,7 +551,7 @@ def _native_field(field) -> tuple | None:
             field._steps[1],
             np.ascontiguousarray(field.dz, dtype=np.float64).ravel().tolist(),
             field.outside,
-            tuple(float(v) for v in field.bounds),
+            tuple(float(v) for v in field.bounds or ()),
         )
     return None
 

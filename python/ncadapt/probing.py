@@ -354,12 +354,13 @@ def _tight_box(face, tree, margin, a0, a1, b0, b1, bounds):
 
 def _grid_shape(m: int, aspect: float) -> tuple[int, int]:
     """nu x nv, at least 2 each, with nu·nv ≥ m, as few extra points and as near the aspect as can be."""
-    best = None
+    best: tuple[float, int, int] | None = None
     for nu in range(2, max(3, 4 * int(math.sqrt(m * max(aspect, 1.0))) + 3)):
         nv = max(2, -(-m // nu))
         score = 10.0 * (nu * nv - m) / m + abs(math.log(nu / nv / aspect))
         if best is None or score < best[0]:
             best = (score, nu, nv)
+    assert best is not None  # nu = 2 is always tried
     return best[1], best[2]
 
 

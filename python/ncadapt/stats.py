@@ -62,7 +62,7 @@ class Weights:
     """What a Moran's I used: ``kind`` idw|knn, ``power`` k, ``threshold`` (mm or None), ``neighbors``."""
 
     kind: str = "idw"
-    power: float = 1.0
+    power: float | None = 1.0
     threshold: float | None = None
     neighbors: int | None = None
     chosen: bool = False  # by weights="auto" from the number of points
@@ -172,7 +172,8 @@ def weights_matrix(points, weights: Weights) -> sparse.csr_matrix:
         # largest weight of a row is 1, so no power overflows, and a row never underflows to 0
         near = np.full(n, np.inf)
         np.minimum.at(near, r, d)
-        w = sparse.csr_matrix(((d / near[r]) ** -float(weights.power), (r, c)), shape=(n, n))
+        power = 1.0 if weights.power is None else float(weights.power)
+        w = sparse.csr_matrix(((d / near[r]) ** -power, (r, c)), shape=(n, n))
     else:
         raise ValueError(f"weights must be one of {WEIGHTS}, got {weights.kind!r}")
     rs = np.asarray(w.sum(axis=1)).ravel()
@@ -226,7 +227,7 @@ def _sums_dense_idw(p: np.ndarray, z: np.ndarray, power: float, progress=None, k
         b = min(a + _DENSE_ROWS, n)
         d = block(a, b)
         w = (d / near[a:b, None]) ** -power * inv[a:b, None]
-        if keep:
+        if full is not None:
             full[a:b] = w
         wz += float(z[a:b] @ (w @ z))
         col += w.sum(axis=0)
@@ -311,7 +312,8 @@ def moran_matrix(w, values, alpha: float = 0.05) -> Moran:
     rs = np.asarray(m.sum(axis=1)).ravel()
     m = sp.csr_matrix(sp.diags(np.divide(1.0, rs, out=np.zeros_like(rs), where=rs > 0)) @ m)
     z = _centred(v)
-    return _moran(v, *_sums_sparse(m, z), alpha, Weights("matrix", None, None, None))
+    s0, s1, s2, zwz = _sums_sparse(m, z)
+    return _moran(v, s0, s1, s2, zwz, alpha, Weights("matrix", None, None, None))
 
 
 def _centred(v: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ Also here: :func:`extrapolate_border`, the cubic extrapolation of values known i
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import RectBivariateSpline
@@ -33,6 +33,8 @@ class Surface:
     u: np.ndarray
     v: np.ndarray
     grid: np.ndarray
+    # the three coordinate splines, made from the grid
+    _s: list = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         u, v, g = np.asarray(self.u, float), np.asarray(self.v, float), np.asarray(self.grid, float)
@@ -50,8 +52,8 @@ class Surface:
     @classmethod
     def from_function(cls, f, u_range, v_range, nu: int = 41, nv: int = 41) -> Surface:
         """Interpolate ``f(u, v) -> (x, y, z)`` (vectorised) on an nu × nv grid."""
-        u = np.linspace(*u_range, nu)
-        v = np.linspace(*v_range, nv)
+        u = np.linspace(u_range[0], u_range[1], nu)
+        v = np.linspace(v_range[0], v_range[1], nv)
         U, V = np.meshgrid(u, v, indexing="ij")
         return cls(u, v, np.stack(f(U, V), axis=-1))
 

@@ -250,7 +250,9 @@ def read_dmis_circles(path, entry: str = "top") -> BoreMeasurement:
     statement). The circle's centre is (x, y), its plane z."""
     path = str(path)
     text = read_text(path)
-    items, seen, buf, start = [], {}, "", 0
+    items: list = []
+    seen: dict[str, int] = {}
+    buf, start = "", 0
     for ln, raw in enumerate(text.splitlines(), 1):
         line = raw.rstrip()
         if not buf:

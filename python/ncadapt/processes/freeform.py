@@ -228,6 +228,7 @@ def decompose(
     found = chosen is not None
     if not found:  # no rung passes: the default setting, flagged
         chosen = split(base if method == "bilateral" else {"p": p0})
+    assert chosen is not None
     s, r, par, nz = chosen
     params = {k: float(v) for k, v in par.items()}
     return Decomposition(

@@ -146,7 +146,7 @@ class SecantCompensator(_Base):
 
     def reset(self) -> None:
         super().reset()
-        self._prev = None  # (a_p, δ) of the previous step
+        self._prev: tuple[float, float] | None = None  # (a_p, δ) of the previous step
 
     def _next(self, delta: float) -> float:
         a = self.depth
@@ -186,8 +186,8 @@ class KalmanCompensator(_Base):
 
     def reset(self) -> None:
         super().reset()
-        self._x = None  # [κ, κ̇]
-        self._p = None
+        self._x: tuple[float, float] | None = None  # [κ, κ̇]
+        self._p: tuple[float, float, float] | None = None
 
     def _next(self, delta: float) -> float:
         # the 2 × 2 filter written out in scalars: a step costs about a microsecond
@@ -198,6 +198,7 @@ class KalmanCompensator(_Base):
             self._x = (z, 0.0)
             self._p = (r, 0.0, 0.01)  # P00, P01, P11
         else:
+            assert self._p is not None  # set with _x
             k0, k1 = self._x
             p00, p01, p11 = self._p
             q = self.q
@@ -217,7 +218,11 @@ class KalmanCompensator(_Base):
         return self.target_depth / (1.0 - kappa)
 
 
-COMPENSATORS = {"mirror": MirrorCompensator, "secant": SecantCompensator, "kalman": KalmanCompensator}
+COMPENSATORS: dict[str, type[_Base]] = {
+    "mirror": MirrorCompensator,
+    "secant": SecantCompensator,
+    "kalman": KalmanCompensator,
+}
 
 #: the kinds of gauge a loop may have: ``fresh`` — each reading reflects the latest W1 command
 #: (the paper's: the controller reads only once the spot lies on floor cut after the command
@@ -349,7 +354,7 @@ class Interlocks:
         self.clamped = 0  # commands the bounds changed
         self.max_abs_w1 = 0.0
         self.reasons: dict[str, int] = {}
-        self._last = None
+        self._last: float | None = None
         self._same = 0
 
     def check(self, reading) -> str | None:

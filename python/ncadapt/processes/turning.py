@@ -291,7 +291,7 @@ def load(path) -> Config:
             fail("plan", "finish_depth", f"must be < the depth of cut {depth:g} mm")
         cfg.finish_depth = fd * mm
     else:
-        cfg.finish_depth = min(0.25e-3, cfg.depth / 2)
+        cfg.finish_depth = default_finish_depth(cfg.depth)
     if cfg.phi + cfg.phi1 >= math.pi:
         fail("cut", "trailing_angle", "and plan_angle must add up to less than 180 degrees")
     for name, key in (("chuck", "chuck"), ("tail", "tailstock"), ("tool", "tool")):
@@ -699,6 +699,12 @@ def plan(
     )
 
 
+def default_finish_depth(depth: float) -> float:
+    """The finishing pass of the rough + finish baseline when the configuration names none, m:
+    0.25 mm, at most half the depth of cut."""
+    return min(0.25e-3, depth / 2)
+
+
 def baselines(cfg: Config, m: Model, x3, rpm: float) -> tuple:
     """What a programmer without the model would run, on the same model, each with its best
     constant X offset, at the speed ``rpm``: (1) a constant-feed finish at the largest feed of the
@@ -713,7 +719,7 @@ def baselines(cfg: Config, m: Model, x3, rpm: float) -> tuple:
     n = np.full_like(x3, rpm)
     c1, w1 = m.constant_offset(x3, s_fin, rpm)
     t_fin = _time(x3, np.full_like(x3, s_fin), n)
-    tf = cfg.finish_depth
+    tf = cfg.finish_depth if cfg.finish_depth is not None else default_finish_depth(cfg.depth)
 
     def rough(s):
         return m.constant_offset(x3, s, rpm, depth=cfg.depth - tf)

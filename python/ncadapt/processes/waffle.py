@@ -313,6 +313,7 @@ class DepthField:
         elif self._grid is not None:
             out = self._grid(q)
         else:
+            assert self._lin is not None  # one of the three was built in __init__
             out = self._lin(q)
         bad = ~np.isfinite(out)
         if bad.any():
@@ -466,6 +467,7 @@ def estimate_backlash(v_ideal, v_measured, dt: float = 1.0, *, fit_tau: bool = T
             r = least_squares(resid, [g0, t0], x_scale=[span, dt], diff_step=1e-4)
             if best is None or r.cost < best.cost:
                 best = r
+    assert best is not None  # the loops ran
     g, tau = abs(best.x[0]), (abs(best.x[1]) if fit_tau else 0.0)
     if not travels.max() > g:
         raise ValueError(
@@ -517,7 +519,7 @@ class SelfTuning:
         if not t_min < target < t_max:
             raise ValueError(f"the signal band ({t_min}, {t_max}) must contain the target {target}")
         self.target, self.allowance, self.t_min, self.t_max = target, allowance, t_min, t_max
-        self.k_fb = None
+        self.k_fb: np.ndarray | None = None
         self.retunes = 0
         self._retune_next = True
 
@@ -526,10 +528,11 @@ class SelfTuning:
         return self._retune_next
 
     def tune(self, semi_finished_thickness) -> np.ndarray:
-        self.k_fb = feedback_correction(semi_finished_thickness, self.target, self.allowance)
+        k_fb = feedback_correction(semi_finished_thickness, self.target, self.allowance)
+        self.k_fb = k_fb
         self.retunes += 1
         self._retune_next = False
-        return self.k_fb
+        return k_fb
 
     def finished(self, thickness) -> bool:
         """Record a finished cell's thickness map; True when the next cell must be retuned."""
