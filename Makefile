@@ -7,7 +7,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # rustup installs cargo here; maturin needs it on the PATH
 export PATH := $(HOME)/.cargo/bin:$(PATH)
 
-.PHONY: demo test lint fuzz bench wheel install install-test system-deps rust clean
+.PHONY: demo test lint docs fuzz bench wheel install install-test system-deps rust clean
 
 $(VENV)/bin/python:
 	python3 -m venv $(VENV)
@@ -51,6 +51,10 @@ lint: install-test
 	cargo clippy -q --workspace -- -D warnings
 	$(VENV)/bin/mypy
 
+# the documentation with its API reference (mkdocs + mkdocstrings, from the docstrings, offline) in site/
+docs: install-test
+	$(VENV)/bin/mkdocs build --strict
+
 # the property tests with large budgets: generated programs against rs274 (make test runs 25
 # examples) and the CLI contract on mutated inputs and extreme options (make test: 100 per target,
 # about 3,500 cases; here 300 per target, about 10,500)
@@ -75,4 +79,4 @@ wheel: install-test
 	NCADAPT_WHEEL="$$(ls dist/ncadapt-*.whl)" $(PY) -m pytest -q tests/test_wheel.py
 
 clean:
-	rm -rf $(VENV) target demo-out dist
+	rm -rf $(VENV) target demo-out dist site

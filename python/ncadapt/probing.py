@@ -427,11 +427,15 @@ def plan_text(points, normals, *, stylus_radius: float, log: str, ids=None, touc
 
 
 def is_plan(head: str) -> bool:
+    """Whether a file's first bytes ``head`` are those of a probing plan (its magic first line)."""
     return head.lstrip("\ufeff").startswith(PLAN_MAGIC)
 
 
 @dataclass(frozen=True)
 class Plan:
+    """A probing plan read back: point ids, nominal points and outward normals (n, 3) in mm, the
+    plan file's lines of them, the stylus radius, the log file it names and the touches per point."""
+
     ids: tuple[str, ...]
     nominal: np.ndarray
     normal: np.ndarray

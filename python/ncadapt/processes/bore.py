@@ -450,6 +450,7 @@ def probing_program(
 
 # ------------------------------------------------------------------------------------ the plan
 def class_limits(diameter: float, cls: str) -> tuple[float, float]:
+    """The (lower, upper) deviations of ISO 286 class ``cls`` (e.g. "H6") at ``diameter``, mm."""
     lo, hi = iso286.deviations(*iso286.parse(f"{diameter:g}{cls}"))
     return lo, hi
 
@@ -464,6 +465,9 @@ def _hole_class(cls: str, what: str) -> None:
 
 @dataclass(frozen=True)
 class Plan:
+    """A plan of corrective passes: the bore, its classes, the pre-finish and allowance, the
+    measured taper δA/δB, the tolerances and the predicted passes (mm), and the pass history."""
+
     diameter: float
     final: str
     prefinish: str
@@ -829,6 +833,9 @@ def plan_from_measurement(
 # ------------------------------------------------------------------------------------ pass by pass
 @dataclass(frozen=True)
 class Correction:
+    """The correction of the next pass from the measured bore after ``pass_done``: errors and
+    deflections per plane (face A first) and the tool setting δK for the next pass."""
+
     pass_done: int  # the pass just measured (0: the pre-finish)
     next_pass: int
     errors: list  # (D_aimed − D)/2 per plane, A first: against the pass's aimed diameter

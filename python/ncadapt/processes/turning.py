@@ -75,6 +75,9 @@ def _sym(v, scale: float) -> np.ndarray:
 
 @dataclass
 class Config:
+    """A turning job read from its TOML file (SI units inside: m, Pa, N): the shaft, the machine's
+    stiffness model, the cut and the plan's bounds."""
+
     diameter: float  # m
     length: float  # m
     youngs: float  # Pa

@@ -414,6 +414,9 @@ def copying_error(v_ideal, g: float, tau: float = 0.0, dt: float = 1.0) -> np.nd
 
 @dataclass
 class Backlash:
+    """The copying system identified from a pair of signals: its gap g, time constant τ, offset,
+    the fit's residual and the web-thickness error it leaves."""
+
     gap: float  # g, mm
     tau: float  # s
     offset: float  # mm: a constant between the two signals
