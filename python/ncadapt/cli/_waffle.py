@@ -34,6 +34,33 @@ _Z_TOL = dict(
 )
 
 
+def _tracking_options(f):
+    """The tracking log and the geometry the tilt is identified with (tilt and correct)."""
+    for o in reversed(
+        [
+            click.option(
+                "--tracking",
+                "log",
+                type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                required=True,
+                help="Tracking pre-measurement: CSV with columns B (deg), Z (mm), V (mm).",
+            ),
+            click.option("--tool-radius", **_RADIUS),
+            click.option("--diameter", **_DIAMETER),
+            click.option(
+                "--segment",
+                type=click.IntRange(min=2, max=10**6),
+                default=10,
+                show_default=True,
+                help="Points per least-squares segment of the tracking log (restarting where Z changes).",
+            ),
+            click.option("--z-tol", **_Z_TOL),
+        ]
+    ):
+        f = o(f)
+    return f
+
+
 def _pair(value, what, option):
     """Two comma-separated finite numbers of ``option`` (None when not given)."""
     if value is None:
@@ -51,23 +78,7 @@ def waffle() -> None:
 
 
 @waffle.command("tilt")
-@click.option(
-    "--tracking",
-    "log",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    required=True,
-    help="Tracking pre-measurement: CSV with columns B (deg), Z (mm), V (mm).",
-)
-@click.option("--tool-radius", **_RADIUS)
-@click.option("--diameter", **_DIAMETER)
-@click.option(
-    "--segment",
-    type=click.IntRange(min=2, max=10**6),
-    default=10,
-    show_default=True,
-    help="Points per least-squares segment (restarting where Z changes).",
-)
-@click.option("--z-tol", **_Z_TOL)
+@_tracking_options
 @json_option
 @handle_errors
 def tilt(log, tool_radius, diameter, segment, z_tol, json_path):
@@ -100,23 +111,7 @@ def tilt(log, tool_radius, diameter, segment, z_tol, json_path):
 
 @waffle.command("correct")
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option(
-    "--tracking",
-    "log",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    required=True,
-    help="Tracking pre-measurement: CSV with columns B, Z, V.",
-)
-@click.option("--tool-radius", **_RADIUS)
-@click.option("--diameter", **_DIAMETER)
-@click.option(
-    "--segment",
-    type=click.IntRange(min=2, max=10**6),
-    default=10,
-    show_default=True,
-    help="Points per least-squares segment of the tracking log (restarting where Z changes).",
-)
-@click.option("--z-tol", **_Z_TOL)
+@_tracking_options
 @click.option(
     "--thickness",
     "map_path",
