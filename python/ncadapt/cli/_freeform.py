@@ -106,9 +106,43 @@ def _print_analysis(a) -> None:
 
 @click.command()
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "--nominal",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="The CAD model (STEP or IGES) as the nominal: MEASUREMENTS are actual points (CSV x,y,z), each projected "
+    "onto the nearest selected face, the deviation along its outward normal.",
+)
+@click.option(
+    "--face",
+    "face_ids",
+    type=click.IntRange(min=1),
+    multiple=True,
+    help="A face of --nominal (1-based, OpenCASCADE's order; repeat for several; default: all).",
+)
+@click.option(
+    "--max-distance",
+    type=FiniteRange(0, constants.COORD_MAX, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="With --nominal: refuse points farther than this from every face, mm.",
+)
 @_moran_options
 @handle_errors
-def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_radius, units, json_path, report_path):
+def analyze(
+    measurements,
+    nominal,
+    face_ids,
+    max_distance,
+    weights,
+    power,
+    threshold,
+    neighbors,
+    alpha,
+    probe_radius,
+    units,
+    json_path,
+    report_path,
+):
     """Deviations of MEASUREMENTS along the normals and Moran's I: is the error systematic?
 
     MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3.
@@ -118,11 +152,25 @@ def analyze(measurements, weights, power, threshold, neighbors, alpha, probe_rad
     from ..processes import freeform as pf
 
     check_outputs(
-        {"measurements": measurements, **companion_inputs(measurements)}, {"--json": json_path, "--report": report_path}
+        {"measurements": measurements, "nominal": nominal, **companion_inputs(measurements)},
+        {"--json": json_path, "--report": report_path},
     )
+    if face_ids and nominal is None:
+        raise click.UsageError("--face needs --nominal")
     with progress() as say:
         say(f"reading {measurements}")
-        meas = measure.read(measurements, probe_radius=probe_radius, units=units)
+        if nominal is not None:
+            say(f"projecting onto {nominal}")
+            meas = measure.against_cad(
+                measurements,
+                nominal,
+                faces=list(face_ids) or None,
+                max_distance=max_distance,
+                probe_radius=probe_radius,
+                units=units,
+            )
+        else:
+            meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
         a = pf.analyze(
             meas,

@@ -17,13 +17,27 @@ Readers (:func:`read` picks one from the file's contents):
   ``mx my mz``;
 - QIF 3 results: point features with nominal ``Location``/``Normal`` and measured ``Location``.
 
+With a CAD nominal (:func:`against_cad`), actual points only (``x,y,z``) are projected onto the
+part's faces and the deviation is taken along the face's outward normal.
+
 Nothing is guessed: NaN, zero or non-unit normals (|n| off 1 by more than 1e-3), duplicate ids and
 mismatched nominal/measured sets are errors naming the file and line.
 """
 
 from __future__ import annotations
 
+from ._cad import against_cad, read_actuals
 from ._core import Measurements, from_arrays
 from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
 
-__all__ = ["Measurements", "from_arrays", "read", "read_csv", "read_dmis", "read_qif", "read_xyzijk"]
+__all__ = [
+    "Measurements",
+    "against_cad",
+    "from_arrays",
+    "read",
+    "read_actuals",
+    "read_csv",
+    "read_dmis",
+    "read_qif",
+    "read_xyzijk",
+]

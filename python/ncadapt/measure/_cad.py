@@ -1,0 +1,100 @@
+"""Measured points against a CAD nominal: each actual point projected onto the nearest of the
+selected faces (OpenCASCADE through OCP), the deviation along the face's outward normal there."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .._io import csv_reader
+from ..errors import InputError
+from ._core import Measurements, from_arrays
+
+
+def read_actuals(path) -> tuple[np.ndarray, np.ndarray, tuple[str, ...] | None]:
+    """Actual points only: a CSV with a header naming ``x,y,z`` (optional ``id``), mm. Returns the
+    points (n, 3), their lines and their ids."""
+    src = str(Path(path))
+    rows = csv_reader(path)
+    try:
+        header = [h.strip().lower() for h in next(rows)]
+    except StopIteration:
+        raise InputError("empty file", src) from None
+    if not all(c in header for c in "xyz"):
+        raise InputError(f"header must name x,y,z (optional id); got {','.join(header)}", src, 1)
+    k = [header.index(c) for c in "xyz"]
+    pts, lines, ids = [], [], []
+    for row in rows:
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise InputError(f"{len(row)} fields, the header has {len(header)}", src, rows.line_num)
+        try:
+            pts.append([float(row[j]) for j in k])
+        except ValueError:
+            bad = next(row[j] for j in k if not _is_number(row[j]))
+            raise InputError(f"expected a number, got {bad.strip()!r}", src, rows.line_num) from None
+        lines.append(rows.line_num)
+        if "id" in header:
+            ids.append(row[header.index("id")].strip())
+    if not pts:
+        raise InputError("no points", src)
+    return np.asarray(pts), np.asarray(lines), tuple(ids) if ids else None
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def against_cad(
+    path,
+    nominal,
+    *,
+    faces: list[int] | None = None,
+    max_distance: float = 1.0,
+    probe_radius: float = 0.0,
+    units: str | None = None,
+) -> Measurements:
+    """Actual points of ``path`` (see :func:`read_actuals`) against the faces of the STEP/IGES file
+    ``nominal`` (1-based ids, all by default): the nominal point is the nearest point of the nearest
+    face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
+    ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
+    ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
+    the actual points' length unit (mm by default)."""
+    from .. import cad
+    from ._readers import UNITS_MM
+
+    src = str(Path(path))
+    m, lines, ids = read_actuals(path)
+    m = m * (UNITS_MM[units] if units else 1.0)
+    all_faces = cad.faces(cad.read_shape(nominal))
+    if not all_faces:
+        raise InputError("no faces in the CAD file", str(nominal))
+    chosen = faces or list(range(1, len(all_faces) + 1))
+    bad = [f for f in chosen if not 1 <= f <= len(all_faces)]
+    if bad:
+        raise InputError(f"--face {bad[0]}: the CAD file has faces 1 to {len(all_faces)}", str(nominal))
+    best_d = np.full(len(m), np.inf)
+    p = np.full((len(m), 3), np.nan)
+    n = np.full((len(m), 3), np.nan)
+    face_of = np.zeros(len(m), dtype=int)
+    for f in chosen:
+        q, nn, d = cad.face_project(all_faces[f - 1], m)
+        better = d < best_d
+        best_d[better], p[better], n[better], face_of[better] = d[better], q[better], nn[better], f
+    far = np.flatnonzero(~(best_d <= max_distance))
+    if len(far):
+        i = int(far[0])
+        how = "on no face" if not np.isfinite(best_d[i]) else f"{best_d[i]:.4g} mm from the nearest face"
+        raise InputError(
+            f"{len(far)} point(s) farther than --max-distance {max_distance:g} mm from the CAD faces; "
+            f"this one is {how}",
+            src,
+            int(lines[i]),
+        )
+    return from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
