@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ncadapt import InputError, RefusedError, fields, nc
+from ncadapt import InputError, RefusedError, correction, fields, nc
 
 PART = "G21 G90 G0 X0 Y0 Z5\nG1 Z-1 F300\nG1 X10.0000 Y0.0000 (edge)\nG2 X20 Y0 I5 J0\nG0 Z5\nM30\n"
 
@@ -122,8 +122,10 @@ def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, piece, from_
     src.write_text(PART.replace("G0 Z5\nM30", "G91 G1 X2 Y1\nG3 X-4 Y0 I-2 J0\nG90 G0 Z5\nM30"))
     prog = nc.read(src)
     monkeypatch.setattr(nc, "_PIECE_BYTES", 1 << 30)
+    monkeypatch.setattr(correction, "_PIECE_BYTES", 1 << 30)
     whole = prog.correct(_bowl)
     monkeypatch.setattr(nc, "_PIECE_BYTES", piece)
+    monkeypatch.setattr(correction, "_PIECE_BYTES", piece)
     if from_file:
         c = nc.correct_file(src, tmp_path / "out.ngc", _bowl)
     else:
@@ -140,6 +142,7 @@ def test_correct_to_streams_the_same_program(tmp_path, monkeypatch, piece, from_
 
 def test_correct_to_refusal_leaves_nothing(tmp_path, monkeypatch):
     monkeypatch.setattr(nc, "_PIECE_BYTES", 1)
+    monkeypatch.setattr(correction, "_PIECE_BYTES", 1)
     out = tmp_path / "out.ngc"
     out.write_text("old\n")
     with pytest.raises(RefusedError, match="exceeds the limit"):

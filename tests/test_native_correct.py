@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ncadapt import InputError, RefusedError, _nc, fields, nc
+from ncadapt import InputError, RefusedError, _nc, correction, fields, nc
 
 PROGRAM = (
     "%\n(native)\nG21 G90 G17\nG0 X1.0000 Y1.0000 Z5.0000\nG1 Z-0.5000 F300\n"
@@ -72,7 +72,7 @@ def _points(xs, ys):
 
 
 def _spec(field):
-    spec = nc._native_field(field)
+    spec = correction._native_field(field)
     assert spec is not None
     return spec
 
@@ -115,10 +115,13 @@ def test_shift_and_non_finite_points():
 
 def test_only_plain_shift_and_linear_grid_are_native():
     grid = fields.GridField(np.arange(4.0), np.arange(4.0), np.zeros((4, 4)))
-    assert nc._native_field(grid) is not None and nc._native_field(fields.Shift((0, 0, 1))) is not None
-    assert nc._native_field(fields.GridField(np.arange(4.0), np.arange(4.0), np.zeros((4, 4)), method="cubic")) is None
-    assert nc._native_field(PyGrid(np.arange(4.0), np.arange(4.0), np.zeros((4, 4)))) is None
-    assert nc._native_field(lambda p: p * 0) is None
+    assert correction._native_field(grid) is not None and correction._native_field(fields.Shift((0, 0, 1))) is not None
+    assert (
+        correction._native_field(fields.GridField(np.arange(4.0), np.arange(4.0), np.zeros((4, 4)), method="cubic"))
+        is None
+    )
+    assert correction._native_field(PyGrid(np.arange(4.0), np.arange(4.0), np.zeros((4, 4)))) is None
+    assert correction._native_field(lambda p: p * 0) is None
 
 
 def _run(tmp_path, field, src=PROGRAM, name="out.ngc", **options):
@@ -151,6 +154,7 @@ FIELDS = [
 @pytest.mark.parametrize("k", range(len(FIELDS)))
 def test_outputs_figures_and_refusals_are_the_python_evaluations(tmp_path, monkeypatch, piece, k):
     monkeypatch.setattr(nc, "_PIECE_BYTES", piece)
+    monkeypatch.setattr(correction, "_PIECE_BYTES", piece)
     field = FIELDS[k]
     for options in ({"max_segment": 1.0}, {"max_segment": 0.5, "limit": 0.25, "clearance": 6.0}):
         native = _run(tmp_path, field, name="native.ngc", **options)
@@ -179,9 +183,10 @@ def test_outputs_figures_and_refusals_are_the_python_evaluations(tmp_path, monke
 @pytest.mark.parametrize("keep", [False, True])
 def test_style_warnings_and_errors_as_in_python(tmp_path, monkeypatch, src, keep):
     monkeypatch.setattr(nc, "_PIECE_BYTES", 16)
+    monkeypatch.setattr(correction, "_PIECE_BYTES", 16)
     done = []
-    engine = nc._nc_correct
-    monkeypatch.setattr(nc, "_nc_correct", lambda *a: done.append(engine(*a)) or done[-1])
+    engine = correction._nc_correct
+    monkeypatch.setattr(correction, "_nc_correct", lambda *a: done.append(engine(*a)) or done[-1])
     for field in (fields.Shift((0, 0, 0.0125)), FIELDS[2]):
         done.clear()
         native = _run(tmp_path, field, src, name="native.ngc", keep_unsupported=keep, clearance=0.0)
