@@ -149,6 +149,7 @@ class CsvRows:
         self.delimiter = ","
         if "," not in first:
             self.delimiter = ";" if ";" in first else ("\t" if "\t" in first else ",")
+        self.text = text  # line ends made LF, one for one
         self._rows = csv.reader(io.StringIO(text, newline=""), delimiter=self.delimiter)
         self.line_num = 0
 

@@ -298,7 +298,7 @@ def moran(
     else:
         w = weights_matrix(p, wt)
         s0, s1, s2, zwz = _sums_sparse(w, z)
-    m = _moran(v, s0, s1, s2, zwz, alpha, wt)
+    m = _moran(z, s0, s1, s2, zwz, alpha, wt)
     r = max(PERMUTATIONS, math.ceil(20 / alpha) - 1)
     return _with_permutations(m, w, z, r) if exact and r <= PERMUTATIONS_MAX else m
 
@@ -313,7 +313,7 @@ def moran_matrix(w, values, alpha: float = 0.05) -> Moran:
     m = sp.csr_matrix(sp.diags(np.divide(1.0, rs, out=np.zeros_like(rs), where=rs > 0)) @ m)
     z = _centred(v)
     s0, s1, s2, zwz = _sums_sparse(m, z)
-    return _moran(v, s0, s1, s2, zwz, alpha, Weights("matrix", None, None, None))
+    return _moran(z, s0, s1, s2, zwz, alpha, Weights("matrix", None, None, None))
 
 
 def _centred(v: np.ndarray) -> np.ndarray:
@@ -343,9 +343,9 @@ def _with_permutations(m: Moran, w, z: np.ndarray, r: int = PERMUTATIONS, seed: 
     return dataclasses.replace(m, p_permutation=p, permutations=r) if zz > 0 else m
 
 
-def _moran(v, s0, s1, s2, zwz, alpha, wt) -> Moran:
-    n = len(v)
-    z = _centred(v)
+def _moran(z, s0, s1, s2, zwz, alpha, wt) -> Moran:
+    """The statistic and its moments from the weights' sums and the centred, scaled values ``z``."""
+    n = len(z)
     zz = float(z @ z)
     if s0 == 0:
         raise InputError("no point has a neighbour within the threshold; increase it")

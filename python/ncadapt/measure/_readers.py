@@ -77,7 +77,9 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     if has_m and "dev" in cols:
         raise InputError("header names both mx,my,mz and dev; give one", src, 1)
     want = NOMINAL + NORMAL + (MEASURED if has_m else ("dev",))
-    fast = _plain_csv(path, len(header), [cols[c] for c in want], cols.get("id"))
+    fast = (
+        _plain_csv(rows.text, len(header), [cols[c] for c in want], cols.get("id")) if rows.delimiter == "," else None
+    )
     if fast is not None:
         a, ids, lines = fast
         a = _lengths(a, has_m, _scale(units))
@@ -117,14 +119,14 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     )
 
 
-def _plain_csv(path, width: int, idx: list[int], id_col: int | None):
-    """The rows of a plain comma-separated file — the header on line 1, no quotes, no blank line,
-    no CR alone, every row of ``width`` fields, every wanted field a number — parsed at once
+def _plain_csv(text: str, width: int, idx: list[int], id_col: int | None):
+    """The rows of a plain comma-separated file's ``text`` (as :class:`ncadapt._io.CsvRows` read it,
+    line ends LF) — the header on line 1, no quotes, no blank line, every row of ``width`` fields,
+    every wanted field a number — parsed at once
     (numpy's C parser: a million rows in about a second): the columns ``idx`` as floats, the ids,
     the line numbers. None when the file is not that plain: the row-by-row reader reads it then,
     and locates what is wrong."""
-    text = read_text(Path(path)).replace("\r\n", "\n")
-    if '"' in text or "\r" in text:
+    if '"' in text:
         return None
     body = text.split("\n")[1:]
     if body and body[-1] == "":

@@ -81,19 +81,22 @@ def noise_level(points, values) -> float:
     return float(np.median(np.abs(d)) / (0.6745 * np.sqrt(2)))
 
 
-def require_area(uv, source: str | None = None) -> None:
+def require_area(uv, source: str | None = None) -> float:
     """Refuse points in (u, v) that lie along one line (a single scan line, a row of points): a
-    surface, a triangulation or a thin-plate spline over them is undetermined across the line."""
+    surface, a triangulation or a thin-plate spline over them is undetermined across the line.
+    Returns their :func:`spacing`, which the check measures against."""
     q = np.asarray(uv, float)[:, :2]
     c = q - q.mean(axis=0)
     across = np.linalg.svd(c, full_matrices=False)[2][-1]
     width = float(np.abs(c @ across).max()) if len(q) else 0.0
-    if width < 0.5 * spacing(q):
+    h = spacing(q)
+    if width < 0.5 * h:
         raise InputError(
             f"the {len(q)} measured points lie along one line (all within half their spacing of it): "
             "a surface needs points over an area",
             source,
         )
+    return h
 
 
 def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
@@ -379,8 +382,8 @@ def fit_height_surface(points, extent=None, step: float | None = None, frame: Fr
         return Surface(xs, ys, frame.to_world(X, Y, Z))
     from scipy.interpolate import CloughTocher2DInterpolator
 
-    require_area(p)
-    h = step or spacing(p)
+    measured_spacing = require_area(p)  # refuses a single scan line whatever the step
+    h = step or measured_spacing
     x0, x1, y0, y1 = extent or (p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max())
     what = "the extent" if extent else "the measured area"
     area = f"{what} u {x0:g} … {x1:g}, v {y0:g} … {y1:g} mm"
