@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import csv_column, csv_reader, read_text
+from ._io import csv_column, csv_reader, plain_csv, read_text
 from .constants import COORD_MAX
 from .errors import InputError, RefusedError, cut
 
@@ -317,6 +317,9 @@ class ScatteredField(Field):
 def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Read a CSV with a header; return the required columns as floats and their line numbers."""
     rows = csv_reader(path)
+    fast = _read_plain_csv(rows.text, required) if rows.delimiter == "," else None
+    if fast is not None:
+        return fast
     header = None
     cols: dict[str, list[float]] = {}
     linenos: list[int] = []
@@ -362,6 +365,23 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> tuple[dict[str, np.ndarr
     if header is None:
         raise InputError("empty file; expected a header line", str(path))
     return {c: np.asarray(v, dtype=np.float64) for c, v in cols.items()}, np.asarray(linenos)
+
+
+def _read_plain_csv(text: str, required: tuple[str, ...]) -> tuple[dict[str, np.ndarray], np.ndarray] | None:
+    """:func:`_read_csv` at once for a plain file (:func:`ncadapt._io.plain_csv`: the header on
+    line 1, numbers only) whose values are all finite and within ±COORD_MAX; None for any other,
+    which the row-by-row reader then reads and locates."""
+    first = text.split("\n", 1)[0]
+    header = [c.strip().lower() for c in first.split(",")]
+    if any(c not in header for c in required):
+        return None
+    got = plain_csv(text, len(header), [header.index(c) for c in required])
+    if got is None:
+        return None
+    a, _, lines = got
+    if not (np.isfinite(a).all() and (np.abs(a) <= COORD_MAX).all()):
+        return None
+    return {c: np.ascontiguousarray(a[:, k]) for k, c in enumerate(required)}, lines
 
 
 def _grid_from_points(x, y, dz, linenos, path, method, outside) -> GridField:

@@ -10,10 +10,6 @@ use crate::interp::{Interp, Motion, Record, AXES, MM_PER_INCH, NAXES, PLANE_AXES
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
 
-/// Corrected pieces this close to a straight line (mm) are written as one move. Far below any
-/// written digit, so merging never moves the path by a visible amount.
-pub const MERGE_TOL_MM: f64 = 1e-6;
-
 /// Counts for the summary.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct EmitStats {
@@ -587,7 +583,8 @@ impl<'a> Emitter<'a> {
         // the output starts this block where the corrected path expects it
         let on_path = (0..3).all(|a| (self.st.epos[a] - (start[a] + d0[a])).abs() < half_mm);
         let keep_arc = rec.motion.is_arc() && uniform && on_path;
-        // a straight move whose corrected pieces all lie on one line is written as one move; when
+        // a straight move whose corrected pieces all lie on one line, within half a unit of the
+        // last written digit (the rounding every written number has), is written as one move; when
         // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
         // piece must also be where that one move puts it at the piece's fraction
         let only_xyz = rec.named & !0b111 == 0;
@@ -597,9 +594,9 @@ impl<'a> Emitter<'a> {
                 (0..n - 1).all(|k| {
                     let p = target_at(k, ts[k]);
                     if only_xyz {
-                        dist_to_segment(&p, &self.st.epos, &e) <= MERGE_TOL_MM
+                        dist_to_segment(&p, &self.st.epos, &e) <= half_mm
                     } else {
-                        dist_at_fraction(&p, &self.st.epos, &e, ts[k]) <= MERGE_TOL_MM
+                        dist_at_fraction(&p, &self.st.epos, &e, ts[k]) <= half_mm
                     }
                 })
             });

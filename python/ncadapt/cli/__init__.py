@@ -6,26 +6,50 @@ located message), 3 internal error (a bug: ``--debug`` shows the traceback).
 
 from __future__ import annotations
 
-import click
+import importlib
+import os
 
-from .. import __version__
-from ._bore import bore
-from ._common import EXIT_BAD_INPUT, internal_error
-from ._correct import correct
-from ._demo import demo
-from ._freeform import analyze, compensate
-from ._inspect import inspect
-from ._probe import probe
-from ._skin import skin
-from ._turning import turning
-from ._waffle import waffle
+# numpy's OpenBLAS starts its threads on import and lets them spin for about 2**28 cycles (0.1 s of
+# a core) before they sleep; the engine's own threads want that core. With the shortest timeout
+# they sleep at once and still work in parallel for large products (set before numpy is imported;
+# a value the user gave is kept).
+os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
+
+import click  # noqa: E402
+
+from .. import __version__  # noqa: E402
+from ._common import EXIT_BAD_INPUT, internal_error  # noqa: E402
 
 __all__ = ["main"]
+
+# each command and the module that defines it: a command's module (and what it imports: numpy,
+# OCP, scipy, asyncua) is imported only when that command runs, or when the help lists them all
+_COMMANDS = {
+    "correct": "_correct",
+    "inspect": "_inspect",
+    "analyze": "_freeform",
+    "compensate": "_freeform",
+    "demo": "_demo",
+    "bore": "_bore",
+    "skin": "_skin",
+    "waffle": "_waffle",
+    "turning": "_turning",
+    "probe": "_probe",
+}
 
 
 class _Main(click.Group):
     """The command group: whatever escapes a command (an option's conversion included) that is
     not a usage error is an internal error, exit 3."""
+
+    def list_commands(self, ctx):
+        return sorted(_COMMANDS)
+
+    def get_command(self, ctx, cmd_name):
+        module = _COMMANDS.get(cmd_name)
+        if module is None:
+            return None
+        return getattr(importlib.import_module(f".{module}", __name__), cmd_name)
 
     def invoke(self, ctx):
         try:
@@ -54,15 +78,3 @@ class _Main(click.Group):
 def main(ctx, debug) -> None:
     """Correct CNC machining from measurements."""
     ctx.meta["ncadapt.debug"] = debug
-
-
-main.add_command(correct)
-main.add_command(inspect)
-main.add_command(analyze)
-main.add_command(compensate)
-main.add_command(demo)
-main.add_command(bore)
-main.add_command(skin)
-main.add_command(waffle)
-main.add_command(turning)
-main.add_command(probe)

@@ -13,17 +13,28 @@ import sys
 import tempfile
 import traceback
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
-from rich.console import Console
 
 from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries, write_target
 from ..constants import COORD_MAX
 from ..errors import InputError, NcadaptError, RefusedError, cut
 
+if TYPE_CHECKING:
+    from rich.console import Console
+
 #: Exit codes: success, refused by a safety check (nothing written), bad input or usage, internal error.
 EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
-err_console = Console(stderr=True, highlight=False)
+
+
+@functools.cache
+def err_console() -> Console:
+    """The console of progress bars, on stderr (rich is imported when a bar may be shown)."""
+    from rich.console import Console
+
+    return Console(stderr=True, highlight=False)
+
 
 #: Where summaries go: stdout, or stderr when stdout carries the JSON (``--json -``).
 _state = {"summary_to_stderr": False}
@@ -321,9 +332,13 @@ def progress(console: Console | None = None):
     Yields ``say(message, done=None, total=None)``: with a total, a bar with the percentage and
     the time left; without, the message beside a spinner. The bar is removed when the work ends.
     """
+    if console is None and not sys.stderr.isatty() and not os.environ.get("FORCE_TERMINAL"):
+        # not a terminal (rich would say the same): no bar, and rich is not imported
+        yield lambda msg, done=None, total=None: None
+        return
     from rich.progress import BarColumn, Progress, SpinnerColumn, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
-    con = console or err_console
+    con = console or err_console()
     if not con.is_terminal:
         yield lambda msg, done=None, total=None: None
         return

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import csv_reader, read_text
+from .._io import csv_reader, plain_csv, read_text
 from ..errors import InputError
 from ._core import Measurements, from_arrays
 
@@ -77,9 +77,7 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     if has_m and "dev" in cols:
         raise InputError("header names both mx,my,mz and dev; give one", src, 1)
     want = NOMINAL + NORMAL + (MEASURED if has_m else ("dev",))
-    fast = (
-        _plain_csv(rows.text, len(header), [cols[c] for c in want], cols.get("id")) if rows.delimiter == "," else None
-    )
+    fast = plain_csv(rows.text, len(header), [cols[c] for c in want], cols.get("id")) if rows.delimiter == "," else None
     if fast is not None:
         a, ids, lines = fast
         a = _lengths(a, has_m, _scale(units))
@@ -117,28 +115,6 @@ def read_csv(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
         lines=lines,
         source=src,
     )
-
-
-def _plain_csv(text: str, width: int, idx: list[int], id_col: int | None):
-    """The rows of a plain comma-separated file's ``text`` (as :class:`ncadapt._io.CsvRows` read it,
-    line ends LF) — the header on line 1, no quotes, no blank line, every row of ``width`` fields,
-    every wanted field a number — parsed at once
-    (numpy's C parser: a million rows in about a second): the columns ``idx`` as floats, the ids,
-    the line numbers. None when the file is not that plain: the row-by-row reader reads it then,
-    and locates what is wrong."""
-    if '"' in text:
-        return None
-    body = text.split("\n")[1:]
-    if body and body[-1] == "":
-        body.pop()
-    if not body or any(not ln.strip() or ln.count(",") != width - 1 for ln in body):
-        return None
-    try:
-        a = np.loadtxt(body, delimiter=",", usecols=idx, dtype=float, ndmin=2, comments=None)
-    except ValueError:
-        return None
-    ids = [ln.split(",")[id_col].strip() for ln in body] if id_col is not None else None
-    return a, ids, np.arange(2, len(body) + 2)
 
 
 def read_xyzijk(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
