@@ -594,9 +594,9 @@ impl<'a> Emitter<'a> {
                 (0..n - 1).all(|k| {
                     let p = target_at(k, ts[k]);
                     if only_xyz {
-                        dist_to_segment(&p, &self.st.epos, &e) <= half_mm
+                        dist2_to_segment(&p, &self.st.epos, &e) <= half_mm * half_mm
                     } else {
-                        dist_at_fraction(&p, &self.st.epos, &e, ts[k]) <= half_mm
+                        dist2_at_fraction(&p, &self.st.epos, &e, ts[k]) <= half_mm * half_mm
                     }
                 })
             });
@@ -808,8 +808,8 @@ impl<'a> Emitter<'a> {
     }
 }
 
-/// Distance from p to the segment a-b (XYZ).
-fn dist_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 {
+/// Squared distance from p to the segment a-b (XYZ).
+fn dist2_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 {
     let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
     let l2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
@@ -819,15 +819,14 @@ fn dist_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 
         0.0
     };
     let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
-    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
 
-/// Distance from p to the point at fraction t of the segment a-b (XYZ).
-fn dist_at_fraction(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES], t: f64) -> f64 {
+/// Squared distance from p to the point at fraction t of the segment a-b (XYZ).
+fn dist2_at_fraction(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES], t: f64) -> f64 {
     (0..3)
         .map(|k| (p[k] - (a[k] + t * (b[k] - a[k]))).powi(2))
         .sum::<f64>()
-        .sqrt()
 }
 
 /// Where a block's words begin: after `/`, leading blanks and a leading N word.
