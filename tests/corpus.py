@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ncadapt import fields, nc  # noqa: E402
+from ncadapt import dialects, fields, nc  # noqa: E402
 from ncadapt.errors import InputError, RefusedError  # noqa: E402
 from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
 
@@ -569,6 +569,13 @@ def run(entry: Entry, work: Path) -> Result:
 
 def _run(entry: Entry, work: Path, r: Result) -> None:
     work.mkdir(parents=True, exist_ok=True)
+    try:
+        dialects.resolve(entry.path)  # as `ncadapt correct` does first (--dialect auto)
+    except InputError as e:
+        d = dialects.detect(entry.path.read_bytes()[: dialects.HEAD_BYTES], entry.file)
+        r.outcome = f"refused: line {e.line}: {dialects.NAMES[d.name]} program ({d.text}), syntax not read"
+        r.reason, r.refusal_line = f"{dialects.NAMES[d.name]} program, syntax not read", e.line
+        return
     try:
         prog = nc.read(entry.path)
         uns = prog.unsupported

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from .. import dialects
 from .._io import TMP_PREFIX, all_or_nothing, atomic_write, remove_temporaries, write_target
 from ..constants import COORD_MAX
 from ..errors import InputError, NcadaptError, RefusedError, cut
@@ -366,3 +367,14 @@ def progress_bar(description: str, total: int):
     with progress() as say:
         say(description, 0, total)
         yield lambda done: say(description, done, total)
+
+
+#: ``--dialect`` of the commands that read an NC program.
+dialect_option = click.option(
+    "--dialect",
+    type=click.Choice(dialects.CHOICES),
+    default="auto",
+    show_default=True,
+    help="The program's controller dialect; auto detects it from the program's first 64 KB. Sinumerik and "
+    "Heidenhain programs are refused, naming the line that shows the dialect.",
+)

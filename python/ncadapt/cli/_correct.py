@@ -6,9 +6,19 @@ from pathlib import Path
 
 import click
 
-from .. import constants, nc
+from .. import constants, dialects, nc
 from .. import fields as _fields
-from ._common import FiniteRange, check_outputs, comma_floats, echo_err, handle_errors, progress, summary, write_json
+from ._common import (
+    FiniteRange,
+    check_outputs,
+    comma_floats,
+    dialect_option,
+    echo_err,
+    handle_errors,
+    progress,
+    summary,
+    write_json,
+)
 
 
 def _shift(ctx, param, value):
@@ -74,6 +84,7 @@ def _shift(ctx, param, value):
     default=None,
     help="Report uncorrected rapids ending below this Z inside the field.",
 )
+@dialect_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
 def correct(
@@ -89,6 +100,7 @@ def correct(
     rapids,
     keep_unsupported,
     clearance,
+    dialect,
     json_path,
 ):
     """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
@@ -99,6 +111,7 @@ def correct(
     if (field_path is None) == (shift is None):
         raise click.UsageError("give exactly one of --field FILE or --shift DX,DY,DZ")
     check_outputs({"input program": program, "field file": field_path}, {"-o": output, "--json": json_path})
+    d = dialects.resolve(program, dialect)
     with progress() as say:
         if field_path is not None:
             say(f"reading {field_path}")
@@ -118,6 +131,7 @@ def correct(
             progress=say,
         )
     summary(f"{program} -> {output}")
+    summary(f"  dialect: {d.describe()}")
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
         f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"
@@ -144,6 +158,7 @@ def correct(
             "field": str(field_path) if field_path else {"shift": shift},
         }
         payload.update(c.as_dict())
+        payload["dialect"] = d.as_dict()
         payload["options"] = {
             "max_segment": max_segment,
             "chord_tol": chord_tol,
@@ -153,5 +168,6 @@ def correct(
             "rapids": rapids,
             "keep_unsupported": keep_unsupported,
             "clearance": clearance,
+            "dialect": dialect,
         }
         write_json(json_path, payload)

@@ -6,20 +6,24 @@ from pathlib import Path
 
 import click
 
-from .. import nc
-from ._common import check_outputs, handle_errors, summary, write_json
+from .. import dialects, nc
+from ._common import check_outputs, dialect_option, handle_errors, summary, write_json
 
 
 @click.command()
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@dialect_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON.")
 @handle_errors
-def inspect(program, json_path):
+def inspect(program, dialect, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
+    d = dialects.resolve(program, dialect)
     info = nc.inspect_file(program)
+    info["dialect"] = d.as_dict()
     m = info["motions"]
     summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
+    summary(f"  dialect: {d.describe()}")
     summary(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
     p = info["planes"]
     summary(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")

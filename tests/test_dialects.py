@@ -1,0 +1,107 @@
+"""Dialect detection: the controller family a program is written for, and the refusal of those
+whose syntax the engine does not read (Sinumerik, Heidenhain), located at the line that shows it."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from corpus import CORPUS, manifest
+from ncadapt import InputError, dialects
+from ncadapt.cli import main
+
+CASES = [
+    # (program, expected dialect, expected evidence line)
+    ("BEGIN PGM CIRSTUD  MM\nL Z-10 FMAX\n", "heidenhain", 1),
+    ("1 BEGIN PGM 12 MM\n", "heidenhain", 1),
+    ("; part\nN10 G0 X=10 Y20\n", "sinumerik", 2),
+    ("G90\nX=IC(5)\n", "sinumerik", 2),
+    ("DEF REAL R_A\nG0 X0\n", "sinumerik", 1),
+    ("G0 X0\nCYCLE81(10, 0, 2, -5)\n", "sinumerik", 2),
+    ("G0 X0\nG2 X10 Y0 CR=5\n", "sinumerik", 2),
+    ("G0 X0\nTRANS X10\n", "sinumerik", 2),
+    (";FLAVOR:Marlin\nG28\n", "marlin", 1),
+    ("G21\nM82\nG1 X1 E0.5\n", "marlin", 2),
+    ("G21\nG1 X10 Y5 E0.33 F1200\n", "marlin", 2),
+    ("$H\nG0 X0\n", "grbl", 1),
+    ("G21\n$J=G91 X10 F100\n", "grbl", 2),
+    ("%\nO1234\nG0 X0\n%\n", "fanuc", 2),
+    ("G0 X0\nM98 P1000 L2\n", "fanuc", 2),
+    # LinuxCNC: O-word subroutines, named parameters, comments that look like other syntax
+    ("o100 sub\nG0 X0\no100 endsub\no100 call\nM2\n", "linuxcnc", None),
+    ("O200 if [#1 GT 0]\nO200 endif\nM2\n", "linuxcnc", None),
+    ("#<x> = 5\nG0 X#<x>\nM2\n", "linuxcnc", None),
+    ("G0 X0 (X=5 is a comment)\nG70 ; G70=inch on a Siemens control\nM2\n", "linuxcnc", None),
+    ("G21 G90\nG1 X10 F100\nM2\n", "linuxcnc", None),
+]
+
+
+@pytest.mark.parametrize("text, name, line", CASES)
+def test_detection(text, name, line):
+    d = dialects.detect(text.encode())
+    assert (d.name, d.line) == (name, line)
+    assert d.detected
+
+
+def test_sinumerik_file_names_and_a_cut_last_line():
+    assert dialects.detect(b"G0 X0\n", "PART.MPF").name == "sinumerik"
+    assert dialects.detect(b"G0 X0\n", "sub.spf").name == "sinumerik"
+    # the head is cut inside a line: that line is not read (its start could look like anything)
+    head = b"(" + b"x" * (dialects.HEAD_BYTES - 9) + b")\nG0 X=5"
+    assert len(head) == dialects.HEAD_BYTES
+    assert dialects.detect(head).name == "linuxcnc"
+
+
+def test_unread_dialects_are_refused_at_their_line(tmp_path):
+    p = tmp_path / "p.h"
+    p.write_text("BEGIN PGM P MM\nL X+10 FMAX\nEND PGM P MM\n")
+    with pytest.raises(InputError) as e:
+        dialects.resolve(p)
+    assert (e.value.line, e.value.col) == (1, 1) and "Heidenhain" in e.value.message
+    with pytest.raises(InputError, match="--dialect sinumerik"):
+        dialects.resolve(tmp_path / "any.ngc", "sinumerik")
+    q = tmp_path / "q.mpf"
+    q.write_text("G0 X0 Y0\nG1 X10 F100\nM30\n")
+    with pytest.raises(InputError, match="q.mpf:1:1: a Sinumerik 840D program.*--dialect linuxcnc"):
+        dialects.resolve(q)
+    assert dialects.resolve(q, "linuxcnc") == dialects.Dialect("linuxcnc", False)
+
+
+def test_cli_reports_the_dialect_and_refuses_with_nothing_written(tmp_path):
+    r = CliRunner()
+    prog = tmp_path / "p.nc"
+    prog.write_text("%\nO1001\nG21 G90 G0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X10\nM30\n%\n")
+    res = r.invoke(main, ["correct", str(prog), "--shift", "0,0,0.01", "-o", str(tmp_path / "o.nc"), "--json", "-"])
+    assert res.exit_code == 0, res.output
+    payload = json.loads(res.stdout)
+    assert payload["dialect"] == {"name": "fanuc", "detected": True, "line": 2, "evidence": "O1001"}
+    assert payload["options"]["dialect"] == "auto"
+    res = r.invoke(main, ["inspect", str(prog), "--dialect", "grbl"])
+    assert res.exit_code == 0 and "dialect: grbl (given)" in res.stdout
+
+    sie = tmp_path / "s.mpf"
+    sie.write_text("; part\nG0 X0 Y0\nG1 X=10 F100\nM30\n")
+    out = tmp_path / "s_out.mpf"
+    res = r.invoke(main, ["correct", str(sie), "--shift", "0,0,0.01", "-o", str(out)])
+    assert res.exit_code == 2
+    assert f"{sie}:3:1: error: a Sinumerik 840D program (G1 X=10 F100)" in res.stderr
+    assert not out.exists()
+
+
+@pytest.mark.skipif(not CORPUS.is_dir(), reason="no corpus at ../shared/corpus/nc")
+def test_corpus_dialects_are_detected():
+    # the manifest's dialect is the corpus' own record of where each program comes from
+    expect = {"Heidenhain": "heidenhain", "Sinumerik": "sinumerik", "Fanuc/Haas": "fanuc"}
+    seen = {}
+    for e in manifest():
+        d = dialects.detect(e.path.read_bytes()[: dialects.HEAD_BYTES], e.file)
+        if e.dialect in expect:
+            assert d.name == expect[e.dialect], e.file
+        if e.dialect == "Marlin":
+            seen[e.file] = d.name
+        if e.dialect.startswith("LinuxCNC") or e.dialect.startswith("FreeCAD"):
+            assert d.name == "linuxcnc" or (d.name == "fanuc" and b"M98" in e.path.read_bytes()), e.file
+    # every slicer's output is Marlin; a laser program of the same firmware family writes none of its codes
+    assert sum(v == "marlin" for v in seen.values()) >= len(seen) - 1
