@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from corpus import CORPUS, manifest
-from ncadapt import InputError, dialects
+from ncadapt import InputError, RefusedError, dialects, fields, nc
 from ncadapt.cli import main
 
 CASES = [
@@ -105,3 +105,27 @@ def test_corpus_dialects_are_detected():
             assert d.name == "linuxcnc" or (d.name == "fanuc" and b"M98" in e.path.read_bytes()), e.file
     # every slicer's output is Marlin; a laser program of the same firmware family writes none of its codes
     assert sum(v == "marlin" for v in seen.values()) >= len(seen) - 1
+
+
+GRBL = "$X\nG21 G90 G0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X10\n$H\nG0 X0 Y0 Z5\nG1 Z-1\n$J=G91 X1 F100\nG1 X3 Y0 Z-1\nM30\n"
+
+
+def test_grbl_system_commands_are_copied_and_homing_or_jog_forgets_the_position(tmp_path):
+    prog = nc.parse(GRBL)
+    assert prog.correct(fields.Shift((0, 0, 0))).data == prog.data
+    out = prog.correct(fields.Shift((0, 0, 0.01)))
+    # the cuts before and after homing are corrected from their known starts (hand-derived: Z -1
+    # moves to -0.99; X10 at the corrected depth needs no new Z word); after the jog every axis the
+    # block names is known again, so the move is corrected too: it keeps its X3 Y0 and its Z moves
+    want = GRBL.replace("G1 Z-1 F100", "G1 Z-0.99 F100").replace("G1 Z-1\n", "G1 Z-0.99\n")
+    assert out.text == want.replace("G1 X3 Y0 Z-1", "G1 X3 Y0 Z-0.99")
+    notes = [n for n in out.correction.notes if "grbl homing or jog" in n[1]]
+    assert [n[0] for n in notes] == [5, 8]
+
+
+def test_grbl_settings_are_refused_at_their_line():
+    prog = nc.parse("$100=250\nG0 X0 Y0 Z0\nG1 X1 F10\n$RST=#\n")
+    assert [(u.line, u.col) for u in prog.unsupported] == [(1, 1), (4, 1)]
+    assert all("grbl setting" in u.construct for u in prog.unsupported)
+    with pytest.raises(RefusedError):
+        prog.correct(fields.Shift((0, 0, 0.01)))

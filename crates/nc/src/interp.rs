@@ -320,7 +320,25 @@ impl Interpreter {
                     Opaque::Expression => "parameters or expressions (# or [ ])",
                     Opaque::OWordFlow => "O-word subroutine or control flow",
                     Opaque::Polar => "polar coordinates (@ ^)",
+                    Opaque::GrblSetting => {
+                        "grbl setting ($n=, $RST=, $N0=): it changes how the machine runs what follows"
+                    }
+                    Opaque::GrblOther => continue, // moves nothing: copied
+                    Opaque::GrblMove => {
+                        // homing or a jog: copied; where it leaves the machine is not traced
+                        st.pos = [f64::NAN; NAXES];
+                        push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                        out.notes.push(Note {
+                            line: li as u32,
+                            message: "grbl homing or jog ($H, $J=): kept as written, not corrected; the axes it moves are unknown afterwards".into(),
+                        });
+                        continue;
+                    }
                 };
+                if kind == Opaque::GrblSetting {
+                    push_unsupported(out, li, c, construct);
+                    continue;
+                }
                 let idx = push_unsupported(out, li, c, construct);
                 if kind == Opaque::OWordFlow && st.active.flow.is_none() {
                     st.active.flow = Some((li as u32, idx));

@@ -32,6 +32,24 @@ pub enum Opaque {
     OWordFlow,
     /// LinuxCNC polar words `@` and `^`.
     Polar,
+    /// A grbl system command that moves the machine: homing `$H`, a jog `$J=...`.
+    GrblMove,
+    /// A grbl system command that changes the machine's settings: `$100=250`, `$RST=#`, `$N0=...`.
+    GrblSetting,
+    /// Any other grbl system command (`$X`, `$$`, `$#`, `$G`, `$C`, `$SLP`, ...): it moves nothing.
+    GrblOther,
+}
+
+/// The kind of the grbl system command `rest` (the line after its `$`).
+fn grbl_kind(rest: &[u8]) -> Opaque {
+    let up = rest.to_ascii_uppercase();
+    if up.starts_with(b"H") || up.starts_with(b"J=") {
+        Opaque::GrblMove
+    } else if up.contains(&b'=') {
+        Opaque::GrblSetting
+    } else {
+        Opaque::GrblOther
+    }
 }
 
 /// One line of the source.
@@ -354,6 +372,11 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
                     line.opaque = Some((Opaque::Polar, i as u32));
                     i = end;
                 }
+                b'$' if first => {
+                    // a grbl system command: the whole line, kept as written
+                    line.opaque = Some((grbl_kind(&s[i + 1..end]), i as u32));
+                    i = end;
+                }
                 b'a'..=b'z' | b'A'..=b'Z' | b'$' => {
                     let letter = c.to_ascii_uppercase();
                     let wstart = i;
@@ -582,5 +605,35 @@ mod tests {
         assert_eq!(l.lines[1].opaque.unwrap().0, Opaque::Expression);
         assert_eq!(l.lines[2].opaque.unwrap().0, Opaque::OWordFlow);
         assert!(l.lines[3].opaque.is_none());
+    }
+
+    #[test]
+    fn grbl_system_commands() {
+        let l = lex(b"$H
+$J=G91 X1 F10
+$100=250
+$RST=#
+$X
+$$
+  $hx
+G0 X$1
+")
+        .unwrap();
+        let kinds: Vec<_> = l.lines[..7].iter().map(|x| x.opaque.unwrap().0).collect();
+        use Opaque::*;
+        assert_eq!(
+            kinds,
+            [
+                GrblMove,
+                GrblMove,
+                GrblSetting,
+                GrblSetting,
+                GrblOther,
+                GrblOther,
+                GrblMove
+            ]
+        );
+        // a '$' that does not start the line is an error, as before
+        assert!(l.lines[7].error.is_some());
     }
 }
