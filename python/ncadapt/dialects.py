@@ -19,6 +19,7 @@ a LinuxCNC O-word keyword), ``M98 P``, ``G65 P``, ``M99``. Anything else is Linu
 from __future__ import annotations
 
 import re
+import string
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,32 +43,58 @@ NAMES = {
     "heidenhain": "Heidenhain conversational (Klartext)",
 }
 
-_O_KEYWORDS = r"(?:sub|endsub|call|return|if|elseif|else|endif|while|endwhile|do|repeat|endrepeat|break|continue)"
-_RULES: tuple[tuple[str, re.Pattern[str]], ...] = (
-    ("heidenhain", re.compile(r"^\s*(?:\d+\s+)?BEGIN\s+PGM\b", re.I)),
+_UPPER = str.maketrans(string.ascii_lowercase, string.ascii_uppercase)
+_O_KEYWORDS = r"(?:SUB|ENDSUB|CALL|RETURN|IF|ELSEIF|ELSE|ENDIF|WHILE|ENDWHILE|DO|REPEAT|ENDREPEAT|BREAK|CONTINUE)"
+_MARLIN_M = ("M82", "M83", "M104", "M105", "M106", "M107", "M109", "M140", "M190", "M204", "M205")
+_SINUMERIK_WORDS = ("TRANS", "ROT", "SCALE", "MIRROR", "CIP", "DIAMO", "SUPA", "G64", "G70", "G71")
+
+
+class _Assignment:
+    """Sinumerik's axis assignments (``X=10``, ``Y = IC(5)``, ``Z1=AC(2)``): a pattern whose
+    ``search`` finds each ``=`` first (a literal, fast) and then looks at the word before it."""
+
+    _AFTER = re.compile(r"=[ \t]*(?:IC|AC|DC|ACP|ACN)?[ \t]*[-+.(\d]")
+    _BEFORE = re.compile(r"(?<![#<\w])[XYZABCUVW]\d?[ \t]*\Z")
+
+    def search(self, t: str) -> re.Match[str] | None:
+        for m in self._AFTER.finditer(t):
+            b = self._BEFORE.search(t, max(0, m.start() - 8), m.start())
+            if b:
+                return b
+        return None
+
+
+# The rules, in order: (dialect, read the text with its comments (else without), literals one of
+# which the text must hold for the pattern to be tried (a fast test), pattern). Patterns read the
+# upper-cased text, one line per ``^``.
+_RULES: tuple[tuple[str, bool, tuple[str, ...], re.Pattern[str] | _Assignment], ...] = (
+    ("heidenhain", False, ("BEGIN",), re.compile(r"^[ \t]*(?:\d+[ \t]+)?BEGIN[ \t]+PGM\b", re.M)),
+    ("sinumerik", False, ("=",), _Assignment()),
     (
         "sinumerik",
-        re.compile(
-            r"(?<![#<\w])[XYZABCUVW]\d?\s*=\s*(?:IC|AC|DC|ACP|ACN)?\s*[-+.(\d]"
-            r"|^\s*(?:N\d+\s+)?(?:EXTERN|PROC|DEF\s+(?:REAL|INT|BOOL|CHAR|STRING|AXIS|FRAME))\b"
-            r"|\b(?:MSG|CYCLE\d+|POCKET\d+|SLOT\d+|HOLES\d+)\s*\("
-            r"|\b(?:A?TRANS|A?ROT|A?SCALE|A?MIRROR|CIP|DIAMON|DIAMOF|SUPA|G64\d|G70\d|G71\d)\b"
-            r"|\b(?:CR|LIMS|AR|TURN)\s*=",
-            re.I,
-        ),
+        False,
+        ("EXTERN", "PROC", "DEF"),
+        re.compile(r"^[ \t]*(?:N\d+[ \t]+)?(?:EXTERN|PROC|DEF[ \t]+(?:REAL|INT|BOOL|CHAR|STRING|AXIS|FRAME))\b", re.M),
     ),
+    ("sinumerik", False, ("(",), re.compile(r"\b(?:MSG|CYCLE\d+|POCKET\d+|SLOT\d+|HOLES\d+)[ \t]*\(")),
+    (
+        "sinumerik",
+        False,
+        _SINUMERIK_WORDS,
+        re.compile(r"\b(?:A?TRANS|A?ROT|A?SCALE|A?MIRROR|CIP|DIAMON|DIAMOF|SUPA|G64\d|G70\d|G71\d)\b"),
+    ),
+    ("sinumerik", False, ("=",), re.compile(r"\b(?:CR|LIMS|AR|TURN)[ \t]*=")),
+    ("marlin", True, ("FLAVOR",), re.compile(r"^;[ \t]*FLAVOR:", re.M)),
     (
         "marlin",
-        re.compile(
-            r"^;\s*FLAVOR:|^\s*(?:N\d+\s+)?M(?:82|83|104|105|106|107|109|140|190|204|205)\b|^\s*G0*1\b[^;(]*\bE[-+.\d]",
-            re.I,
-        ),
+        False,
+        _MARLIN_M,
+        re.compile(r"^[ \t]*(?:N\d+[ \t]+)?M(?:82|83|104|105|106|107|109|140|190|204|205)\b", re.M),
     ),
-    ("grbl", re.compile(r"^\s*\$(?:[HXCIGN#$]|J=|\d+=)", re.I)),
-    (
-        "fanuc",
-        re.compile(rf"^\s*%?\s*O\d{{1,5}}\b(?!\s*{_O_KEYWORDS}\b)|\bM98\s*P|\bG65\s*P|\bM99\b", re.I),
-    ),
+    ("marlin", False, ("E",), re.compile(r"^[ \t]*G0*1\b[^\n]*\bE[-+.\d]", re.M)),
+    ("grbl", False, ("$",), re.compile(r"^[ \t]*\$(?:[HXCIGN#$]|J=|\d+=)", re.M)),
+    ("fanuc", False, ("O",), re.compile(rf"^[ \t]*%?[ \t]*O\d{{1,5}}\b(?![ \t]*{_O_KEYWORDS}\b)", re.M)),
+    ("fanuc", False, ("M98", "G65", "M99"), re.compile(r"\bM98[ \t]*P|\bG65[ \t]*P|\bM99\b")),
 )
 
 
@@ -96,25 +123,47 @@ class Dialect:
         return {"name": self.name, "detected": self.detected, "line": self.line, "evidence": self.text}
 
 
-def _code(line: str) -> str:
-    """A line without its comments: what follows ``;``, and ``(…)`` unless a name comes right before
-    it (Sinumerik's ``MSG(…)``, ``IC(…)``, ``CYCLE81(…)`` are calls, not comments)."""
-    return re.sub(r"(?<![A-Za-z0-9_])\([^)]*\)?", " ", line.split(";", 1)[0])
+#: A ``(…)`` comment, unless a name comes right before it (Sinumerik's ``MSG(…)``, ``IC(…)``,
+#: ``CYCLE81(…)`` are calls, not comments).
+_PAREN = re.compile(r"(?<![A-Za-z0-9_])\([^)]*\)?")
+
+
+def _blank_comments(text: str) -> str:
+    """``text`` with its comments (``(…)``, and what follows ``;``) blanked to the same length."""
+    out = []
+    for line in text.split("\n"):
+        k = line.find(";")
+        if k >= 0:
+            line = line[:k] + " " * (len(line) - k)
+        if "(" in line:
+            line = _PAREN.sub(lambda m: " " * len(m.group()), line)
+        out.append(line)
+    return "\n".join(out)
 
 
 def detect(head: bytes, name: str | None = None) -> Dialect:
     """The dialect of a program from its first bytes ``head`` (and its file ``name``, whose
     ``.mpf``/``.spf`` suffix is Sinumerik's)."""
-    text = head.decode("utf-8", "replace")
-    lines = text.splitlines()
-    if len(head) >= HEAD_BYTES and lines:
-        lines.pop()  # the last line may be cut
-    for dialect, rule in _RULES:
-        for k, raw in enumerate(lines, 1):
-            # Marlin's flavour comment is read with its ';'; every other rule reads the code only
-            probe = raw if dialect == "marlin" else _code(raw)
-            if rule.search(probe):
-                return Dialect(dialect, True, k, raw.strip()[:80])
+    text = head.decode("utf-8", "replace").replace("\r\n", "\n")
+    if len(head) >= HEAD_BYTES:
+        text = text[: text.rfind("\n") + 1]  # the last line may be cut
+    # comments blanked to the same length, so that a match's offset gives its line in the text
+    code = _blank_comments(text)
+    up, up_code = text.translate(_UPPER), code.translate(_UPPER)  # ASCII only: offsets stay
+    found: tuple[int, str] | None = None  # the first rule's dialect that matches, at its match
+    for dialect, with_comments, gate, rule in _RULES:
+        if found is not None and found[1] != dialect:
+            break
+        t = up if with_comments else up_code
+        m = rule.search(t) if any(g in t for g in gate) else None
+        if m and (found is None or m.start() < found[0]):
+            found = (m.start(), dialect)
+    if found is not None:
+        at, dialect = found
+        start = text.rfind("\n", 0, at) + 1
+        end = text.find("\n", at)
+        line = text[start : end if end >= 0 else len(text)]
+        return Dialect(dialect, True, text.count("\n", 0, at) + 1, line.strip()[:80])
     if name is not None and Path(name).suffix.lower() in (".mpf", ".spf"):
         return Dialect("sinumerik", True, 1, f"the file name {Path(name).name}")
     return Dialect("linuxcnc", True)
