@@ -104,6 +104,82 @@ def _print_analysis(a) -> None:
     )
 
 
+def _align_dof(ctx, param, value):  # noqa: ARG001 - a click callback's signature
+    from ..measure import _align
+
+    if value is None:
+        return None
+    try:
+        return _align.parse_dof(value)
+    except InputError as e:
+        raise click.BadParameter(e.message.removeprefix("--align-dof: ")) from None
+
+
+def _align_options(f):
+    """``--align``, ``--align-dof`` and ``--datums`` (with ``--nominal``); the command passes them to
+    :func:`ncadapt.measure.against_cad` and prints the result's ``alignment`` with
+    :func:`_print_alignment`."""
+    opts = [
+        click.option(
+            "--align",
+            type=click.Choice(["none", "bestfit", "datums"]),
+            default="none",
+            show_default=True,
+            help="With --nominal: move the actual points onto the CAD frame first — none (on-machine probing: the "
+            "machine frame is the part's), bestfit (least squares on the distances to the faces) or datums (RPS / "
+            "3-2-1 on the datum points of --datums).",
+        ),
+        click.option(
+            "--align-dof",
+            callback=_align_dof,
+            metavar="LIST",
+            help="The degrees of freedom --align solves for, among x,y,z,rx,ry,rz (default all six; the others "
+            "held at 0).",
+        ),
+        click.option(
+            "--datums",
+            type=click.Path(exists=True, dir_okay=False, path_type=Path),
+            help="With --align datums: the datum points (TOML; docs/freeform.md gives the format).",
+        ),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def _check_align(nominal, align, align_dof, datums) -> None:
+    """Usage errors of the options of :func:`_align_options`."""
+    if align != "none" and nominal is None:
+        raise click.UsageError("--align needs --nominal")
+    if align_dof is not None and align == "none":
+        raise click.UsageError("--align-dof needs --align bestfit or datums")
+    if (datums is not None) != (align == "datums"):
+        raise click.UsageError(
+            "--align datums needs --datums FILE.toml" if datums is None else "--datums needs --align datums"
+        )
+
+
+def _print_alignment(al) -> None:
+    """The rigid transform, apart from the form error."""
+    if al.mode == "none":
+        summary("alignment: none (the measurement's frame is the CAD frame)")
+        return
+    t, r, st = al.translation, al.rotation, al.std
+    what = "points" if al.mode == "bestfit" else "constraints"
+    summary(
+        f"alignment ({al.mode}, {','.join(al.dof)}; {al.points:,} {what}, "
+        f"{al.iterations} iterations): translation (mm) {t[0]:+.5f} {t[1]:+.5f} {t[2]:+.5f}, "
+        f"rotation (deg, about fixed X then Y then Z) {r[0]:+.6f} {r[1]:+.6f} {r[2]:+.6f}"
+    )
+    if al.mode == "bestfit":
+        summary(
+            f"alignment residual rms {al.rms:.4f} mm; standard uncertainty translation (mm) "
+            f"{st[0]:.5f} {st[1]:.5f} {st[2]:.5f}, rotation (deg) {st[3]:.6f} {st[4]:.6f} {st[5]:.6f}"
+        )
+    else:
+        summary(f"alignment residual rms {al.rms:.2g} mm (exact: one constraint per degree of freedom)")
+
+
 @click.command()
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
@@ -126,6 +202,7 @@ def _print_analysis(a) -> None:
     show_default=True,
     help="With --nominal: refuse points farther than this from every face, mm.",
 )
+@_align_options
 @_moran_options
 @handle_errors
 def analyze(
@@ -133,6 +210,9 @@ def analyze(
     nominal,
     face_ids,
     max_distance,
+    align,
+    align_dof,
+    datums,
     weights,
     power,
     threshold,
@@ -152,11 +232,12 @@ def analyze(
     from ..processes import freeform as pf
 
     check_outputs(
-        {"measurements": measurements, "nominal": nominal, **companion_inputs(measurements)},
+        {"measurements": measurements, "nominal": nominal, "datums": datums, **companion_inputs(measurements)},
         {"--json": json_path, "--report": report_path},
     )
     if face_ids and nominal is None:
         raise click.UsageError("--face needs --nominal")
+    _check_align(nominal, align, align_dof, datums)
     with progress() as say:
         say(f"reading {measurements}")
         if nominal is not None:
@@ -168,6 +249,9 @@ def analyze(
                 max_distance=max_distance,
                 probe_radius=probe_radius,
                 units=units,
+                align=align,
+                align_dof=align_dof,
+                datums=datums,
             )
         else:
             meas = measure.read(measurements, probe_radius=probe_radius, units=units)
@@ -178,9 +262,12 @@ def analyze(
             progress=_said(say, "Moran's I"),
             **_moran_kw(weights, power, threshold, neighbors, alpha),
         )
+    if meas.alignment is not None:
+        _print_alignment(meas.alignment)
     _print_analysis(a)
     if json_path:
-        write_json(json_path, {"input": str(measurements), **a.as_dict()})
+        extra = {"alignment": meas.alignment.as_dict()} if meas.alignment is not None else {}
+        write_json(json_path, {"input": str(measurements), **extra, **a.as_dict()})
     if report_path:
         from ..report import freeform as rep
         from ..report import write

@@ -18,7 +18,10 @@ Readers (:func:`read` picks one from the file's contents):
 - QIF 3 results: point features with nominal ``Location``/``Normal`` and measured ``Location``.
 
 With a CAD nominal (:func:`against_cad`), actual points only (``x,y,z``) are projected onto the
-part's faces and the deviation is taken along the face's outward normal.
+part's faces and the deviation is taken along the face's outward normal. Before that the points may
+be aligned to the part (:class:`Alignment`): a least-squares best fit on the faces
+(:func:`align_to_cad`) or an RPS / 3-2-1 alignment on datum points (:func:`read_datums`,
+:func:`align_datums`).
 
 Nothing is guessed: NaN, zero or non-unit normals (|n| off 1 by more than 1e-3), duplicate ids and
 mismatched nominal/measured sets are errors naming the file and line.
@@ -26,18 +29,26 @@ mismatched nominal/measured sets are errors naming the file and line.
 
 from __future__ import annotations
 
+from ._align import DOF, Alignment, Datum, align_datums, align_to_cad, read_datums, rotation_matrix
 from ._cad import against_cad, read_actuals
 from ._core import Measurements, from_arrays
 from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
 
 __all__ = [
+    "DOF",
+    "Alignment",
+    "Datum",
     "Measurements",
     "against_cad",
+    "align_datums",
+    "align_to_cad",
     "from_arrays",
     "read",
     "read_actuals",
+    "read_datums",
     "read_csv",
     "read_dmis",
     "read_qif",
     "read_xyzijk",
+    "rotation_matrix",
 ]

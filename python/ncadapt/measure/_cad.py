@@ -3,6 +3,7 @@ selected faces (OpenCASCADE through OCP), the deviation along the face's outward
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -59,17 +60,34 @@ def against_cad(
     max_distance: float = 1.0,
     probe_radius: float = 0.0,
     units: str | None = None,
+    align: str = "none",
+    align_dof=None,
+    datums=None,
 ) -> Measurements:
     """Actual points of ``path`` (see :func:`read_actuals`) against the faces of the STEP/IGES file
     ``nominal`` (1-based ids, all by default): the nominal point is the nearest point of the nearest
     face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
     ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
     ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
-    the actual points' length unit (mm by default)."""
+    the actual points' length unit (mm by default).
+
+    ``align``: ``"none"`` (the measurement's frame is the CAD frame), ``"bestfit"``
+    (:func:`align_to_cad` on the selected faces, over the degrees of freedom ``align_dof``) or
+    ``"datums"`` (:func:`align_datums` on the TOML file ``datums``; the points it names by id are
+    alignment points and are left out of the deviations). The deviations are taken after the
+    alignment; the result's ``alignment`` holds it (the identity with ``"none"``, its ``rms`` that of
+    the deviations)."""
     from .. import cad
+    from ._align import MODES, align_datums, align_to_cad, identity, nearest_on_faces, read_datums
     from ._readers import UNITS_MM
 
     src = str(Path(path))
+    if align not in MODES:
+        raise InputError(f"--align must be one of {', '.join(MODES)}, got {align!r}", src)
+    if (align == "datums") != (datums is not None):
+        raise InputError("--align datums and a datums file go together", src)
+    if align == "none" and align_dof is not None:
+        raise InputError("--align-dof needs --align bestfit or datums", src)
     m, lines, ids = read_actuals(path)
     m = m * (UNITS_MM[units] if units else 1.0)
     all_faces = cad.faces(cad.read_shape(nominal))
@@ -79,22 +97,43 @@ def against_cad(
     bad = [f for f in chosen if not 1 <= f <= len(all_faces)]
     if bad:
         raise InputError(f"--face {bad[0]}: the CAD file has faces 1 to {len(all_faces)}", str(nominal))
-    best_d = np.full(len(m), np.inf)
-    p = np.full((len(m), 3), np.nan)
-    n = np.full((len(m), 3), np.nan)
-    face_of = np.zeros(len(m), dtype=int)
-    for f in chosen:
-        q, nn, d = cad.face_project(all_faces[f - 1], m)
-        better = d < best_d
-        best_d[better], p[better], n[better], face_of[better] = d[better], q[better], nn[better], f
+    selected = [all_faces[f - 1] for f in chosen]
+    alignment = None
+    if align == "bestfit":
+        alignment = align_to_cad(m, selected, dof=align_dof, probe_radius=probe_radius, source=src)
+    elif align == "datums":
+        rps = read_datums(datums)
+        named = [d for d in rps if d.label is not None]
+        if named and probe_radius:
+            raise InputError(
+                f"datum {named[0].name!r} names a measured point, which is a probe-tip centre with "
+                "--probe-radius; give the datum's surface coordinates as measured = [x, y, z]",
+                str(datums),
+                named[0].line,
+            )
+        alignment = align_datums(rps, points=m, ids=ids, dof=align_dof, source=str(datums))
+        if named:
+            keep = np.ones(len(m), bool)
+            keep[[ids.index(d.label) for d in named]] = False  # type: ignore[union-attr]
+            m, lines = m[keep], lines[keep]
+            ids = tuple(i for i, k in zip(ids, keep) if k)  # type: ignore[arg-type]
+            if not len(m):
+                raise InputError("every point is a datum: no point is left for the deviations", src)
+    if alignment is not None:
+        m = alignment.apply(m)
+    p, n, best_d, _ = nearest_on_faces(selected, m)
     far = np.flatnonzero(~(best_d <= max_distance))
     if len(far):
         i = int(far[0])
         how = "on no face" if not np.isfinite(best_d[i]) else f"{best_d[i]:.4g} mm from the nearest face"
         raise InputError(
-            f"{len(far)} point(s) farther than --max-distance {max_distance:g} mm from the CAD faces; "
-            f"this one is {how}",
+            f"{len(far)} point(s) farther than --max-distance {max_distance:g} mm from the CAD faces"
+            + (" after the alignment" if alignment is not None else "")
+            + f"; this one is {how}",
             src,
             int(lines[i]),
         )
-    return from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
+    out = from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
+    if alignment is None:
+        alignment = identity(float(np.sqrt(np.mean(out.deviation**2))))
+    return dataclasses.replace(out, alignment=alignment)

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..constants import COORD_MAX
 from ..errors import InputError
+
+if TYPE_CHECKING:
+    from ._align import Alignment
 
 # how far |n| may be from 1 before a normal is refused rather than silently rescaled
 NORMAL_TOL = 1e-3
@@ -19,7 +23,10 @@ class Measurements:
 
     ``measured`` (n, 3) is the measured surface point when the input gave one (after probe-radius
     compensation), else None. ``ids`` are the point names when the input had them. ``lines`` are
-    the 1-based input lines of the points, for messages.
+    the 1-based input lines of the points, for messages. ``alignment`` is the
+    :class:`~ncadapt.measure.Alignment` that moved the measured points onto a CAD nominal
+    (:func:`~ncadapt.measure.against_cad`; the identity when no alignment was asked for), None
+    without a CAD nominal.
     """
 
     nominal: np.ndarray
@@ -29,6 +36,7 @@ class Measurements:
     ids: tuple[str, ...] | None = None
     lines: np.ndarray | None = None
     source: str | None = None
+    alignment: Alignment | None = None
 
     def __len__(self) -> int:
         return len(self.deviation)
