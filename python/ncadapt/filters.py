@@ -8,14 +8,11 @@ Bilateral filter on scattered points (Tomasi & Manduchi 1998, as the freeform me
 Smoothing spline with MATLAB csaps' parameter p ∈ [0, 1] (p = 0: least-squares straight line,
 p = 1: interpolating natural cubic spline): it minimises p Σ (y_i − f(x_i))² + (1 − p) ∫ f''² dx.
 On a grid the 1-D smoother (de Boor, "A Practical Guide to Splines", ch. XIV, the algorithm csaps
-implements) is applied along each axis in turn (csaps on gridded data). Scattered points get the
-thin-plate smoothing spline of the same weighting, p Σ (y_i − f(x_i))² + (1 − p) J(f) with the
-thin-plate energy J = ∫∫ f_xx² + 2 f_xy² + f_yy²: scipy's :class:`~scipy.interpolate.RBFInterpolator`
-with the kernel r² log r minimises Σ (y_i − f(x_i))² + λ cᵀKc and J(f) = 8π cᵀKc for that kernel
-(its Green's function is r² log r / 8π; Wahba 1990, ch. 2), so λ = 8π (1 − p) / p. The two are
-different functionals (a tensor product of 1-D splines, a thin plate), so one p smooths alike but
-not identically: on grid points both leave residuals within about a third of each other
-(tests/test_freeform_stats.py).
+implements) is applied along each axis in turn (csaps on gridded data): with λ = (1 − p)/p and K
+the natural spline's roughness matrix its result is (I + λK_u)⁻¹ ⊗ (I + λK_v)⁻¹ y, the minimiser of
+‖y − F‖² + λFᵀ(K_u ⊗ I + I ⊗ K_v)F + λ²Fᵀ(K_u ⊗ K_v)F. Scattered points get that same functional
+on a node grid spaced like the points (:func:`smoothing_spline`), so one p means one thing: points
+on a grid given to either smoother give the same surface (tests/test_freeform_stats.py).
 
 The default p is csaps' automatic choice, p·trace(A) = (1 − p)·trace(B) in its linear system,
 which for sites h apart is p = 1 / (1 + h³ / 9) (:func:`csaps_auto_p`).
@@ -105,17 +102,121 @@ def smoothing_spline_grid(axes, values, p: float) -> np.ndarray:
     return out
 
 
-def smoothing_spline(points, values, p: float) -> np.ndarray:
-    """Thin-plate smoothing spline (λ = 8π (1 − p) / p, see the module docstring) of scattered
-    ``values`` at their points."""
-    from scipy.interpolate import RBFInterpolator
+def effective_spacing(points) -> float:
+    """The spacing s of a square grid holding as many points over the same area (mm, like the points).
 
-    if not 0 < p <= 1:
-        raise ValueError(f"p must be in (0, 1] for scattered points, got {p}")
+    The area is the points' convex hull grown by s/2 all round (area A + perimeter P · s/2 + s²), so
+    n s² = A + P s/2 + s²; a full n_x × n_y grid h apart gives back h exactly.
+    """
+    from scipy.spatial import ConvexHull
+
+    p = np.asarray(points, dtype=float)[:, :2]
+    n = len(p)
+    if n < 4:
+        raise InputError(f"an area needs at least 4 points, got {n}")
+    hull = ConvexHull(p)
+    a, perimeter = hull.volume, hull.area  # in 2-D scipy calls the area "volume", the perimeter "area"
+    return float((perimeter / 2 + np.sqrt(perimeter**2 / 4 + 4 * (n - 1) * a)) / (2 * (n - 1)))
+
+
+class _Axis:
+    """One axis of the node grid: sites x and the natural-spline roughness K = 6 Q r⁻¹ Qᵀ in parts."""
+
+    def __init__(self, x: np.ndarray):
+        from scipy.sparse.linalg import splu
+
+        self.x = x
+        n = len(x)
+        h = np.diff(x)
+        hi = 1.0 / h
+        self.qt = sparse.diags([hi[:-1], -(hi[:-1] + hi[1:]), hi[1:]], [0, 1, 2], shape=(n - 2, n)).tocsr()
+        r = sparse.diags([h[1:-1], 2 * (h[1:] + h[:-1]), h[1:-1]], [-1, 0, 1], shape=(n - 2, n - 2))
+        self.r = splu(r.tocsc())
+
+    def roughness(self, v: np.ndarray) -> np.ndarray:
+        """K v along the first axis of v: the ∫ f''² form of the natural spline through v."""
+        return 6 * (self.qt.T @ self.r.solve(np.asarray(self.qt @ v)))
+
+
+def _along(op, v: np.ndarray, axis: int) -> np.ndarray:
+    """op applied along ``axis`` of a 2-D array."""
+    return op(v) if axis == 0 else op(v.T).T
+
+
+def smoothing_spline(points, values, p: float) -> np.ndarray:
+    """The grid smoothing spline's functional (csaps' p) fitted to scattered ``values`` at their points.
+
+    Points (n, 2) scattered over an area get the tensor-product smoothing spline of the grid
+    smoother: on a node grid spaced like the points (:func:`effective_spacing` s, nodes g_u, g_v
+    apart over the points' bounding box) the node values F minimise
+
+        ‖y − B F‖² + α Fᵀ(K_u ⊗ I)F + β Fᵀ(I ⊗ K_v)F + αβ Fᵀ(K_u ⊗ K_v)F,   α = λ g_v / s, β = λ g_u / s,
+
+    with λ = (1 − p)/p, B the bilinear interpolation of the nodes at the points and K the natural
+    cubic spline's roughness along each node axis (∫ f''² = Fᵀ K F). On a grid (B = I, g = s) this
+    is (I + λK_u) ⊗ (I + λK_v) F = y, whose solution is csaps' gridded smoother S_u ⊗ S_v
+    (:func:`smoothing_spline_grid`) exactly; elsewhere the weights keep the balance of the data
+    term (n ≈ area / s²) against the roughness per unit area, so one p smooths scattered points as
+    it smooths a grid of the same density. Solved by conjugate gradients preconditioned by the grid
+    smoother itself (exact in one step on a grid). Returns the fitted surface at the points.
+    """
+    from scipy.sparse.linalg import LinearOperator, cg
+
+    if not 0 < p < 1:
+        raise ValueError(f"p must be in (0, 1) for scattered points, got {p}")
     pts = np.asarray(points, dtype=float)
     v = np.asarray(values, dtype=float).ravel()
-    if len(v) < 4:
-        raise InputError(f"a thin-plate spline needs at least 4 points, got {len(v)}")
-    neighbors = None if len(v) <= 3000 else 100
-    f = RBFInterpolator(pts, v, kernel="thin_plate_spline", smoothing=8 * np.pi * (1 - p) / p, neighbors=neighbors)
-    return f(pts)
+    if pts.ndim != 2 or pts.shape[1] < 2 or len(pts) != len(v):
+        raise ValueError(f"points must be (n, 2) with n = {len(v)}, got {pts.shape}")
+    if not np.isfinite(v).all():
+        raise InputError("the values to smooth must be finite")
+    s = effective_spacing(pts)
+    axes, loc = [], []
+    for k in range(2):
+        lo, hi = pts[:, k].min(), pts[:, k].max()
+        m = max(4, int(round((hi - lo) / s)) + 1)
+        x = np.linspace(lo, hi, m)
+        i = np.clip(np.searchsorted(x, pts[:, k], side="right") - 1, 0, m - 2)
+        t = (pts[:, k] - x[i]) / (x[i + 1] - x[i])
+        axes.append(_Axis(x))
+        loc.append((i, t))
+    nu, nv = len(axes[0].x), len(axes[1].x)
+    gu, gv = np.diff(axes[0].x[:2])[0], np.diff(axes[1].x[:2])[0]
+    lam = (1 - p) / p
+    alpha, beta = lam * gv / s, lam * gu / s
+    (iu, tu), (iv, tv) = loc
+    rows = np.repeat(np.arange(len(v)), 4)
+    cols = np.column_stack([iu * nv + iv, iu * nv + iv + 1, (iu + 1) * nv + iv, (iu + 1) * nv + iv + 1]).ravel()
+    w = np.column_stack([(1 - tu) * (1 - tv), (1 - tu) * tv, tu * (1 - tv), tu * tv]).ravel()
+    b = sparse.csr_matrix((w, (rows, cols)), shape=(len(v), nu * nv))
+    btb = (b.T @ b).tocsr()
+    su = _csaps_1d_operator(axes[0].x, 1 / (1 + alpha))
+    sv = _csaps_1d_operator(axes[1].x, 1 / (1 + beta))
+
+    def penalised(f):  # (I + αK_u) ⊗ (I + βK_v) f − f
+        g = f.reshape(nu, nv)
+        g = g + alpha * axes[0].roughness(g)
+        g = g + beta * _along(axes[1].roughness, g, 1)
+        return g.ravel() - f
+
+    def system(f):
+        f = np.asarray(f).ravel()
+        return btb @ f + penalised(f)
+
+    def precondition(r):  # the grid smoother: ((I + αK_u) ⊗ (I + βK_v))⁻¹
+        return (su @ np.asarray(r).reshape(nu, nv) @ sv.T).ravel()
+
+    n = nu * nv
+    rhs = b.T @ v
+    scale = np.linalg.norm(rhs) or 1.0
+    f, info = cg(
+        LinearOperator((n, n), system, dtype=float),
+        rhs / scale,
+        rtol=1e-8,
+        atol=0.0,
+        maxiter=20_000,
+        M=LinearOperator((n, n), precondition, dtype=float),
+    )
+    if info != 0:
+        raise InputError(f"the scattered smoothing spline did not converge ({info} iterations); smooth more")
+    return b @ f * scale

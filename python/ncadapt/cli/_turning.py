@@ -99,6 +99,12 @@ def plan(config, mode, output, radius_mode, css, tool, dialect, wear_weight, jso
             else ""
         )
     )
+    if d["entry"]:
+        step = 2 * (d["entry"][0]["x1_offset"] - d["profile"][0]["x1_offset"]) * 1000
+        summary(
+            f"  entry: the first {len(d['entry'])} revolutions with their own X (the entry transient: "
+            f"{step:+.2f} µm on the diameter over the stations' X at the first)"
+        )
     for b in d["baselines"]:
         summary(
             f"  baseline {b['name']}: feed {b['feed']:.3f}"

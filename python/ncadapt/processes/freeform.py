@@ -193,8 +193,9 @@ def decompose(
     """Split the deviations into a systematic part and random noise.
 
     ``bilateral``: σ_c defaults to 1.5 × the point spacing, σ_s to 3 × the estimated noise std.
-    ``spline``: p defaults to csaps' automatic choice for sites h apart (h the point spacing),
-    1 / (1 + h³ / 9) (:func:`ncadapt.filters.csaps_auto_p`).
+    ``spline``: p defaults to csaps' automatic choice for sites h apart, 1 / (1 + h³ / 9)
+    (:func:`ncadapt.filters.csaps_auto_p`), h the spacing of a square grid of the points' density
+    (:func:`ncadapt.filters.effective_spacing`: a grid's own spacing; 0.3655 on a 2.5 mm grid).
     ``auto``: the smoothest setting (largest σ_c, or smallest p) of a ladder whose random part
     passes the residual check (:attr:`ncadapt.stats.Noise.passed`: no significantly positive
     Moran's I or lag-1 correlation left, one-sided, at the analysis' ``alpha``). When no setting
@@ -213,7 +214,7 @@ def decompose(
         base = {"sigma_c": sigma_c or 1.5 * h, "sigma_s": sigma_s or 3 * sig}
         ladder = [dict(base, sigma_c=h * f) for f in (4.0, 3.0, 2.5, 2.0, 1.5, 1.0, 0.75)] if auto else [base]
     else:
-        p0 = p if p is not None else filters.csaps_auto_p(h)
+        p0 = p if p is not None else filters.csaps_auto_p(filters.effective_spacing(xy))
         ladder = [{"p": q} for q in (1e-4, 1e-3, 1e-2, 0.05, 0.1, 0.3, 0.6, 0.9)] if auto else [{"p": p0}]
 
     def split(par):

@@ -45,6 +45,9 @@ everywhere (least machining time for the least variation); where the stiff ends 
 at the largest feed, the deflection there (with the feedback) is the floor of the variation. The
 constant offset finally programmed is the mid-range of the deflection it gives (a fixed point: the
 offset changes the depth, so the deflection).
+**Entry**: the revolution that enters the stock has no axial deflection before it (S_p = S − a), so
+the first ``ENTRY_REVOLUTIONS`` revolutions get their own X, solved revolution by revolution
+(:meth:`Model.entry`, :func:`entry_revolutions`) to leave the steady state's radius error.
 
 Choosing one trajectory: dynamic programming over stations along x3 and the spindle speeds of
 the family, minimising machining time Σ Δx3 / (S_p n) (plus, optionally, tool wear by Taylor's law
@@ -53,6 +56,7 @@ V Tᵐ = C: wear cost w Σ Δt / T(V)) with |ΔS_p| and |Δn| per revolution bou
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -64,6 +68,10 @@ from .._io import read_text
 from ..errors import InputError, cut
 
 KGF = 9.80665  # N
+# revolutions at the entry into the stock given their own program offsets: the transient falls by
+# a factor of about 60 per revolution (a₋₁ = 0, then a_k − a_(k−1) shrinks by g₃ρt_p/(1 + g₃ρt_p)),
+# so after three it is below 10⁻⁵ of the first (docs/turning.md)
+ENTRY_REVOLUTIONS = 3
 __all__ = ["Config", "DIALECTS", "load", "Model", "Plan", "plan", "program"]
 
 
@@ -411,6 +419,11 @@ class Model:
         s = self.s_tool[None] + self.workpiece_compliance(x3)
         return s[:, 0, :] @ self.cfg.lam
 
+    def axial_compliance(self, x3) -> np.ndarray:
+        """g₃ = e₃ᵀ (S_X + S_Y) λ, m/N: the axial deflection x₃ + y₃ per newton of F₀."""
+        s = self.s_tool[None] + self.workpiece_compliance(x3)
+        return s[:, 2, :] @ self.cfg.lam
+
     # --- cutting
     def rho(self, rpm) -> np.ndarray:
         v = math.pi * self.cfg.diameter * np.asarray(rpm, float)  # m/min
@@ -483,6 +496,44 @@ class Model:
         rhs = f0 * np.concatenate([self.cfg.lam, self.cfg.lam])
         return np.linalg.solve(m, rhs)
 
+    def entry(self, x3, feed, rpm, error) -> tuple[np.ndarray, np.ndarray]:
+        """The program offsets o_k (m) for the revolutions that enter the stock at ``x3`` (m, where
+        each starts, at ``feed`` (m/rev) and ``rpm``, one per revolution or one for all) so that each
+        leaves the radius error ``error`` (m, the steady state's), and their radial deflections w_k (m).
+
+        The revolution that enters has no axial deflection before it, so its feed is
+        S_p = S + a_(k−1) − a_k with a₋₁ = 0 and a = g₃F₀ (eq. 5's S_p); its radius error
+        e = o + w fixes its depth, t = t_p − e (eq. 5), so F₀ = ρ(S_p t − ζS_p²) is one quadratic
+        in F₀: ρζg₃²F₀² + (1 + ρg₃(t − 2ζu))F₀ − ρ(ut − ζu²) = 0, u = S + a_(k−1), whose positive
+        root gives w = gF₀ and o = e − w. Where a_(k−1) = a_k (the steady state) this is the
+        nominal deflection at depth t."""
+        x3 = np.atleast_1d(np.asarray(x3, float))
+        e, s, n = (np.broadcast_to(np.asarray(v, float), x3.shape) for v in (error, feed, rpm))
+        g, g3, r = self.radial_compliance(x3), self.axial_compliance(x3), self.rho(n)
+        off, w = np.empty(len(x3)), np.empty(len(x3))
+        a_prev = 0.0
+        for k in range(len(x3)):
+            t, u = self.cfg.depth - e[k], s[k] + a_prev
+            qa = r[k] * self.zeta * g3[k] ** 2
+            qb = 1 + r[k] * g3[k] * (t - 2 * self.zeta * u)
+            qc = -r[k] * (u * t - self.zeta * u * u)
+            f0 = 2 * -qc / (qb + math.sqrt(qb * qb - 4 * qa * qc))  # the positive root, without cancellation
+            w[k] = g[k] * f0
+            off[k] = e[k] - w[k]
+            a_prev = g3[k] * f0
+        return off, w
+
+
+@dataclass(frozen=True)
+class Entry:
+    """The revolutions that enter the stock, each programmed as its own block (SI): where each
+    starts, its program offset (programmed radius − nominal final radius), feed and speed."""
+
+    x3: np.ndarray  # m
+    offset: np.ndarray  # m
+    feed: np.ndarray  # m/rev
+    rpm: np.ndarray
+
 
 @dataclass
 class Plan:
@@ -511,6 +562,7 @@ class Plan:
     family_feed: np.ndarray  # (speeds, stations) m/rev, NaN outside the bounds
     delta: float
     baselines: tuple = ()  # dicts: what a programmer without the model would run (see plan)
+    entry: Entry | None = None  # the entry revolutions' own X (None: the stations' from the first)
 
     def as_dict(self) -> dict:
         mm = 1e3
@@ -536,6 +588,12 @@ class Plan:
             "machining_time_same_error_s": self.machining_time_same_error_s if same else None,
             "deflection_target": self.delta * mm,
             "baselines": [dict(b) for b in self.baselines],
+            "entry": [
+                {"x3": float(a * mm), "x1_offset": float(o * mm), "feed": float(f * mm), "spindle_rpm": float(n)}
+                for a, o, f, n in (
+                    zip(self.entry.x3, self.entry.offset, self.entry.feed, self.entry.rpm) if self.entry else ()
+                )
+            ],
             "profile": [
                 {
                     "x3": float(a * mm),
@@ -550,9 +608,8 @@ class Plan:
 
     def constant_feed_plan(self) -> Plan:
         """The comparison: this plan's stations at the constant feed and speed, with the best
-        constant X offset (what a careful programmer without the model would get)."""
-        import dataclasses
-
+        constant X offset (what a careful programmer without the model would get; no entry
+        offsets)."""
         n = len(self.x3)
         return dataclasses.replace(
             self,
@@ -560,7 +617,35 @@ class Plan:
             feed=np.full(n, self.constant_feed),
             rpm=np.full(n, self.constant_rpm),
             x1_offset=np.full(n, -self.constant_offset),
+            entry=None,
         )
+
+
+def _block_at(x3, feed, rpm, a) -> tuple[float, float]:
+    """The feed and speed the program cuts at ``a`` with: the lower feed and the higher speed of
+    the two stations around it (see :func:`program`)."""
+    j = int(np.clip(np.searchsorted(x3, a, side="right"), 1, len(x3) - 1))
+    return float(min(feed[j - 1], feed[j])), float(max(rpm[j - 1], rpm[j]))
+
+
+def entry_revolutions(m: Model, x3, feed, rpm, offset, revolutions: int = ENTRY_REVOLUTIONS) -> Entry:
+    """The first ``revolutions`` revolutions of a trajectory (stations ``x3``, m, with their feed,
+    speed and program ``offset``) with the X that gives each the radius error the steady state
+    leaves there (:meth:`Model.entry`): each starts where the one before ends, at the feed and
+    speed of the block it is in."""
+    a, pos, feeds, rpms = float(x3[0]), [], [], []
+    for _ in range(revolutions):
+        if a >= x3[-1]:
+            break
+        f, n = _block_at(x3, feed, rpm, a)
+        pos.append(a)
+        feeds.append(f)
+        rpms.append(n)
+        a += f
+    e_x3, e_f, e_n = np.array(pos), np.array(feeds), np.array(rpms)
+    o_st = np.interp(e_x3, x3, offset)
+    off, _ = m.entry(e_x3, e_f, e_n, o_st + m.deflection(e_x3, e_f, e_n, o_st))
+    return Entry(e_x3, off, e_f, e_n)
 
 
 def _time(x3, feed, rpm) -> float:
@@ -699,6 +784,7 @@ def plan(
         family,
         delta,
         baselines(cfg, m, x3, n_bar),
+        entry_revolutions(m, x3, feed, rpm, x1),
     )
 
 
@@ -780,8 +866,10 @@ def program(
 
     The same in every dialect: spindle on, coolant on (M8), the approach with X clear of the bar
     first (a radial move away from the work is safe from any position), then Z to the start, a rapid
-    to 1 mm above the bar and a radial plunge at the smallest feed of the bounds; one G1 per station
-    with the plan's F (feed mode) or pre-distorted X (path mode), a block at the lower feed and the
+    to 1 mm above the bar and a radial plunge at the smallest feed of the bounds to the X of the
+    first entry revolution; one G1 per entry revolution (:attr:`Plan.entry`: each block ends
+    where the next revolution starts, at that revolution's X), then one G1 per station with the
+    plan's F (feed mode) or pre-distorted X (path mode), a block at the lower feed and the
     higher speed of its two stations, so the deflection stays at or under the target along it. Speed:
     G97 with an S word (rpm) where it changes, or, with ``css``, G96 with the limit (the largest
     speed of the bounds) and an S word (m/min) per block computed at the tool's own diameter at the
@@ -820,13 +908,29 @@ def program(
 
     dp = 3 if dialect == "fanuc" else 4  # Fanuc IS-B: least input increment 0.001 mm
 
-    def surface_speed(j, n):  # m/min at the tool's diameter at station j
-        return math.pi * 2 * (r_final + p.x1_offset[j] * mm) * n / 1000
+    # the cutting blocks (x3 at the end, m; program offset there, m; feed, m/rev; rpm): the entry
+    # revolutions, one block each, then one block per station, at the lower feed and the higher
+    # speed of its two stations
+    blocks = []
+    e = p.entry
+    x0 = e.offset[0] if e is not None else p.x1_offset[0]
+    after = p.x3[0]
+    if e is not None:  # block k ends where revolution k + 1 starts, at its X; the last at the stations' X
+        ends = e.x3 + e.feed
+        offs = np.append(e.offset[1:], np.interp(ends[-1], p.x3, p.x1_offset))
+        blocks += [(a, o, f, n) for a, o, f, n in zip(ends, offs, e.feed, e.rpm) if a < p.x3[-1]]
+        after = blocks[-1][0] if blocks else after
+    for j in range(1, len(p.x3)):
+        if p.x3[j] > after + 1e-9:
+            blocks.append((p.x3[j], p.x1_offset[j], min(p.feed[j - 1], p.feed[j]), max(p.rpm[j - 1], p.rpm[j])))
+
+    def surface_speed(o, n):  # m/min at the tool's diameter with program offset o
+        return math.pi * 2 * (r_final + o * mm) * n / 1000
 
     n0 = p.rpm[0]
     m3 = "M03" if dialect == "fanuc" else "M3"
     if css:
-        last_s = round(surface_speed(0, n0), 2)
+        last_s = round(surface_speed(x0, n0), 2)
         out.append(f"G96 D{limit:.0f} S{last_s:.2f} M3" if dialect == "linuxcnc" else f"G96 S{last_s:.2f} {m3}")
     else:
         last_s = round(n0)
@@ -837,12 +941,10 @@ def program(
         f"G0 Z{-p.x3[0] * mm:.{dp}f}",
         f"G0 X{xw(r_clear - 1):.{dp}f}",
     ]
-    out.append(f"G1 X{xw(r_final + p.x1_offset[0] * mm):.{dp}f} F{cfg.feed_bounds[0] * mm:.4f}")
-    for j in range(1, len(p.x3)):
-        f = min(p.feed[j - 1], p.feed[j])
-        n = max(p.rpm[j - 1], p.rpm[j])
-        words = [f"G1 X{xw(r_final + p.x1_offset[j] * mm):.{dp}f} Z{-p.x3[j] * mm:.{dp}f} F{f * mm:.4f}"]
-        sv = round(surface_speed(j, n), 2) if css else round(n)
+    out.append(f"G1 X{xw(r_final + x0 * mm):.{dp}f} F{cfg.feed_bounds[0] * mm:.4f}")
+    for a, o, f, n in blocks:
+        words = [f"G1 X{xw(r_final + o * mm):.{dp}f} Z{-a * mm:.{dp}f} F{f * mm:.4f}"]
+        sv = round(surface_speed(o, n), 2) if css else round(n)
         if sv != last_s:
             words.append(f"S{sv:.2f}" if css else f"S{sv:.0f}")
             last_s = sv
