@@ -26,14 +26,16 @@ mismatched nominal/measured sets are errors naming the file and line.
 
 from __future__ import annotations
 
-from ._cad import against_cad, read_actuals
+from ._cad import CadProjection, against_cad, project_on_cad, read_actuals
 from ._core import Measurements, from_arrays
 from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
 
 __all__ = [
+    "CadProjection",
     "Measurements",
     "against_cad",
     "from_arrays",
+    "project_on_cad",
     "read",
     "read_actuals",
     "read_csv",

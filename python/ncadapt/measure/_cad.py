@@ -3,6 +3,7 @@ selected faces (OpenCASCADE through OCP), the deviation along the face's outward
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,72 @@ def _is_number(s: str) -> bool:
     return True
 
 
+@dataclass(frozen=True)
+class CadProjection:
+    """Measured points on a CAD part: the measurements (nominal = the nearest face point), the
+    face each point fell on (``face`` (n,) 1-based ids), its (u, v) parameters there (``uv`` (n, 2),
+    the face's own units: mm, or rad for an angle) and the part (``shape``, its ``faces`` in
+    OpenCASCADE's order; ``chosen`` the ids the points were projected onto)."""
+
+    measurements: Measurements
+    face: np.ndarray
+    uv: np.ndarray
+    shape: object
+    faces: tuple
+    chosen: tuple[int, ...]
+    nominal: str
+
+
+def project_on_cad(
+    path,
+    nominal,
+    *,
+    faces: list[int] | None = None,
+    max_distance: float = 1.0,
+    probe_radius: float = 0.0,
+    units: str | None = None,
+) -> CadProjection:
+    """:func:`against_cad` with the face and the (u, v) of each point and the part itself."""
+    from .. import cad
+    from ._readers import UNITS_MM
+
+    src = str(Path(path))
+    m, lines, ids = read_actuals(path)
+    m = m * (UNITS_MM[units] if units else 1.0)
+    shape = cad.read_shape(nominal)
+    all_faces = cad.faces(shape)
+    if not all_faces:
+        raise InputError("no faces in the CAD file", str(nominal))
+    chosen = faces or list(range(1, len(all_faces) + 1))
+    bad = [f for f in chosen if not 1 <= f <= len(all_faces)]
+    if bad:
+        raise InputError(f"--face {bad[0]}: the CAD file has faces 1 to {len(all_faces)}", str(nominal))
+    best_d = np.full(len(m), np.inf)
+    uv = np.full((len(m), 2), np.nan)
+    face_of = np.zeros(len(m), dtype=int)
+    for f in chosen:
+        q, d = cad.face_parameters(all_faces[f - 1], m)
+        better = d < best_d
+        best_d[better], uv[better], face_of[better] = d[better], q[better], f
+    far = np.flatnonzero(~(best_d <= max_distance))
+    if len(far):
+        i = int(far[0])
+        how = "on no face" if not np.isfinite(best_d[i]) else f"{best_d[i]:.4g} mm from the nearest face"
+        raise InputError(
+            f"{len(far)} point(s) farther than --max-distance {max_distance:g} mm from the CAD faces; "
+            f"this one is {how}",
+            src,
+            int(lines[i]),
+        )
+    p = np.empty((len(m), 3))
+    n = np.empty((len(m), 3))
+    for f in np.unique(face_of):
+        k = face_of == f
+        p[k], n[k], _ = cad.face_evaluate(all_faces[f - 1], uv[k, 0], uv[k, 1])
+    meas = from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
+    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal))
+
+
 def against_cad(
     path,
     nominal,
@@ -66,35 +133,6 @@ def against_cad(
     ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
     ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
     the actual points' length unit (mm by default)."""
-    from .. import cad
-    from ._readers import UNITS_MM
-
-    src = str(Path(path))
-    m, lines, ids = read_actuals(path)
-    m = m * (UNITS_MM[units] if units else 1.0)
-    all_faces = cad.faces(cad.read_shape(nominal))
-    if not all_faces:
-        raise InputError("no faces in the CAD file", str(nominal))
-    chosen = faces or list(range(1, len(all_faces) + 1))
-    bad = [f for f in chosen if not 1 <= f <= len(all_faces)]
-    if bad:
-        raise InputError(f"--face {bad[0]}: the CAD file has faces 1 to {len(all_faces)}", str(nominal))
-    best_d = np.full(len(m), np.inf)
-    p = np.full((len(m), 3), np.nan)
-    n = np.full((len(m), 3), np.nan)
-    face_of = np.zeros(len(m), dtype=int)
-    for f in chosen:
-        q, nn, d = cad.face_project(all_faces[f - 1], m)
-        better = d < best_d
-        best_d[better], p[better], n[better], face_of[better] = d[better], q[better], nn[better], f
-    far = np.flatnonzero(~(best_d <= max_distance))
-    if len(far):
-        i = int(far[0])
-        how = "on no face" if not np.isfinite(best_d[i]) else f"{best_d[i]:.4g} mm from the nearest face"
-        raise InputError(
-            f"{len(far)} point(s) farther than --max-distance {max_distance:g} mm from the CAD faces; "
-            f"this one is {how}",
-            src,
-            int(lines[i]),
-        )
-    return from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
+    return project_on_cad(
+        path, nominal, faces=faces, max_distance=max_distance, probe_radius=probe_radius, units=units
+    ).measurements
