@@ -325,3 +325,40 @@ def test_refusals(tmp_path, monkeypatch):
         assert r.exit_code == 2 and match in r.output, r.output
     r = CliRunner().invoke(main, ["compensate", str(csv), "--nominal", str(step), "--part", str(tmp_path / "p.igs")])
     assert r.exit_code == 2 and "written as STEP" in r.output
+
+
+def test_a_program_is_corrected_from_a_cad_nominal(tmp_path):
+    # a plate z = 5 (one face, 60 x 40 mm) measured with E = 20 µm + 0.5 µm/mm along x; a program
+    # along y = 20 at the surface is moved by −E along +z (the face normal) where it was measured
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
+
+    step = _write_step(
+        BRepBuilderAPI_MakeFace(gp_Pln(gp_Pnt(0, 0, 5), gp_Dir(0, 0, 1)), 0.0, 60.0, 0.0, 40.0).Face(),
+        tmp_path / "plate.step",
+    )
+    x, y = np.meshgrid(np.arange(2.0, 58.1, 1.5), np.arange(2.0, 38.1, 1.5), indexing="ij")
+    x, y = x.ravel(), y.ravel()
+    e = 0.02 + 0.0005 * x
+    csv = _csv(
+        tmp_path / "a.csv", np.column_stack([x, y, 5.0 + e + NOISE * np.random.default_rng(3).normal(size=x.size)])
+    )
+    prog = tmp_path / "p.ngc"
+    prog.write_text(
+        "G21 G90\nG0 X10 Y20 Z10\nG1 Z5 F500\n" + "".join(f"G1 X{k}\n" for k in range(12, 51, 2)) + "G0 Z10\nM2\n"
+    )
+    out = tmp_path / "out.ngc"
+    r = CliRunner().invoke(
+        main,
+        ["compensate", str(csv), "--nominal", str(step), "--program", str(prog), "-o", str(out), "--tool-radius", "0"],
+    )
+    assert r.exit_code == 0, r.output
+    zs = {}
+    for line in out.read_text().splitlines():
+        if line.startswith("G1 X"):
+            parts = dict((w[0], float(w[1:])) for w in line.split()[1:])
+            if "Z" in parts:
+                zs[parts["X"]] = parts["Z"]
+    xs = np.array(sorted(zs))
+    assert len(xs) >= 10
+    np.testing.assert_allclose([zs[k] for k in xs], 5.0 - (0.02 + 0.0005 * xs), atol=0.003)
