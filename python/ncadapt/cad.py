@@ -71,11 +71,17 @@ def face(surface):
 
 def write(surface, path: str | os.PathLike) -> Path:
     """Write the surface as STEP (``.step``/``.stp``) or IGES (``.igs``/``.iges``), atomically."""
+    return write_shape(face(surface), path)
+
+
+def write_shape(shape, path: str | os.PathLike) -> Path:
+    """Write an OpenCASCADE shape (a face, a compound of faces, a solid) as STEP (AP214) or IGES,
+    atomically, in millimetres."""
     p = Path(path)
     kind = FORMATS.get(p.suffix.lower())
     if kind is None:
         raise InputError(f"unknown CAD format {p.suffix!r}; use .step, .stp, .igs or .iges", str(p))
-    f = face(surface)
+    f = shape
     with atomic_path(p) as tmp:
         if kind == "step":
             from OCP.IFSelect import IFSelect_RetDone
@@ -251,15 +257,17 @@ def face_evaluate(face, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return pts, nrm, kap
 
 
-def face_inside(face, u, v, tol: float = 1e-7) -> np.ndarray:
-    """Whether each (u, v) lies strictly inside the face (its trimming wires; on an edge: no)."""
+def face_inside(face, u, v, tol: float = 1e-7, *, edges: bool = False) -> np.ndarray:
+    """Whether each (u, v) lies strictly inside the face (its trimming wires; on an edge: no, or
+    yes with ``edges``)."""
     from OCP.BRepClass import BRepClass_FaceClassifier
     from OCP.gp import gp_Pnt2d
-    from OCP.TopAbs import TopAbs_IN
+    from OCP.TopAbs import TopAbs_IN, TopAbs_ON
 
+    keep = (TopAbs_IN, TopAbs_ON) if edges else (TopAbs_IN,)
     out = np.zeros(np.size(u), dtype=bool)
     for k, (a, b) in enumerate(zip(np.ravel(u), np.ravel(v))):
-        out[k] = BRepClass_FaceClassifier(face, gp_Pnt2d(float(a), float(b)), tol).State() == TopAbs_IN
+        out[k] = BRepClass_FaceClassifier(face, gp_Pnt2d(float(a), float(b)), tol).State() in keep
     return out
 
 
@@ -288,6 +296,14 @@ def face_edge_points(face, per_edge: int = 2000) -> np.ndarray:
 def face_project(face, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The nearest points (n, 3) of a face's surface to ``points``, the face's outward normals
     there (n, 3) and the distances (n,), mm."""
+    uv, dist = face_parameters(face, points)
+    p, n, _ = face_evaluate(face, uv[:, 0], uv[:, 1])
+    return p, n, dist
+
+
+def face_parameters(face, points) -> tuple[np.ndarray, np.ndarray]:
+    """The (u, v) (n, 2) of the nearest points of a face's surface to ``points`` and the distances
+    (n,), mm; inf where the nearest point is off the face's trimmed area (or none was found)."""
     from OCP.BRep import BRep_Tool
     from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
     from OCP.gp import gp_Pnt
@@ -302,10 +318,9 @@ def face_project(face, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             a, b = proj.LowerDistanceParameters()
             uv[k] = (a, b)
             dist[k] = proj.LowerDistance()
-    p, n, _ = face_evaluate(face, uv[:, 0], uv[:, 1])
     inside = face_inside(face, uv[:, 0], uv[:, 1])
     dist[~inside] = np.inf
-    return p, n, dist
+    return uv, dist
 
 
 def face_top(face) -> float:
@@ -316,3 +331,197 @@ def face_top(face) -> float:
     box = Bnd_Box()
     BRepBndLib.Add_s(face, box)
     return float(box.CornerMax().Z())
+
+
+# ------------------------------------------------------------------- rebuilding a face in a part
+def face_rebuild_problem(face) -> str | None:
+    """Why a face cannot be rebuilt as one B-spline surface over its (u, v) box (None when it can):
+    a face closed on itself (a seam edge: a full turn of a cylinder) or with a degenerate edge
+    (a pole or an apex) has no such surface that keeps its trimming curves."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    ex = TopExp_Explorer(face, TopAbs_EDGE)
+    while ex.More():
+        e = TopoDS.Edge(ex.Current())
+        ex.Next()
+        if BRep_Tool.IsClosed_s(e, face):
+            return "it closes on itself (a seam edge, a full turn): split it into faces that do not"
+        if BRep_Tool.Degenerated_s(e):
+            return "it has a degenerate edge (a pole or an apex of its surface)"
+    return None
+
+
+def face_on_surface(face, surface):
+    """A face on the B-spline surface of ``surface`` (a :class:`~ncadapt.surfaces.Surface` over
+    the same (u, v) as ``face``), bounded by ``face``'s own trimming curves in (u, v) and oriented
+    as ``face``: the same face with its surface replaced."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepLib import BRepLib
+    from OCP.BRepTools import BRepTools, BRepTools_WireExplorer
+    from OCP.ShapeFix import ShapeFix_Face
+    from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    g = _occ_surface(surface)
+    fwd = TopoDS.Face(face.Oriented(TopAbs_FORWARD))
+    outer = BRepTools.OuterWire_s(fwd)
+
+    def rebuilt(wire):
+        mw = BRepBuilderAPI_MakeWire()
+        ex = BRepTools_WireExplorer(wire, fwd)
+        while ex.More():
+            e = ex.Current()
+            ex.Next()
+            c2d = BRep_Tool.CurveOnSurface_s(e, fwd, 0.0, 0.0)
+            a, b = BRep_Tool.Range_s(e, fwd)
+            ne = BRepBuilderAPI_MakeEdge(c2d, g, a, b).Edge()
+            BRepLib.BuildCurves3d_s(ne, 1e-7)
+            mw.Add(TopoDS.Edge(ne.Reversed()) if e.Orientation() == TopAbs_REVERSED else ne)
+        if not mw.IsDone():
+            raise ValueError("the face's trimming curves do not form a wire on the new surface")
+        return mw.Wire()
+
+    mf = BRepBuilderAPI_MakeFace(g, rebuilt(outer), True)
+    ex = TopExp_Explorer(fwd, TopAbs_WIRE)
+    while ex.More():
+        w = TopoDS.Wire(ex.Current())
+        ex.Next()
+        if not w.IsSame(outer):
+            mf.Add(rebuilt(w))
+    fix = ShapeFix_Face(mf.Face())
+    fix.Perform()
+    out = TopoDS.Face(fix.Face())
+    return TopoDS.Face(out.Reversed()) if face.Orientation() == TopAbs_REVERSED else out
+
+
+def is_valid(shape) -> bool:
+    """OpenCASCADE's own check of a shape's topology and geometry (``BRepCheck_Analyzer``)."""
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    return bool(BRepCheck_Analyzer(shape).IsValid())
+
+
+def _count(shape, kind) -> int:
+    from OCP.TopExp import TopExp_Explorer
+
+    n, ex = 0, TopExp_Explorer(shape, kind)
+    while ex.More():
+        n += 1
+        ex.Next()
+    return n
+
+
+def max_tolerance(shape) -> float:
+    """The largest tolerance of an edge or a vertex of a shape, mm: the widest gap it papers over."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    t = 0.0
+    for kind, get, tol in (
+        (TopAbs_EDGE, TopoDS.Edge, BRep_Tool.Tolerance_s),
+        (TopAbs_VERTEX, TopoDS.Vertex, BRep_Tool.Tolerance_s),
+    ):
+        ex = TopExp_Explorer(shape, kind)
+        while ex.More():
+            t = max(t, float(tol(get(ex.Current()))))
+            ex.Next()
+    return t
+
+
+def replace_faces(shape, new: dict[int, object], tolerance: float):
+    """``shape`` with its faces ``new`` {1-based id: face} put in place of the old ones, and the
+    part sewn again (``BRepBuilderAPI_Sewing`` at ``tolerance`` mm: an edge of a moved face and
+    the unmoved neighbour's edge are one edge again, its tolerance the gap between them).
+
+    Returns (the new shape, {id: the face in it}). A solid stays a solid (its shell closed and
+    oriented outward); the caller checks the result with :func:`is_valid`."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeSolid, BRepBuilderAPI_Sewing
+    from OCP.BRepLib import BRepLib
+    from OCP.TopAbs import TopAbs_SHELL, TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    old = faces(shape)
+    if len(old) == 1:
+        return new[1], dict(new)
+    sew = BRepBuilderAPI_Sewing(tolerance)
+    for i, f in enumerate(old, 1):
+        sew.Add(new.get(i, f))
+    sew.Perform()
+    out = sew.SewedShape()
+    placed = {i: (sew.Modified(f) if sew.IsModified(f) else f) for i, f in new.items()}
+    if _count(shape, TopAbs_SOLID) == 1 and _count(out, TopAbs_SHELL) == 1:
+        ex = TopExp_Explorer(out, TopAbs_SHELL)
+        solid = BRepBuilderAPI_MakeSolid(TopoDS.Shell(ex.Current())).Solid()
+        BRepLib.OrientClosedSolid_s(solid)
+        out = solid
+    placed = {i: _same_face(out, f) for i, f in placed.items()}
+    return out, placed
+
+
+def _same_face(shape, face):
+    """The face of ``shape`` that is ``face`` (the same TShape), in its orientation there."""
+    for f in faces(shape):
+        if f.IsSame(face):
+            return f
+    raise ValueError("a replaced face is missing from the sewn part")
+
+
+def part_summary(shape) -> dict:
+    """Counts of solids, shells and faces and whether every shell is closed."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+
+    closed = True
+    ex = TopExp_Explorer(shape, TopAbs_SHELL)
+    while ex.More():
+        closed = closed and bool(BRep_Tool.IsClosed_s(ex.Current()))
+        ex.Next()
+    return {
+        "solids": _count(shape, TopAbs_SOLID),
+        "shells": _count(shape, TopAbs_SHELL),
+        "faces": _count(shape, TopAbs_FACE),
+        "closed": closed,
+    }
+
+
+def compound(shapes):
+    """One compound of several shapes (the compensated faces written alone)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TopoDS import TopoDS_Compound
+
+    b, c = BRep_Builder(), TopoDS_Compound()
+    b.MakeCompound(c)
+    for s in shapes:
+        b.Add(c, s)
+    return c
+
+
+def signed_distances(face, points, normals) -> tuple[np.ndarray, np.ndarray]:
+    """From each point along its unit normal to the nearest point of ``face``'s surface: the signed
+    distance (n,) mm (> 0 along the normal) and the distance across the normal (n,) mm."""
+    from OCP.BRep import BRep_Tool
+    from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
+    from OCP.gp import gp_Pnt
+
+    s = BRep_Tool.Surface_s(face)
+    q = np.asarray(points, float).reshape(-1, 3)
+    nn = np.asarray(normals, float).reshape(-1, 3)
+    near = np.full((len(q), 3), np.nan)
+    for k, (x, y, z) in enumerate(q):
+        proj = GeomAPI_ProjectPointOnSurf(gp_Pnt(float(x), float(y), float(z)), s)
+        if proj.NbPoints() > 0:
+            r = proj.NearestPoint()
+            near[k] = (r.X(), r.Y(), r.Z())
+    d = near - q
+    along = np.einsum("ij,ij->i", d, nn)
+    across = np.linalg.norm(d - along[:, None] * nn, axis=1)
+    return along, across

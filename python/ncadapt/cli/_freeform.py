@@ -147,6 +147,34 @@ def _align_options(f):
     return f
 
 
+def _cad_options(f):
+    opts = [
+        click.option(
+            "--nominal",
+            type=click.Path(exists=True, dir_okay=False, path_type=Path),
+            help="The CAD model (STEP or IGES) as the nominal: MEASUREMENTS are actual points (CSV x,y,z), each "
+            "projected onto the nearest selected face, the deviation along its outward normal.",
+        ),
+        click.option(
+            "--face",
+            "face_ids",
+            type=click.IntRange(min=1),
+            multiple=True,
+            help="A face of --nominal (1-based, OpenCASCADE's order; repeat for several; default: all).",
+        ),
+        click.option(
+            "--max-distance",
+            type=FiniteRange(0, constants.COORD_MAX, min_open=True),
+            default=1.0,
+            show_default=True,
+            help="With --nominal: refuse points farther than this from every face, mm.",
+        ),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
 def _check_align(nominal, align, align_dof, datums) -> None:
     """Usage errors of the options of :func:`_align_options`."""
     if align != "none" and nominal is None:
@@ -358,6 +386,14 @@ def analyze(
 @click.option(
     "--points-out", type=click.Path(dir_okay=False, path_type=Path), help="CSV of the parts and compensated points."
 )
+@_cad_options
+@click.option(
+    "--part",
+    "part_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="With --nominal: the whole compensated part, .step/.stp (the compensated faces in place of the nominal "
+    "ones; --surface then writes those faces alone).",
+)
 @_moran_options
 @handle_errors
 def compensate(
@@ -377,6 +413,10 @@ def compensate(
     outside,
     surface_path,
     points_out,
+    nominal,
+    face_ids,
+    max_distance,
+    part_path,
     weights,
     power,
     threshold,
@@ -388,10 +428,9 @@ def compensate(
     report_path,
 ):
     """Separate the systematic error of MEASUREMENTS and mirror it: corrected NC program, STEP/IGES
-    surface and compensated points."""
+    surface and compensated points; with --nominal, the compensated CAD part."""
     from .. import cad, measure
     from .. import nc as ncmod
-    from .._io import atomic_write
     from ..processes import freeform as pf
 
     if (program is None) != (output is None):
@@ -399,21 +438,61 @@ def compensate(
     from ..probing import companion_inputs
 
     check_outputs(
-        {"measurements": measurements, "input program": program, **companion_inputs(measurements)},
+        {
+            "measurements": measurements,
+            "input program": program,
+            "nominal": nominal,
+            **companion_inputs(measurements),
+        },
         {
             "-o": output,
             "--surface": surface_path,
+            "--part": part_path,
             "--points-out": points_out,
             "--json": json_path,
             "--report": report_path,
         },
     )
+    if nominal is None:
+        for name, given in (("--face", face_ids), ("--part", part_path)):
+            if given:
+                raise click.UsageError(f"{name} needs --nominal")
+    else:
+        for name, given in (("--extent", extent), ("--extrapolate-nominal", extrapolate_nominal)):
+            if given:
+                raise click.UsageError(
+                    f"{name} is for a nominal rebuilt from the measured points; with --nominal the CAD faces "
+                    "are compensated over their whole extent"
+                )
+        if part_path is not None and cad.FORMATS.get(part_path.suffix.lower()) != "step":
+            raise click.UsageError(f"--part {part_path}: the part is written as STEP (.step or .stp)")
     if program is not None and tool_radius is None:
         raise click.UsageError(
             "--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
             "programmed point is the contact point); the correction is evaluated at the tool's tip"
         )
     kw = _moran_kw(weights, power, threshold, neighbors, alpha)
+    if nominal is not None:
+        return _compensate_cad(
+            measurements,
+            nominal,
+            list(face_ids) or None,
+            max_distance,
+            dict(method=method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, border=border),
+            kw,
+            probe_radius=probe_radius,
+            units=units,
+            program=program,
+            output=output,
+            tool_radius=tool_radius,
+            limit=limit,
+            outside=outside,
+            surface_path=surface_path,
+            part_path=part_path,
+            points_out=points_out,
+            json_path=json_path,
+            report_path=report_path,
+        )
     with progress() as say:
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius, units=units)
@@ -443,32 +522,14 @@ def compensate(
             cad.write(c.compensated, surface_path)
     _print_analysis(a)
     sysd = d.as_dict()
-    summary(
-        f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
-        f"({d.method}); random part: std {d.noise.std:.4f} mm"
-    )
-    if not a.systematic:
-        echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
-    if d.auto is not None and not d.auto["passed"]:
-        summary(
-            f"warning: --auto found no {d.method} setting whose random part is free of systematic error; "
-            f"the default setting ({', '.join(f'{k} {v:g}' for k, v in d.auto['setting'].items())}) is used"
-        )
-    elif not d.noise.passed:
-        summary(
-            f"warning: the random part still holds systematic error (Moran z {d.noise.moran_z:.2f}, lag-1 "
-            f"r {d.noise.lag1_r:.2f}); smooth less, or try --auto"
-        )
+    _print_decomposition(a, d)
     if corr is not None:
         summary(
             f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
             f"max displacement {corr.max_displacement:.4f} mm"
         )
     if points_out is not None:
-        rows = ["x,y,z,deviation,systematic,random,cx,cy,cz"]
-        for q, e, s, r, cp in zip(meas.nominal, meas.deviation, d.systematic, d.random, c.points_compensated):
-            rows.append(",".join(f"{v:.6f}" for v in (*q, e, s, r, *cp)))
-        atomic_write(points_out, ("\n".join(rows) + "\n").encode())
+        _write_points(points_out, meas, d, c.points_compensated)
     payload = {"input": str(measurements), **a.as_dict(), **sysd}
     if ext.max_distance > 0:
         payload["extrapolation"] = ext.as_dict()
@@ -499,3 +560,147 @@ def compensate(
                 extrapolation=ext if ext.max_distance > 0 else None,
             ),
         )
+
+
+def _print_decomposition(a, d) -> None:
+    sysd = d.as_dict()
+    summary(
+        f"systematic part: rms {sysd['systematic']['rms']:.4f} mm, max |.| {sysd['systematic']['max_abs']:.4f} mm "
+        f"({d.method}); random part: std {d.noise.std:.4f} mm"
+    )
+    if not a.systematic:
+        echo_err("warning: the deviations are not significantly systematic; compensating them mostly moves noise")
+    if d.auto is not None and not d.auto["passed"]:
+        setting = d.auto["setting"]
+        said = ", ".join(f"{k} {v:g}" for k, v in setting.items()) if isinstance(setting, dict) else "by face"
+        summary(
+            f"warning: --auto found no {d.method} setting whose random part is free of systematic error; "
+            f"the default setting ({said}) is used"
+        )
+    elif not d.noise.passed:
+        summary(
+            f"warning: the random part still holds systematic error (Moran z {d.noise.moran_z:.2f}, lag-1 "
+            f"r {d.noise.lag1_r:.2f}); smooth less, or try --auto"
+        )
+
+
+def _write_points(path, meas, d, compensated, faces=None) -> None:
+    from .._io import atomic_write
+
+    rows = ["x,y,z,deviation,systematic,random,cx,cy,cz" + (",face" if faces is not None else "")]
+    for k, (q, e, s, r, cp) in enumerate(zip(meas.nominal, meas.deviation, d.systematic, d.random, compensated)):
+        rows.append(",".join(f"{v:.6f}" for v in (*q, e, s, r, *cp)) + (f",{faces[k]}" if faces is not None else ""))
+    atomic_write(path, ("\n".join(rows) + "\n").encode())
+
+
+def _compensate_cad(
+    measurements,
+    nominal,
+    face_ids,
+    max_distance,
+    options,
+    kw,
+    *,
+    probe_radius,
+    units,
+    program,
+    output,
+    tool_radius,
+    limit,
+    outside,
+    surface_path,
+    part_path,
+    points_out,
+    json_path,
+    report_path,
+):
+    """``compensate --nominal``: each measured face compensated in its own (u, v) and put in the part."""
+    from .. import cad, measure
+    from .. import nc as ncmod
+    from ..processes import freeform as pf
+
+    with progress() as say:
+        say(f"reading {measurements} and projecting onto {nominal}")
+        proj = measure.project_on_cad(
+            measurements, nominal, faces=face_ids, max_distance=max_distance, probe_radius=probe_radius, units=units
+        )
+        meas = proj.measurements
+        a = pf.analyze(meas, coords=meas.nominal, progress=_said(say, "Moran's I"), **kw)
+        say("separating systematic and random error on each face, rebuilding the part")
+        pc = pf.compensate_cad(proj, **options, **kw)
+        d = pf.part_decomposition(pc, meas, **kw)
+        corr = None
+        if program is not None:
+            say(f"correcting {program}")
+            corr = ncmod.read(program).correct_to(
+                output, pc.field(tool_radius or 0.0, outside), limit=limit, progress=say
+            )
+        if surface_path is not None:
+            say(f"writing {surface_path}")
+            cad.write_shape(pc.surfaces(), surface_path)
+        if part_path is not None:
+            say(f"writing {part_path}")
+            cad.write_shape(pc.part, part_path)
+    _print_analysis(a)
+    _print_decomposition(a, d)
+    for f in pc.faces:
+        fd = f.as_dict()
+        summary(
+            f"face {f.face}: {fd['n_points']:,} points, systematic rms {fd['systematic']['rms']:.4f} mm, random std "
+            f"{fd['random']['std']:.4f} mm; measured hull {fd['cover']:.0%} of the face, the rest ({_border_said(f)}) "
+            f"up to {fd['border']['max_abs_df']:.4f} mm"
+        )
+    summary(
+        f"part: {pc.summary['faces']} faces, {len(pc.faces)} compensated, valid (BRepCheck); the compensated faces lie "
+        f"-dF from the nominal within {pc.check_error * 1000:.3f} µm at {pc.check_points} points; widest edge gap "
+        f"{pc.max_tolerance:.4f} mm"
+    )
+    if corr is not None:
+        summary(
+            f"{program} -> {output}: {corr.blocks_changed:,} blocks changed, {corr.lines_added:,} lines added, "
+            f"max displacement {corr.max_displacement:.4f} mm"
+        )
+    if points_out is not None:
+        _write_points(points_out, meas, d, meas.nominal - d.systematic[:, None] * meas.normal, proj.face)
+    payload = {
+        "input": str(measurements),
+        "nominal": str(nominal),
+        **a.as_dict(),
+        **d.as_dict(),
+        "faces": pc.ids,
+        "by_face": [f.as_dict() for f in pc.faces],
+        "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
+    }
+    if corr is not None:
+        payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
+    if json_path:
+        write_json(json_path, payload)
+    if report_path:
+        from ..report import freeform as rep
+        from ..report import write
+
+        write(
+            report_path,
+            rep.render(
+                title=f"Freeform compensation: {measurements.name} on {nominal.name}",
+                analysis=a,
+                decomposition=d,
+                xy=pf.face_layout(pc, len(meas)),
+                names=("u (mm along the face)", "v (mm along the face)"),
+                deviation=meas.deviation,
+                files={
+                    k: str(v)
+                    for k, v in (
+                        ("program", output),
+                        ("surface", surface_path),
+                        ("part", part_path),
+                        ("points", points_out),
+                    )
+                    if v
+                },
+            ),
+        )
+
+
+def _border_said(f) -> str:
+    return "dF held at the nearest measured value" if f.border == "hold" else "dF extrapolated by cubics"

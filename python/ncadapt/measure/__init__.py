@@ -30,19 +30,21 @@ mismatched nominal/measured sets are errors naming the file and line.
 from __future__ import annotations
 
 from ._align import DOF, Alignment, Datum, align_datums, align_to_cad, read_datums, rotation_matrix
-from ._cad import against_cad, read_actuals
+from ._cad import CadProjection, against_cad, project_on_cad, read_actuals
 from ._core import Measurements, from_arrays
 from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
 
 __all__ = [
     "DOF",
     "Alignment",
+    "CadProjection",
     "Datum",
     "Measurements",
     "against_cad",
     "align_datums",
     "align_to_cad",
     "from_arrays",
+    "project_on_cad",
     "read",
     "read_actuals",
     "read_datums",

@@ -4,6 +4,7 @@ selected faces (OpenCASCADE through OCP), the deviation along the face's outward
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +53,23 @@ def _is_number(s: str) -> bool:
     return True
 
 
-def against_cad(
+@dataclass(frozen=True)
+class CadProjection:
+    """Measured points on a CAD part: the measurements (nominal = the nearest face point), the
+    face each point fell on (``face`` (n,) 1-based ids), its (u, v) parameters there (``uv`` (n, 2),
+    the face's own units: mm, or rad for an angle) and the part (``shape``, its ``faces`` in
+    OpenCASCADE's order; ``chosen`` the ids the points were projected onto)."""
+
+    measurements: Measurements
+    face: np.ndarray
+    uv: np.ndarray
+    shape: object
+    faces: tuple
+    chosen: tuple[int, ...]
+    nominal: str
+
+
+def project_on_cad(
     path,
     nominal,
     *,
@@ -63,22 +80,10 @@ def against_cad(
     align: str = "none",
     align_dof=None,
     datums=None,
-) -> Measurements:
-    """Actual points of ``path`` (see :func:`read_actuals`) against the faces of the STEP/IGES file
-    ``nominal`` (1-based ids, all by default): the nominal point is the nearest point of the nearest
-    face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
-    ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
-    ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
-    the actual points' length unit (mm by default).
-
-    ``align``: ``"none"`` (the measurement's frame is the CAD frame), ``"bestfit"``
-    (:func:`align_to_cad` on the selected faces, over the degrees of freedom ``align_dof``) or
-    ``"datums"`` (:func:`align_datums` on the TOML file ``datums``; the points it names by id are
-    alignment points and are left out of the deviations). The deviations are taken after the
-    alignment; the result's ``alignment`` holds it (the identity with ``"none"``, its ``rms`` that of
-    the deviations)."""
+) -> CadProjection:
+    """:func:`against_cad` with the face and the (u, v) of each point and the part itself."""
     from .. import cad
-    from ._align import MODES, align_datums, align_to_cad, identity, nearest_on_faces, read_datums
+    from ._align import MODES, align_datums, align_to_cad, identity, read_datums
     from ._readers import UNITS_MM
 
     src = str(Path(path))
@@ -90,7 +95,8 @@ def against_cad(
         raise InputError("--align-dof needs --align bestfit or datums", src)
     m, lines, ids = read_actuals(path)
     m = m * (UNITS_MM[units] if units else 1.0)
-    all_faces = cad.faces(cad.read_shape(nominal))
+    shape = cad.read_shape(nominal)
+    all_faces = cad.faces(shape)
     if not all_faces:
         raise InputError("no faces in the CAD file", str(nominal))
     chosen = faces or list(range(1, len(all_faces) + 1))
@@ -121,7 +127,13 @@ def against_cad(
                 raise InputError("every point is a datum: no point is left for the deviations", src)
     if alignment is not None:
         m = alignment.apply(m)
-    p, n, best_d, _ = nearest_on_faces(selected, m)
+    best_d = np.full(len(m), np.inf)
+    uv = np.full((len(m), 2), np.nan)
+    face_of = np.zeros(len(m), dtype=int)
+    for f in chosen:
+        q, d = cad.face_parameters(all_faces[f - 1], m)
+        better = d < best_d
+        best_d[better], uv[better], face_of[better] = d[better], q[better], f
     far = np.flatnonzero(~(best_d <= max_distance))
     if len(far):
         i = int(far[0])
@@ -133,7 +145,51 @@ def against_cad(
             src,
             int(lines[i]),
         )
-    out = from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
+    p = np.empty((len(m), 3))
+    n = np.empty((len(m), 3))
+    for f in np.unique(face_of):
+        k = face_of == f
+        p[k], n[k], _ = cad.face_evaluate(all_faces[f - 1], uv[k, 0], uv[k, 1])
+    meas = from_arrays(p, n, measured=m, ids=ids, lines=lines, source=src, probe_radius=probe_radius)
     if alignment is None:
-        alignment = identity(float(np.sqrt(np.mean(out.deviation**2))))
-    return dataclasses.replace(out, alignment=alignment)
+        alignment = identity(float(np.sqrt(np.mean(meas.deviation**2))))
+    meas = dataclasses.replace(meas, alignment=alignment)
+    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal))
+
+
+def against_cad(
+    path,
+    nominal,
+    *,
+    faces: list[int] | None = None,
+    max_distance: float = 1.0,
+    probe_radius: float = 0.0,
+    units: str | None = None,
+    align: str = "none",
+    align_dof=None,
+    datums=None,
+) -> Measurements:
+    """Actual points of ``path`` (see :func:`read_actuals`) against the faces of the STEP/IGES file
+    ``nominal`` (1-based ids, all by default): the nominal point is the nearest point of the nearest
+    face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
+    ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
+    ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
+    the actual points' length unit (mm by default).
+
+    ``align``: ``"none"`` (the measurement's frame is the CAD frame), ``"bestfit"``
+    (:func:`align_to_cad` on the selected faces, over the degrees of freedom ``align_dof``) or
+    ``"datums"`` (:func:`align_datums` on the TOML file ``datums``; the points it names by id are
+    alignment points and are left out of the deviations). The deviations are taken after the
+    alignment; the result's ``alignment`` holds it (the identity with ``"none"``, its ``rms`` that of
+    the deviations)."""
+    return project_on_cad(
+        path,
+        nominal,
+        faces=faces,
+        max_distance=max_distance,
+        probe_radius=probe_radius,
+        units=units,
+        align=align,
+        align_dof=align_dof,
+        datums=datums,
+    ).measurements

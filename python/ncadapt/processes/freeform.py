@@ -105,15 +105,21 @@ def frame_of(meas: Measurements, frame: Frame | None = None) -> Frame:
 
 
 def analyze(
-    meas: Measurements, *, frame: Frame | None = None, progress=None, alpha: float = 0.05, **moran_options
+    meas: Measurements,
+    *,
+    frame: Frame | None = None,
+    coords=None,
+    progress=None,
+    alpha: float = 0.05,
+    **moran_options,
 ) -> Analysis:
     """Deviation statistics, Moran's I of the deviations over (u, v) (options of
     :func:`ncadapt.stats.moran`; ``progress(done, total)`` follows its all-pairs weights) and the
-    offset test; the verdict at ``alpha`` (each test at α/2)."""
+    offset test; the verdict at ``alpha`` (each test at α/2). ``coords`` (n, d) mm: the points'
+    coordinates for Moran's I instead of the frame's (u, v) (a CAD face's own, :func:`face_coordinates`)."""
     meas.require(MIN_POINTS, "the analysis")
-    m = stats.moran(
-        frame_of(meas, frame).uv(meas.nominal), meas.deviation, progress=progress, alpha=alpha / 2, **moran_options
-    )
+    xy = frame_of(meas, frame).uv(meas.nominal) if coords is None else np.asarray(coords, float)
+    m = stats.moran(xy, meas.deviation, progress=progress, alpha=alpha / 2, **moran_options)
     o = stats.offset(meas.deviation)
     return Analysis(len(meas), m, stats.summary(meas.deviation), o, stats.verdict(m, o, alpha))
 
@@ -188,6 +194,7 @@ def decompose(
     p: float | None = None,
     auto: bool = False,
     frame: Frame | None = None,
+    coords=None,
     **moran_options,
 ) -> Decomposition:
     """Split the deviations into a systematic part and random noise.
@@ -200,11 +207,13 @@ def decompose(
     passes the residual check (:attr:`ncadapt.stats.Noise.passed`: no significantly positive
     Moran's I or lag-1 correlation left, one-sided, at the analysis' ``alpha``). When no setting
     passes, the default setting is used and ``auto["passed"]`` is False: the caller must say so.
+    ``coords`` (n, 2) mm: the points' coordinates instead of the frame's (u, v) (a CAD face's own,
+    :func:`face_coordinates`).
     """
     if method not in FILTERS:
         raise ValueError(f"filter must be one of {FILTERS}, got {method!r}")
     meas.require(MIN_POINTS, "the decomposition")
-    xy = frame_of(meas, frame).uv(meas.nominal)
+    xy = frame_of(meas, frame).uv(meas.nominal) if coords is None else np.asarray(coords, float)
     if method == "spline":
         require_area(xy, meas.source)
     e = meas.deviation
@@ -291,19 +300,10 @@ class FramedField:
         return f"FramedField({self.frame.names}, {self.inner!r})"
 
 
-def compensate(
-    surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None, border: str = BORDER
-) -> Compensation:
-    """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface.
-
-    The surface's (u, v) must be the frame's (u, v) of the measured points (as
-    :func:`fit_height_surface` makes it with the same frame)."""
+def _linear_onto(xy, values, U, V) -> np.ndarray:
+    """``values`` at scattered ``xy`` interpolated linearly at (U, V); NaN outside their hull."""
     from scipy.interpolate import LinearNDInterpolator
 
-    sysv = np.asarray(systematic, float)
-    frame = frame_of(meas, frame)
-    xy = frame.uv(meas.nominal)
-    U, V = np.meshgrid(surface.u, surface.v, indexing="ij")
     grid = _on_grid(xy)
     if grid is not None:
         # a measured grid: bilinear on it (a triangulation of a regular grid is degenerate and slow:
@@ -312,12 +312,25 @@ def compensate(
 
         xs, ys, flat = grid
         g = np.empty(len(xs) * len(ys))
-        g[flat] = sysv
-        inside = RegularGridInterpolator((xs, ys), g.reshape(len(xs), len(ys)), bounds_error=False, fill_value=np.nan)(
+        g[flat] = values
+        return RegularGridInterpolator((xs, ys), g.reshape(len(xs), len(ys)), bounds_error=False, fill_value=np.nan)(
             np.stack([U, V], axis=-1)
         )
-    else:
-        inside = LinearNDInterpolator(xy, sysv)(U, V)
+    return LinearNDInterpolator(xy, values)(U, V)
+
+
+def compensate(
+    surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None, border: str = BORDER
+) -> Compensation:
+    """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface.
+
+    The surface's (u, v) must be the frame's (u, v) of the measured points (as
+    :func:`fit_height_surface` makes it with the same frame)."""
+    sysv = np.asarray(systematic, float)
+    frame = frame_of(meas, frame)
+    xy = frame.uv(meas.nominal)
+    U, V = np.meshgrid(surface.u, surface.v, indexing="ij")
+    inside = _linear_onto(xy, sysv, U, V)
     known = np.isfinite(inside)
     if known.sum() < 16:
         raise InputError("the measured points cover fewer than 16 nodes of the surface grid", meas.source)
@@ -409,3 +422,345 @@ def fit_height_surface(points, extent=None, step: float | None = None, frame: Fr
         )
     Z = extrapolate_border(xs, ys, np.where(known, zi, 0.0), known)
     return Surface(xs, ys, frame.to_world(X, Y, Z))
+
+
+# ------------------------------------------------------------------------ a CAD part as nominal
+# least share of a face's area (its grid nodes inside the trimmed face) that the measured points'
+# hull must cover for the face to be compensated: beyond it dF is only carried (hold or cubic)
+MIN_COVER = 0.25
+# the B-spline rebuilt through the grid must reproduce P − dF·n at the grid cells' centres within
+# this, mm (else the grid is refined, up to MAX_FACE_NODES a side)
+REBUILD_TOL = 1e-4
+# the compensated face in the part must lie −dF from the nominal face along its normal within
+# this at the checked points, mm (the issue's 1 µm)
+CHECK_TOL = 1e-3
+# nodes a side of a face's compensation grid: fewest and most
+MIN_FACE_NODES, MAX_FACE_NODES = 8, 400
+# points of each face at which the written part is checked against −dF
+CHECK_POINTS = 400
+
+
+def face_scale(face) -> tuple[float, float]:
+    """Mean lengths |∂P/∂u|, |∂P/∂v| (mm per unit of u, v) over a face's (u, v) box (chords of a
+    17 × 17 grid): the face's (u, v) times these are near millimetres along the surface — exactly
+    for a plane or a cylinder, whose lengths are constant."""
+    from .. import cad
+
+    u0, u1, v0, v1 = cad.face_uv_bounds(face)
+    U, V = np.meshgrid(np.linspace(u0, u1, 17), np.linspace(v0, v1, 17), indexing="ij")
+    P = cad.face_evaluate(face, U, V)[0].reshape(17, 17, 3)
+    lu = np.linalg.norm(np.diff(P, axis=0), axis=2).sum(axis=0).mean() / (u1 - u0)
+    lv = np.linalg.norm(np.diff(P, axis=1), axis=2).sum(axis=1).mean() / (v1 - v0)
+    return float(lu), float(lv)
+
+
+@dataclass(frozen=True)
+class FaceCompensation:
+    """One face of a CAD part: its points' statistics and decomposition in its own (u, v) scaled
+    to mm (``scale``, :func:`face_scale`), and the compensated surface over its whole (u, v) box.
+
+    ``u``, ``v``: the grid axes in the face's parameters; ``df_grid`` (nu, nv) mm the systematic
+    error there (inside the measured hull: interpolated linearly; outside: carried by ``border``);
+    ``measured_region``, ``in_face`` (nu, nv) bool; ``compensated`` the B-spline surface through
+    P − dF·n (the face's (u, v)); ``rebuild_error`` mm its largest distance from P − dF·n at the
+    grid cells' centres, dF there the bicubic spline through ``df_grid`` (:meth:`df`)."""
+
+    face: int
+    points: np.ndarray  # indices of the face's measurements
+    coords: np.ndarray  # (k, 2) mm: their (u, v) times ``scale``
+    scale: tuple[float, float]
+    analysis: Analysis
+    decomposition: Decomposition
+    u: np.ndarray
+    v: np.ndarray
+    df_grid: np.ndarray
+    measured_region: np.ndarray
+    in_face: np.ndarray
+    normal: np.ndarray  # (nu, nv, 3) outward normals of the nominal face
+    compensated: Surface
+    rebuild_error: float
+    border: str
+
+    def df(self, u, v) -> np.ndarray:
+        """dF (mm) at face parameters (u, v): the bicubic spline through ``df_grid``."""
+        from scipy.interpolate import RectBivariateSpline
+
+        return RectBivariateSpline(self.u, self.v, self.df_grid, kx=3, ky=3, s=0).ev(u, v)
+
+    @property
+    def border_strip(self) -> np.ndarray:
+        """(nu, nv) bool: grid nodes on the face outside the measured hull (dF extrapolated there)."""
+        return self.in_face & ~self.measured_region
+
+    def as_dict(self) -> dict:
+        strip = self.border_strip
+        return {
+            "face": self.face,
+            "n_points": len(self.points),
+            "scale": list(self.scale),
+            **self.analysis.as_dict(),
+            **self.decomposition.as_dict(),
+            "grid": [len(self.u), len(self.v)],
+            "cover": float((self.measured_region & self.in_face).sum() / self.in_face.sum()),
+            "border": {
+                "mode": self.border,
+                "area_fraction": float(strip.sum() / self.in_face.sum()),
+                "max_abs_df": float(np.abs(self.df_grid[strip]).max()) if strip.any() else 0.0,
+            },
+            "rebuild_error": self.rebuild_error,
+        }
+
+
+@dataclass(frozen=True)
+class PartCompensation:
+    """The compensated CAD part: ``part`` (an OpenCASCADE shape, valid by ``BRepCheck_Analyzer``)
+    with each compensated face (``placed`` {face id: face in the part}) replacing the nominal one;
+    ``check_error`` mm: the largest |distance along the normal from the nominal face to the
+    compensated one + dF| at ``check_points`` points of the faces; ``max_tolerance`` mm: the
+    widest gap an edge of the sewn part covers (an unmoved neighbour's edge against a moved face's)."""
+
+    faces: tuple[FaceCompensation, ...]
+    part: object
+    placed: dict
+    summary: dict
+    max_tolerance: float
+    check_error: float
+    check_points: int
+    nominal_faces: dict  # {face id: the nominal face}
+
+    @property
+    def ids(self) -> list[int]:
+        return [f.face for f in self.faces]
+
+    def surfaces(self):
+        """The compensated faces alone (one compound)."""
+        from .. import cad
+
+        return cad.compound([self.placed[i] for i in self.ids])
+
+    def as_dict(self) -> dict:
+        return {
+            **self.summary,
+            "valid": True,
+            "max_tolerance": self.max_tolerance,
+            "check": {"max_error": self.check_error, "points": self.check_points, "tolerance": CHECK_TOL},
+        }
+
+    def field(self, tool_radius: float = 0.0, outside: str = "error") -> FramedField:
+        """The NC correction field −dF·n at the tool-tip positions of a ball-end tool of radius R
+        (as :meth:`Compensation.field`) over the compensated faces' grid nodes on the faces, in the
+        (u, v) of the frame their normals fit (:meth:`~ncadapt.surfaces.Frame.fit`: a part seen
+        along one direction)."""
+        from .. import cad
+
+        pts, nrm, dfs = [], [], []
+        for f in self.faces:
+            k = f.in_face
+            U, V = np.meshgrid(f.u, f.v, indexing="ij")
+            p = cad.face_evaluate(self.nominal_faces[f.face], U[k], V[k])[0]
+            pts.append(p)
+            nrm.append(f.normal[k])
+            dfs.append(f.df_grid[k])
+        p, n, df = np.concatenate(pts), np.concatenate(nrm), np.concatenate(dfs)
+        frame = Frame.fit(n, "the compensated faces")
+        tip = p + tool_radius * n - tool_radius * np.array([0.0, 0.0, 1.0])
+        return FramedField(
+            frame, ScatteredField(frame.local(tip), -df[:, None] * n, outside=outside, source="compensation")
+        )
+
+
+def compensate_cad(
+    proj,
+    method: str = "bilateral",
+    *,
+    sigma_c: float | None = None,
+    sigma_s: float | None = None,
+    p: float | None = None,
+    auto: bool = False,
+    border: str = BORDER,
+    alpha: float = 0.05,
+    **moran_options,
+) -> PartCompensation:
+    """Compensate the faces of a CAD part that the measured points fell on
+    (:func:`ncadapt.measure.project_on_cad`), each in its own (u, v), and put them in the part.
+
+    For each face: the points' (u, v) scaled to mm (:func:`face_scale`) carry the analysis and the
+    decomposition (:func:`analyze`, :func:`decompose`); the systematic part is interpolated onto a
+    grid over the face's whole (u, v) box and carried beyond the measured hull by ``border``
+    (:func:`~ncadapt.surfaces.extrapolate_border`: dF is extrapolated, never the nominal, which is
+    the face's own surface); the compensated face P_c = P − dF·n is a bicubic B-spline through the
+    grid, bounded by the face's own trimming curves, and replaces the face in the part
+    (:func:`ncadapt.cad.replace_faces`).
+
+    Refused (:class:`~ncadapt.InputError`, nothing made): a chosen face without points, a face with
+    fewer than :data:`MIN_POINTS` points or whose points' hull covers less than :data:`MIN_COVER` of
+    it, a face that cannot be rebuilt as one B-spline (a seam or a pole) or whose B-spline misses
+    P − dF·n by more than :data:`REBUILD_TOL`, a part not valid after the replacement, or a
+    compensated face off −dF by more than :data:`CHECK_TOL` in the part.
+    """
+    from .. import cad
+
+    meas = proj.measurements
+    src = proj.nominal
+    used = [int(f) for f in np.unique(proj.face)]
+    if len(proj.chosen) < len(proj.faces):
+        empty = [f for f in proj.chosen if f not in used]
+        if empty:
+            raise InputError(f"face {empty[0]}: no measured point is nearest to it", src)
+    out = []
+    for fid in used:
+        face = proj.faces[fid - 1]
+        idx = np.flatnonzero(proj.face == fid)
+        if len(idx) < MIN_POINTS:
+            raise InputError(
+                f"face {fid}: {len(idx)} measured point(s) fell on it, the decomposition needs at least "
+                f"{MIN_POINTS}; measure it or leave it out with --face",
+                src,
+            )
+        why = cad.face_rebuild_problem(face)
+        if why:
+            raise InputError(f"face {fid} cannot be rebuilt as a compensated B-spline: {why}", src)
+        scale = face_scale(face)
+        xy = proj.uv[idx] * scale
+        sub = _subset(meas, idx)
+        require_area(xy, f"{meas.source} (face {fid})")
+        a = analyze(sub, coords=xy, alpha=alpha, **moran_options)
+        d = decompose(
+            sub, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, coords=xy, alpha=alpha, **moran_options
+        )
+        out.append(_face_grid(fid, face, idx, scale, xy, a, d, border, src))
+    new = {f.face: cad.face_on_surface(proj.faces[f.face - 1], f.compensated) for f in out}
+    before = cad.part_summary(proj.shape)
+    tol = 2.0 * max(float(np.abs(f.df_grid).max()) for f in out) + 1e-3
+    try:
+        part, placed = cad.replace_faces(proj.shape, new, tol)
+    except ValueError as e:
+        raise InputError(f"the compensated faces could not be put in the part: {e}", src) from None
+    after = cad.part_summary(part)
+    if not cad.is_valid(part):
+        raise InputError("the part is not valid after the faces were replaced (BRepCheck_Analyzer)", src)
+    if (after["solids"], after["faces"]) != (before["solids"], before["faces"]) or (
+        before["closed"] and not after["closed"]
+    ):
+        raise InputError(
+            f"the part changed its topology when the faces were replaced ({before} before, {after} after)", src
+        )
+    worst, count = 0.0, 0
+    for f in out:
+        off, k = _check_face(f, proj.faces[f.face - 1], placed[f.face])
+        if off > CHECK_TOL:
+            raise InputError(
+                f"face {f.face}: in the rebuilt part the compensated face is {off * 1000:.2f} µm off −dF (more "
+                f"than {CHECK_TOL * 1000:g} µm)",
+                src,
+            )
+        worst, count = max(worst, off), count + k
+    nominal = {f.face: proj.faces[f.face - 1] for f in out}
+    return PartCompensation(tuple(out), part, placed, after, cad.max_tolerance(part), worst, count, nominal)
+
+
+def _subset(meas: Measurements, idx) -> Measurements:
+    from dataclasses import replace
+
+    return replace(
+        meas,
+        nominal=meas.nominal[idx],
+        normal=meas.normal[idx],
+        deviation=meas.deviation[idx],
+        measured=None if meas.measured is None else meas.measured[idx],
+        ids=None if meas.ids is None else tuple(meas.ids[i] for i in idx),
+        lines=None if meas.lines is None else meas.lines[idx],
+    )
+
+
+def _face_grid(fid, face, idx, scale, xy, a, d, border, src) -> FaceCompensation:
+    """The compensation grid of one face, refined until its B-spline reproduces P − dF·n."""
+    from scipy.interpolate import RectBivariateSpline
+
+    from .. import cad
+
+    u0, u1, v0, v1 = cad.face_uv_bounds(face)
+    h = spacing(xy)
+    nu, nv = (
+        int(np.clip(round(span / h) + 1, MIN_FACE_NODES, MAX_FACE_NODES))
+        for span in ((u1 - u0) * scale[0], (v1 - v0) * scale[1])
+    )
+    while True:
+        u, v = np.linspace(u0, u1, nu), np.linspace(v0, v1, nv)
+        U, V = np.meshgrid(u, v, indexing="ij")
+        P, N, _ = cad.face_evaluate(face, U, V)
+        P, N = P.reshape(nu, nv, 3), N.reshape(nu, nv, 3)
+        if not np.isfinite(N).all():
+            raise InputError(f"face {fid} has points without a normal (a singular point of its surface)", src)
+        inside = _linear_onto(xy, d.systematic, U * scale[0], V * scale[1])
+        known = np.isfinite(inside)
+        in_face = cad.face_inside(face, U, V, edges=True).reshape(nu, nv)
+        cover = float((known & in_face).sum() / max(in_face.sum(), 1))
+        if cover < MIN_COVER or known.sum() < 16:
+            raise InputError(
+                f"face {fid}: the measured points cover {cover:.0%} of it (their hull in its (u, v)); at least "
+                f"{MIN_COVER:.0%} is needed to compensate it",
+                src,
+            )
+        df = extrapolate_border(u, v, np.where(known, inside, 0.0), known, mode=border)
+        surf = Surface(u, v, P - df[..., None] * N)
+        # the B-spline against P − dF·n at the cells' centres, dF the spline through the grid
+        um, vm = np.meshgrid((u[1:] + u[:-1]) / 2, (v[1:] + v[:-1]) / 2, indexing="ij")
+        pm, nm, _ = cad.face_evaluate(face, um, vm)
+        dfm = RectBivariateSpline(u, v, df, kx=3, ky=3, s=0).ev(um.ravel(), vm.ravel())
+        err = float(np.linalg.norm(surf.point(um.ravel(), vm.ravel()) - (pm - dfm[:, None] * nm), axis=1).max())
+        if err <= REBUILD_TOL:
+            break
+        if max(nu, nv) >= MAX_FACE_NODES:
+            raise InputError(
+                f"face {fid} cannot be rebuilt faithfully: the B-spline through a {nu} x {nv} grid is "
+                f"{err * 1000:.2f} µm off P − dF·n (more than {REBUILD_TOL * 1000:g} µm)",
+                src,
+            )
+        nu, nv = min(2 * nu - 1, MAX_FACE_NODES), min(2 * nv - 1, MAX_FACE_NODES)
+    return FaceCompensation(fid, idx, xy, scale, a, d, u, v, df, known, in_face, N, surf, err, border)
+
+
+def _check_face(f: FaceCompensation, nominal_face, placed) -> tuple[float, int]:
+    """The largest |distance from the nominal face to the compensated face in the part, along the
+    nominal normal, + dF| at up to :data:`CHECK_POINTS` points of the face (grid cells' centres)."""
+    from .. import cad
+
+    um, vm = np.meshgrid((f.u[1:] + f.u[:-1]) / 2, (f.v[1:] + f.v[:-1]) / 2, indexing="ij")
+    um, vm = um.ravel(), vm.ravel()
+    keep = cad.face_inside(nominal_face, um, vm)
+    um, vm = um[keep], vm[keep]
+    step = max(1, len(um) // CHECK_POINTS)
+    um, vm = um[::step], vm[::step]
+    p, n, _ = cad.face_evaluate(nominal_face, um, vm)
+    along, _ = cad.signed_distances(placed, p, n)
+    return float(np.abs(along + f.df(um, vm)).max()), len(um)
+
+
+def part_decomposition(pc: PartCompensation, meas: Measurements, **moran_options) -> Decomposition:
+    """The faces' decompositions as one over all the points (in the measurements' order): its
+    random part checked over the points' 3-D positions; ``parameters`` those of the face when
+    there is one, else the filter and ``by_face`` (see each face's own)."""
+    s = np.zeros(len(meas))
+    for f in pc.faces:
+        s[f.points] = f.decomposition.systematic
+    r = meas.deviation - s
+    first = pc.faces[0].decomposition
+    params = dict(first.parameters) if len(pc.faces) == 1 else {"auto": first.parameters.get("auto", False)}
+    nz = stats.noise(meas.nominal, r, **moran_options)
+    auto = first.auto if len(pc.faces) == 1 else None
+    if len(pc.faces) > 1 and first.auto is not None:
+        auto = {"passed": all(f.decomposition.auto["passed"] for f in pc.faces), "setting": "by_face"}  # type: ignore[index]
+    return Decomposition(s, r, first.method, params, nz, auto)
+
+
+def face_layout(pc: PartCompensation, n: int, gap: float = 5.0) -> np.ndarray:
+    """(n, 2) mm: each point's face (u, v) scaled to mm (``coords``), the faces side by side
+    along u, ``gap`` mm apart (for plots)."""
+    out = np.zeros((n, 2))
+    shift = 0.0
+    for f in pc.faces:
+        xy = f.coords - [f.coords[:, 0].min() - shift, 0.0]
+        out[f.points] = xy
+        shift = float(xy[:, 0].max()) + gap
+    return out
