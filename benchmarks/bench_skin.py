@@ -23,13 +23,13 @@ from ncadapt.sim import skin as sk
 
 def main() -> int:
     print(f"machine: {machine()}")
-    print("\nthe paper's protocol (noise-free, 13 checkpoints): max |error| after the second compensation")
+    print("\nthe paper's protocol (noise-free, 2 x 13 checkpoints): max |error| after the second compensation")
     m, s = sk.protocol("mirror")["max_abs_error"], sk.protocol("secant")["max_abs_error"]
     print(
         f"   mirror {m * 1000:.3f} µm   secant {s * 1000:.4f} µm   ratio {m / s:.0f} x   (paper: 32.2 vs 0.213 µm, 151 x)"
     )
 
-    print("\n20 seeds, 5 µm noise, 45 ms dead time: |error| at the 13 checkpoints (mean over seeds)")
+    print("\n20 seeds, 5 µm noise, 45 ms dead time: |error| at the 2 x 13 checkpoints (mean over seeds)")
     rows, runs = {}, {}
     for method in ("none", "mirror", "secant", "kalman"):
         rs = runs[method] = [sk.run(method, seed=k).as_dict() for k in range(1, 21)]
@@ -56,7 +56,7 @@ def main() -> int:
     )
 
     print(
-        "\ntestbed variants, 20 seeds, 5 µm noise: max / mean |error| at the 13 checkpoints (mean over seeds),"
+        "\ntestbed variants, 20 seeds, 5 µm noise: max / mean |error| at the 2 x 13 checkpoints (mean over seeds),"
         " worst seed's max"
     )
     for variant in sk.VARIANTS:

