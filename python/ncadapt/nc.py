@@ -300,6 +300,7 @@ class Program:
         keep_unsupported: bool = False,
         clearance: float | None = None,
         progress: Callable[[str], None] | None = None,
+        expand_cycles: bool = False,
     ) -> Program:
         """Apply a correction field and return the corrected program.
 
@@ -320,6 +321,12 @@ class Program:
             Copy blocks with unsupported constructs unchanged instead of refusing the program.
         clearance : float, mm, optional
             Report uncorrected rapids that end below this Z inside the field's area.
+        progress : callable, optional
+            Called with a message for each piece of the program.
+        expand_cycles : bool
+            Write canned cycles (G73, G81-G83, G85, G89) as the G0/G1 moves (and G4 dwells)
+            LinuxCNC makes of them. By default a cycle block stays a cycle block, each hole moved
+            by the displacement at its bottom: X and Y by its x and y, Z and R by its z.
 
         Returns
         -------
@@ -342,6 +349,7 @@ class Program:
             clearance=clearance,
             progress=progress,
             keep_points=True,
+            expand_cycles=expand_cycles,
         )
         # the corrected program is parsed only if it is used as a program again
         result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True)
