@@ -130,7 +130,7 @@ def _retract_modes(p):
     p.hole("G98 G81", 2.0, 2.0, z=-2.0, r=3.0, tail="F100")
     p.hole("G99", 8.0, 2.0)
     p.hole("", 14.0, 5.0)
-    p.hole("G98", 20.0, 5.0)
+    p.hole("G98", 20.0, 5.0, r=2.5)
     p.raw("G80")
     p.raw("G0 X24 Y8 Z0.5")
     p.hole("G99 G81", 26.0, 8.0, z=-1.0, r=2.0)
@@ -376,3 +376,48 @@ def test_correct_command_on_a_file(tmp_path, expand):
         _canon(tmp_path, out.read_bytes(), "o.ngc")
     r = CliRunner().invoke(main, ["correct", "--help"])
     assert "--expand-cycles" in r.output
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_corpus_comparison_follows_cycles(tmp_path, case):
+    """The corpus check (tests/corpus.py) reads the engine's cycle moves: the corrected program
+    matches, the input left as written does not."""
+    import corpus
+
+    src = _program(case)
+    prog = nc.parse(src)
+    field = _field_of(_wavy)
+    inp = _canon(tmp_path, src, "in.ngc")
+    displaced, lines, start_known, why = corpus.displaced_moves(prog, inp)
+    assert why is None, why
+
+    def compare(out):
+        return corpus.compare_motion(inp, out, displaced, field, TOL, lines, None, start_known, prog.blocks.cycle)
+
+    assert compare(_canon(tmp_path, prog.correct(field).data, "o.ngc")) == []
+    assert compare(inp), "the uncorrected holes pass for corrected ones"
+
+
+def test_g98_after_g99_at_the_r_plane(tmp_path):
+    """G99 holes leave the tool at the R plane; a G98 hole with that R plane is reached at the
+    initial level (LinuxCNC compares the tool's height with R: equal, it travels at the retract
+    level). A correction that lowers this hole's R plane below the last one would make LinuxCNC
+    travel at the tool's height instead: refused as a cycle block; --expand-cycles writes the
+    programmed approach, up to the initial level."""
+    src = "G21 G90 G17 G0 X0 Y0 Z12\nG99 G81 X2 Y2 Z-2 R3 F100\nG98 X20 Y5\nG80\nM2\n"
+
+    def d(x, y):
+        return (0.0, 0.0, 0.02 - 0.001 * x)  # lower at the second hole
+
+    field = _field_of(d)
+    prog = nc.parse(src)
+    with pytest.raises(InputError, match=r":3:1: canned cycle G81: the correction moves the R plane past"):
+        prog.correct(field)
+    inp = _canon(tmp_path, src, "in.ngc")
+    got = _canon(tmp_path, prog.correct(field, expand_cycles=True).data, "o.ngc")
+    assert got.kinds == inp.kinds
+    _feeds_displaced(got, inp, d, "g98 after g99")
+    assert got.ends[5, 2] == inp.ends[5, 2] == 12.0  # to the second hole at the initial level
+    # a field that keeps the order of the two R planes: a cycle block as ever
+    out = prog.correct(_field_of(lambda x, y: (0.0, 0.0, 0.001 * x)))
+    _feeds_displaced(_canon(tmp_path, out.data, "k.ngc"), inp, lambda x, y: (0.0, 0.0, 0.001 * x), "kept")

@@ -101,18 +101,23 @@ class Blocks:
         1-based source line.
     motion : (m,) uint8
         Index into :data:`MOTIONS`; 4 ("other") for moves the engine does not trace (G53, G28,
-        canned cycles, ...).
+        canned cycles it refuses, ...). A canned cycle it follows makes one block per move, as
+        LinuxCNC runs it.
     end : (m, 9) float
         Position after the block: X Y Z U V W in mm, A B C in degrees (order ``XYZABCUVW``);
         NaN where the program does not determine it.
     supported : (m,) bool
-        The block can be corrected.
+        The block can be corrected (of a canned cycle's moves, the feed to each hole's bottom,
+        where the hole's displacement is evaluated).
+    cycle : (m,) bool
+        A move of a canned cycle: it moves with its hole.
     """
 
     line: np.ndarray
     motion: np.ndarray
     end: np.ndarray
     supported: np.ndarray
+    cycle: np.ndarray
 
     def __len__(self) -> int:
         return len(self.line)
@@ -225,7 +230,7 @@ class Program:
     def blocks(self) -> Blocks:
         """Every block that changes the position, with where it ends."""
         r = self._records()
-        return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0)
+        return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0, (r["flags"] & 16) != 0)
 
     # ----------------------------------------------------------------------------- sampling
     @staticmethod

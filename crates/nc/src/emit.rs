@@ -884,7 +884,7 @@ impl<'a> Emitter<'a> {
         }
         let mut steps = std::mem::take(&mut self.st.steps);
         steps.clear();
-        let end = cycle_steps(
+        let (end, choices) = cycle_steps(
             cy.code,
             cy.g98,
             cy.q,
@@ -892,9 +892,16 @@ impl<'a> Emitter<'a> {
             cur,
             level,
             &out_holes,
+            None,
             &mut steps,
         );
         self.st.steps = steps;
+        if approach_changes(&cy, choices, level, out_holes[0].r) {
+            return Err(err(format!(
+                "canned cycle {}: the correction moves the R plane past the tool's height, so LinuxCNC would travel to the hole at that height instead of the G98 retract level (or the other way round); use --expand-cycles (it writes the programmed approach)",
+                name(cy.code)
+            )));
+        }
         for (e, v) in self.st.epos.iter_mut().zip(end) {
             *e = v * u;
         }
@@ -941,7 +948,7 @@ impl<'a> Emitter<'a> {
         }
         let mut steps = std::mem::take(&mut self.st.steps);
         steps.clear();
-        cycle_steps(
+        let (_, choices) = cycle_steps(
             cy.code,
             cy.g98,
             cy.q,
@@ -949,8 +956,24 @@ impl<'a> Emitter<'a> {
             cur,
             level,
             holes,
+            None,
             &mut steps,
         );
+        if approach_changes(cy, choices, level, holes[0].r) {
+            // the programmed approach: at the retract level, or at the tool's height
+            steps.clear();
+            cycle_steps(
+                cy.code,
+                cy.g98,
+                cy.q,
+                peck_clearance(inch),
+                cur,
+                level,
+                holes,
+                Some((choices.0, cy.choices.1)),
+                &mut steps,
+            );
+        }
         let prefix: &[u8] = if self.lx.lines[li].block_delete {
             b"/"
         } else {
@@ -1113,6 +1136,15 @@ impl<'a> Emitter<'a> {
             }
         }
     }
+}
+
+/// Whether LinuxCNC, given the corrected numbers, would reach the first hole of a G98 block at
+/// another height than the program makes it: at the tool's height rather than at the retract
+/// level above the R plane, or the other way round. (It decides by comparing the tool's height
+/// with the R plane, which a correction may put the other way round when they were equal; in
+/// G99, or when the retract level is the R plane, both ways travel at the R plane.)
+fn approach_changes(cy: &crate::interp::Cycle, choices: (bool, bool), level: f64, r: f64) -> bool {
+    cy.g98 && choices.1 != cy.choices.1 && !choices.0 && level > r
 }
 
 /// Distance from p to the segment a-b (XYZ).

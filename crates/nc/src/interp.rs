@@ -92,6 +92,10 @@ pub struct Cycle {
     pub p: f64,
     /// Repeats (L).
     pub repeats: u32,
+    /// LinuxCNC's two choices for the block, as the program's numbers make them: the tool rises
+    /// to the R plane first (the initial level is below it), and it reaches the first hole at
+    /// the height it is at (above the R plane) rather than at the retract level.
+    pub choices: (bool, bool),
 }
 
 /// One step of a canned cycle as LinuxCNC runs it.
@@ -130,8 +134,9 @@ pub fn peck_clearance(inch: bool) -> f64 {
 /// The steps of one canned-cycle block in the XY plane, as LinuxCNC's `convert_cycle_xy` and
 /// `CYCLE_MACRO` make them (linuxcnc-uspace 2.9, `interp_cycles.cc`), in program units: from
 /// `cur`, with the initial level `level`, one hole per repeat (all with the same R plane and
-/// bottom when read from a program; the emitter may give each its own). Returns the position
-/// after the block.
+/// bottom when read from a program; the emitter may give each its own). `choices` imposes
+/// [`Cycle::choices`] (else they are made from the numbers). Returns the position after the
+/// block and the choices made.
 pub fn cycle_steps(
     code: i32,
     g98: bool,
@@ -140,25 +145,28 @@ pub fn cycle_steps(
     cur: [f64; 3],
     level: f64,
     holes: &[Hole],
+    choices: Option<(bool, bool)>,
     out: &mut Vec<CycleStep>,
-) -> [f64; 3] {
+) -> ([f64; 3], (bool, bool)) {
     let r0 = holes[0].r;
     let mut old_cc = level;
     let mut current_cc = cur[2];
     // below the R plane: straight up to it first
-    if old_cc < r0 {
+    let rise = choices.map_or(old_cc < r0, |c| c.0);
+    if rise {
         out.push(CycleStep::Move(Motion::Rapid, [cur[0], cur[1], r0], false));
         old_cc = r0;
         current_cc = r0;
     }
     let mut end = cur;
+    let from_current = choices.map_or(current_cc > r0, |c| c.1);
     let mv = |out: &mut Vec<CycleStep>, m: Motion, x: f64, y: f64, z: f64| {
         out.push(CycleStep::Move(m, [x, y, z], false))
     };
     for (k, h) in holes.iter().enumerate() {
         let (x, y, r, cc) = (h.x, h.y, h.r, h.bottom);
         let clear = if g98 { old_cc } else { r };
-        if k == 0 && current_cc > r {
+        if k == 0 && from_current {
             mv(out, Motion::Rapid, x, y, current_cc);
             mv(out, Motion::Rapid, x, y, r);
         } else {
@@ -209,7 +217,7 @@ pub fn cycle_steps(
         }
         end = [x, y, clear];
     }
-    end
+    (end, (rise, from_current))
 }
 
 /// A construct the engine does not interpret, with the line where it appears.
@@ -1458,7 +1466,7 @@ fn canned(
         });
     }
     let mut steps = Vec::new();
-    let end = cycle_steps(
+    let (end, choices) = cycle_steps(
         c,
         g98,
         q,
@@ -1466,6 +1474,7 @@ fn canned(
         cur,
         level,
         &holes,
+        None,
         &mut steps,
     );
     let supported = blocked.is_none();
@@ -1495,6 +1504,7 @@ fn canned(
         q,
         p,
         repeats,
+        choices,
     });
     Ok(())
 }
