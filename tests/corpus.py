@@ -315,7 +315,7 @@ def compare_motion(
     for k in range(n_in):
         if not cut[k]:
             # an extra rapid along Z before a cycle's rapid (to a lower corrected R plane)
-            def ends_here(jj):
+            def ends_here(jj, k=k):
                 e = oe6[jj, :3]
                 return np.abs(e - ie6[k, :3]).max() <= tol or (np.abs(e - cyc_target[:, k]).max(axis=1) <= tol).any()
 
