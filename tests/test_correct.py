@@ -66,12 +66,12 @@ def test_limit_refuses_and_lists_worst_points():
 
 
 def test_unsupported_refused_unless_kept():
-    src = "G0 X0 Y0 Z5\nG81 X5 Y5 Z-1 R1 F100\nG80\nG1 X10 Z-1 F100\n"
+    src = "G0 X0 Y0 Z5\nG88 X5 Y5 Z-1 R1 P1 F100\nG80\nG1 X10 Z-1 F100\n"
     with pytest.raises(RefusedError, match="1 unsupported construct") as e:
         nc.parse(src).correct(fields.Shift((0, 0, 0.1)))
-    assert e.value.details[0]["construct"] == "canned cycle G81"
+    assert e.value.details[0]["construct"].startswith("canned cycle G88 (the operator retracts by hand")
     out = nc.parse(src).correct(fields.Shift((0, 0, 0.1)), keep_unsupported=True)
-    assert out.text.splitlines()[1] == "G81 X5 Y5 Z-1 R1 F100"
+    assert out.text.splitlines()[1] == "G88 X5 Y5 Z-1 R1 P1 F100"
     assert out.text.splitlines()[3] == "G1 X10 Z-0.9 F100"
     assert "kept unchanged" in out.correction.warnings[0]
 

@@ -43,10 +43,22 @@ def test_errors_name_line_and_column(text, line, col, message):
 @pytest.mark.parametrize(
     "text, line, construct",
     [
-        ("G0 X0 Y0 Z0\nG81 X1 Y1 Z-1 R1 F10\n", 2, "canned cycle G81"),
-        ("G0 X0 Y0 Z0\nG83 X1 Y1 Z-1 R1 Q.5 F10\n", 2, "canned cycle G83"),
-        ("G0 X0 Y0 Z0\nG73 X1 Y1 Z-1 R1 Q.5 F10\n", 2, "canned cycle G73"),
-        ("G0 X0 Y0 Z0\nG76 P0.05 Z-1 I-.075 J0.008 K0.045 Q29.5 L2 E0.045\n", 2, "canned cycle G76"),
+        (
+            "G0 X0 Y0 Z0\nG18 G81 X1 Y1 Z-1 R1 F10\n",
+            2,
+            "canned cycle G81 in the G18 plane (only G17 cycles are followed)",
+        ),
+        (
+            "G0 X0 Y0\nG83 X1 Y1 Z-1 R1 Q.5 F10\n",
+            2,
+            "canned cycle G83 from an unknown position (give X, Y and Z a G0 or G1 move before it)",
+        ),
+        (
+            "G0 X0 Y0 Z0\nG88 X1 Y1 Z-1 R1 P1 F10\n",
+            2,
+            "canned cycle G88 (the operator retracts by hand: the position after it is unknown)",
+        ),
+        ("G0 X0 Y0 Z0\nG76 P0.05 Z-1 I-.075 J0.008 K0.045 Q29.5 L2 E0.045\n", 2, "threading cycle G76"),
         ("G0 X0 Y0 Z0\nG41 D1 G1 X5\n", 2, "cutter compensation G41"),
         ("G0 X0 Y0 Z0\nG42.1 D2 G1 X5\n", 2, "cutter compensation G42.1"),
         ("G0 X0 Y0 Z0\nG92 X0 Y0\n", 2, "coordinate shift G92"),

@@ -158,7 +158,8 @@ class _Warnings:
             self.first = (int(r["line"][i]), " and ".join(said))
         self.unknown += len(left)
         if self.clearance is not None:
-            rapid = np.flatnonzero(r["motion"] == 0)
+            # (the rapids of a canned cycle move with their hole)
+            rapid = np.flatnonzero((r["motion"] == 0) & ((r["flags"] & 16) == 0))
             end = r["end"][rapid]
             low = end[:, 2] < self.clearance
             if self.bounds is not None:
@@ -219,6 +220,7 @@ def _correct_native(
     say,
     gx,
     gy,
+    expand_cycles=False,
 ) -> Correction | None:
     """The correction run by the engine alone (reading, field, figures, emitting and writing to
     ``out_file`` in threads without the GIL), for the fields of :func:`_native_field`. None when a
@@ -247,6 +249,7 @@ def _correct_native(
             None if clearance is None else float(clearance),
             shift_norm,
             lambda a, b: say(f"correcting lines {a + 1:,}-{b:,}"),
+            bool(expand_cycles),
         ),
         name,
     )
@@ -275,6 +278,7 @@ def _correct(
     progress=None,
     keep_points=True,
     out_file=None,
+    expand_cycles=False,
 ) -> Correction:
     """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
 
@@ -307,12 +311,13 @@ def _correct(
             say=say,
             gx=gx,
             gy=gy,
+            expand_cycles=expand_cycles,
         )
         if c is not None:
             return c
     run = _engine(
         lambda: _NativeCorrector(
-            source, float(chord_tol), float(max_segment), bool(rapids), True, gx, gy, _PIECE_BYTES
+            source, float(chord_tol), float(max_segment), bool(rapids), True, gx, gy, _PIECE_BYTES, bool(expand_cycles)
         ),
         name,
     )

@@ -101,18 +101,23 @@ class Blocks:
         1-based source line.
     motion : (m,) uint8
         Index into :data:`MOTIONS`; 4 ("other") for moves the engine does not trace (G53, G28,
-        canned cycles, ...).
+        canned cycles it refuses, ...). A canned cycle it follows makes one block per move, as
+        LinuxCNC runs it.
     end : (m, 9) float
         Position after the block: X Y Z U V W in mm, A B C in degrees (order ``XYZABCUVW``);
         NaN where the program does not determine it.
     supported : (m,) bool
-        The block can be corrected.
+        The block can be corrected (of a canned cycle's moves, the feed to each hole's bottom,
+        where the hole's displacement is evaluated).
+    cycle : (m,) bool
+        A move of a canned cycle: it moves with its hole.
     """
 
     line: np.ndarray
     motion: np.ndarray
     end: np.ndarray
     supported: np.ndarray
+    cycle: np.ndarray
 
     def __len__(self) -> int:
         return len(self.line)
@@ -225,7 +230,7 @@ class Program:
     def blocks(self) -> Blocks:
         """Every block that changes the position, with where it ends."""
         r = self._records()
-        return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0)
+        return Blocks(r["line"], r["motion"], r["end"], (r["flags"] & 8) != 0, (r["flags"] & 16) != 0)
 
     # ----------------------------------------------------------------------------- sampling
     @staticmethod
@@ -300,6 +305,7 @@ class Program:
         keep_unsupported: bool = False,
         clearance: float | None = None,
         progress: Callable[[str], None] | None = None,
+        expand_cycles: bool = False,
     ) -> Program:
         """Apply a correction field and return the corrected program.
 
@@ -320,6 +326,12 @@ class Program:
             Copy blocks with unsupported constructs unchanged instead of refusing the program.
         clearance : float, mm, optional
             Report uncorrected rapids that end below this Z inside the field's area.
+        progress : callable, optional
+            Called with a message for each piece of the program.
+        expand_cycles : bool
+            Write canned cycles (G73, G81-G83, G85, G89) as the G0/G1 moves (and G4 dwells)
+            LinuxCNC makes of them. By default a cycle block stays a cycle block, each hole moved
+            by the displacement at its bottom: X and Y by its x and y, Z and R by its z.
 
         Returns
         -------
@@ -342,6 +354,7 @@ class Program:
             clearance=clearance,
             progress=progress,
             keep_points=True,
+            expand_cycles=expand_cycles,
         )
         # the corrected program is parsed only if it is used as a program again
         result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True)

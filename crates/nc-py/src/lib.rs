@@ -86,6 +86,7 @@ fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict
                 | (r.incremental as u8) << 1
                 | (r.arc_absolute as u8) << 2
                 | (r.supported as u8) << 3
+                | ((r.cycle != 0) as u8) << 4
         })
         .collect();
     let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();
@@ -152,7 +153,8 @@ impl Program {
         self.inner.lexed.lines.len()
     }
 
-    /// Records as a dict of byte arrays: line (u32, 0-based), motion, plane, flags (u8 each),
+    /// Records as a dict of byte arrays: line (u32, 0-based), motion, plane, flags (u8 each:
+    /// inch 1, G91 2, G90.1 4, supported 8, a move of a canned cycle 16),
     /// named (u16), end (float64, 9 per record, mm / degrees, NaN unknown), origin (9 float64).
     fn records<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         records_dict(py, &self.inner.interp)
@@ -279,7 +281,7 @@ struct Corrector {
 impl Corrector {
     /// `source`: the program's bytes, or the path of its file (str).
     #[new]
-    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes))]
+    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -291,6 +293,7 @@ impl Corrector {
         grid_x: Vec<f64>,
         grid_y: Vec<f64>,
         piece_bytes: usize,
+        expand_cycles: bool,
     ) -> PyResult<Self> {
         let src = if let Ok(b) = source.downcast::<PyBytes>() {
             Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
@@ -320,7 +323,11 @@ impl Corrector {
             for job in job_rx {
                 let p = &job.piece;
                 let mut out = Vec::with_capacity(p.src.len() + p.src.len() / 4);
-                let st = state.take().unwrap_or_else(|| EmitState::new(&p.interp));
+                let st = state.take().unwrap_or_else(|| {
+                    let mut s = EmitState::new(&p.interp);
+                    s.expand_cycles = expand_cycles;
+                    s
+                });
                 let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);
                 let r = em.lines(0..p.lexed.lines.len(), &job.samples, &job.disp, &mut out);
                 state = Some(em.into_state());
@@ -575,7 +582,7 @@ fn output_file(_fd: i32) -> PyResult<Option<std::fs::File>> {
 /// GIL. Returns the figures as a dict, or None when a check refuses the program (the caller runs
 /// the Python evaluation to report it). `progress(first, end)` is called for each piece.
 #[pyfunction]
-#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress))]
+#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false))]
 #[allow(clippy::too_many_arguments)]
 fn correct_native<'py>(
     py: Python<'py>,
@@ -593,6 +600,7 @@ fn correct_native<'py>(
     clearance: Option<f64>,
     shift_norm: Option<f64>,
     progress: Option<PyObject>,
+    expand_cycles: bool,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let src = if let Ok(b) = source.downcast::<PyBytes>() {
         Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
@@ -620,6 +628,7 @@ fn correct_native<'py>(
         keep_unsupported,
         clearance,
         shift_norm,
+        expand_cycles,
     };
     // between pieces: the progress display, and Python's signal handlers (SIGTERM, Ctrl-C), which
     // run only when the main thread asks for them; an exception they raise stops the run

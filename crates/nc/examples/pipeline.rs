@@ -61,6 +61,7 @@ fn main() {
         keep_unsupported: false,
         clearance: None,
         shift_norm: None,
+        expand_cycles: false,
     };
     let runs: usize = std::env::var("RUNS")
         .ok()

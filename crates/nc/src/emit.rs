@@ -6,7 +6,10 @@
 //! numbers that change are rewritten, in the program's own number style.
 
 use crate::error::NcError;
-use crate::interp::{Interp, Motion, Record, AXES, MM_PER_INCH, NAXES, PLANE_AXES};
+use crate::interp::{
+    cycle_steps, peck_clearance, CycleStep, Hole, Interp, Motion, Record, AXES, CYCLE_BOTTOM,
+    MM_PER_INCH, NAXES, PLANE_AXES,
+};
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
 
@@ -270,6 +273,14 @@ pub struct EmitState {
     /// Lines added after the current line, one after the other, and where each ends.
     tail: Vec<u8>,
     tail_ends: Vec<usize>,
+    /// Write canned cycles as the G0/G1 moves they make (else they stay cycle blocks).
+    pub expand_cycles: bool,
+    /// The output's canned-cycle state: its initial level (mm) and its R and Z as last written
+    /// (program units).
+    cyc_level: f64,
+    cyc_r: Option<f64>,
+    cyc_z: Option<f64>,
+    steps: Vec<CycleStep>,
 }
 
 impl EmitState {
@@ -283,6 +294,11 @@ impl EmitState {
             arena: Vec::new(),
             tail: Vec::new(),
             tail_ends: Vec::new(),
+            expand_cycles: false,
+            cyc_level: f64::NAN,
+            cyc_r: None,
+            cyc_z: None,
+            steps: Vec::new(),
         }
     }
 }
@@ -364,7 +380,9 @@ impl<'a> Emitter<'a> {
                     )));
                 }
                 let (f, c) = samples.of(ri);
-                if c > 0 {
+                if self.it.records[ri].cycle != 0 {
+                    self.cycle_block(li, ri, samples, disp)?;
+                } else if c > 0 {
                     self.corrected(
                         li,
                         ri,
@@ -698,6 +716,315 @@ impl<'a> Emitter<'a> {
         }
     }
 
+    /// A canned-cycle block: each hole moved by the displacement at its bottom (X, Y by its x
+    /// and y, Z and R by its z). Kept a cycle block, its X Y Z R words rewritten (and written
+    /// where the output's sticky value differs), or written as the moves LinuxCNC makes of it
+    /// (`expand_cycles`).
+    fn cycle_block(
+        &mut self,
+        li: usize,
+        last: usize,
+        samples: &Samples,
+        disp: &[f64],
+    ) -> Result<(), NcError> {
+        let it = self.it;
+        let line_no = it.records[last].line;
+        let mut first = last;
+        while first > samples.rec0 && it.records[first - 1].line == line_no {
+            first -= 1;
+        }
+        let k = it.cycles.partition_point(|c| c.line < line_no);
+        let cy = match it.cycles.get(k) {
+            Some(c) if c.line == line_no => c.clone(),
+            _ => {
+                return Err(NcError::Usage(format!(
+                    "line {}: a canned cycle the interpreter did not keep",
+                    line_no + 1
+                )))
+            }
+        };
+        let rec = &it.records[first];
+        let (inch, incremental) = (rec.inch, rec.incremental);
+        let u = if inch { MM_PER_INCH } else { 1.0 };
+        let half = self.fmt.half(inch);
+        if cy.sets_level {
+            self.st.cyc_level = self.st.epos[2];
+        }
+        let level = self.st.cyc_level / u;
+        let mut holes: Vec<Hole> = Vec::with_capacity(cy.repeats as usize);
+        for ri in first..=last {
+            let r = &it.records[ri];
+            if r.cycle != CYCLE_BOTTOM {
+                continue;
+            }
+            let (f, c) = samples.of(ri);
+            let d = if c > 0 {
+                [disp[3 * f], disp[3 * f + 1], disp[3 * f + 2]]
+            } else {
+                [0.0; 3]
+            };
+            holes.push(Hole {
+                x: (r.end[0] + d[0]) / u,
+                y: (r.end[1] + d[1]) / u,
+                r: (cy.r + d[2]) / u,
+                bottom: (r.end[2] + d[2]) / u,
+            });
+        }
+        let cur = [
+            self.st.epos[0] / u,
+            self.st.epos[1] / u,
+            self.st.epos[2] / u,
+        ];
+        let name = |c: i32| format!("G{}", c / 10);
+        let err = |msg: String| NcError::Interpret {
+            line: line_no as usize + 1,
+            col: 1,
+            message: msg,
+        };
+        if holes.is_empty() {
+            return Err(err("a canned cycle without holes".into()));
+        }
+        if !(cur.iter().all(|v| v.is_finite()) && level.is_finite()) {
+            return Err(err(format!(
+                "canned cycle {}: the corrected program's position before it is unknown",
+                name(cy.code)
+            )));
+        }
+        if self.st.expand_cycles {
+            return self.expand_cycle(li, &cy, &holes, cur, level, inch, incremental);
+        }
+        // the numbers the block must have
+        let h0 = holes[0];
+        let (want, implied_xy) = if incremental {
+            let mut prev = [cur[0], cur[1]];
+            let step = [h0.x - prev[0], h0.y - prev[1]];
+            for h in &holes {
+                let d = [h.x - prev[0], h.y - prev[1]];
+                if (d[0] - step[0]).abs() >= half
+                    || (d[1] - step[1]).abs() >= half
+                    || (h.r - h0.r).abs() >= half
+                    || (h.bottom - h0.bottom).abs() >= half
+                {
+                    return Err(err(format!(
+                        "G91 canned cycle {} with L{}: the correction moves its holes by different amounts, which one cycle block cannot write; use --expand-cycles",
+                        name(cy.code),
+                        cy.repeats
+                    )));
+                }
+                prev = [h.x, h.y];
+            }
+            (
+                [step[0], step[1], h0.bottom - h0.r, h0.r - level],
+                [0.0, 0.0],
+            )
+        } else {
+            ([h0.x, h0.y, h0.bottom, h0.r], [cur[0], cur[1]])
+        };
+        let implied = [
+            Some(implied_xy[0]),
+            Some(implied_xy[1]),
+            self.st.cyc_z,
+            self.st.cyc_r,
+        ];
+        let mut written = [0.0; 4];
+        let words = self.lx.line_words(li);
+        for (i, letter) in [b'X', b'Y', b'Z', b'R'].into_iter().enumerate() {
+            written[i] = if let Some(w) = words.iter().find(|w| w.letter == letter) {
+                if (want[i] - w.value).abs() >= half {
+                    self.edit_number(w.num_start, w.end, want[i], inch)
+                } else {
+                    w.value
+                }
+            } else {
+                match implied[i] {
+                    Some(v) if (want[i] - v).abs() < half => v,
+                    _ => {
+                        let at = self.insert_point(li);
+                        let t0 = self.st.arena.len() as u32;
+                        let sep = self.sep();
+                        self.st.arena.extend_from_slice(sep);
+                        self.st.arena.push(letter);
+                        let v = self.fmt.number(want[i], inch, &mut self.st.arena);
+                        self.st.edits.push(Edit {
+                            start: at,
+                            end: at,
+                            t0,
+                            t1: self.st.arena.len() as u32,
+                        });
+                        v
+                    }
+                }
+            };
+        }
+        self.st.cyc_z = Some(written[2]);
+        self.st.cyc_r = Some(written[3]);
+        // where the output's block leaves the machine, from the numbers as written
+        let mut out_holes = Vec::with_capacity(holes.len());
+        let (mut aa, mut bb) = (cur[0], cur[1]);
+        for _ in 0..holes.len() {
+            let (r, cc) = if incremental {
+                let r = written[3] + level;
+                aa += written[0];
+                bb += written[1];
+                (r, r + written[2])
+            } else {
+                aa = written[0];
+                bb = written[1];
+                (written[3], written[2])
+            };
+            out_holes.push(Hole {
+                x: aa,
+                y: bb,
+                r,
+                bottom: cc,
+            });
+        }
+        let mut steps = std::mem::take(&mut self.st.steps);
+        steps.clear();
+        let (end, choices) = cycle_steps(
+            cy.code,
+            cy.g98,
+            cy.q,
+            peck_clearance(inch),
+            cur,
+            level,
+            &out_holes,
+            None,
+            &mut steps,
+        );
+        self.st.steps = steps;
+        if approach_changes(&cy, choices, level, out_holes[0].r) {
+            return Err(err(format!(
+                "canned cycle {}: the correction moves the R plane past the tool's height, so LinuxCNC would travel to the hole at that height instead of the G98 retract level (or the other way round); use --expand-cycles (it writes the programmed approach)",
+                name(cy.code)
+            )));
+        }
+        for (e, v) in self.st.epos.iter_mut().zip(end) {
+            *e = v * u;
+        }
+        self.st.out_motion = None;
+        Ok(())
+    }
+
+    /// A canned-cycle block written as the G0/G1 moves (and G4 dwells) LinuxCNC makes of the
+    /// corrected holes; the block keeps its other words.
+    #[allow(clippy::too_many_arguments)]
+    fn expand_cycle(
+        &mut self,
+        li: usize,
+        cy: &crate::interp::Cycle,
+        holes: &[Hole],
+        cur: [f64; 3],
+        level: f64,
+        inch: bool,
+        incremental: bool,
+    ) -> Result<(), NcError> {
+        if matches!(cy.code, 740 | 840 | 860) {
+            return Err(NcError::Interpret {
+                line: cy.line as usize + 1,
+                col: 1,
+                message: format!(
+                    "canned cycle G{} stops or reverses the spindle, which G0/G1 moves cannot write; correct it without --expand-cycles",
+                    cy.code / 10
+                ),
+            });
+        }
+        let u = if inch { MM_PER_INCH } else { 1.0 };
+        let half = self.fmt.half(inch);
+        let words = self.lx.line_words(li);
+        let mut stops: Vec<u8> = Vec::new();
+        for w in words {
+            let cycle_g = w.letter == b'G' && is_motion_g(w);
+            if cycle_g || matches!(w.letter, b'X' | b'Y' | b'Z' | b'R' | b'Q' | b'P' | b'L') {
+                self.remove_word(li, w);
+            } else if is_stop_m(w) {
+                stops.extend_from_slice(self.sep());
+                stops.extend_from_slice(&self.src[w.start as usize..w.end as usize]);
+                self.remove_word(li, w);
+            }
+        }
+        let mut steps = std::mem::take(&mut self.st.steps);
+        steps.clear();
+        let (_, choices) = cycle_steps(
+            cy.code,
+            cy.g98,
+            cy.q,
+            peck_clearance(inch),
+            cur,
+            level,
+            holes,
+            None,
+            &mut steps,
+        );
+        if approach_changes(cy, choices, level, holes[0].r) {
+            // the programmed approach: at the retract level, or at the tool's height
+            steps.clear();
+            cycle_steps(
+                cy.code,
+                cy.g98,
+                cy.q,
+                peck_clearance(inch),
+                cur,
+                level,
+                holes,
+                Some((choices.0, cy.choices.1)),
+                &mut steps,
+            );
+        }
+        let prefix: &[u8] = if self.lx.lines[li].block_delete {
+            b"/"
+        } else {
+            b""
+        };
+        let padded = self.lx.style.padded_g;
+        for (k, s) in steps.iter().enumerate() {
+            let t0 = self.st.tail.len();
+            self.st.tail.extend_from_slice(prefix);
+            match *s {
+                CycleStep::Dwell => {
+                    self.st
+                        .tail
+                        .extend_from_slice(if padded { b"G04" } else { b"G4" });
+                    self.st.tail.extend_from_slice(self.sep());
+                    self.st
+                        .tail
+                        .extend_from_slice(format!("P{}", cy.p).as_bytes());
+                }
+                CycleStep::Move(m, p, _) => {
+                    self.st
+                        .tail
+                        .extend_from_slice(motion_text(m, padded).as_bytes());
+                    let mut any = false;
+                    for a in 0..3 {
+                        let now = self.st.epos[a] / u;
+                        if (p[a] - now).abs() < half && (any || a < 2) {
+                            continue;
+                        }
+                        let want = if incremental { p[a] - now } else { p[a] };
+                        let sep = self.sep();
+                        self.st.tail.extend_from_slice(sep);
+                        self.st.tail.push(AXES[a]);
+                        let v = self.fmt.number(want, inch, &mut self.st.tail);
+                        self.st.epos[a] = if incremental {
+                            self.st.epos[a] + v * u
+                        } else {
+                            v * u
+                        };
+                        any = true;
+                    }
+                }
+            }
+            if k + 1 == steps.len() {
+                self.st.tail.extend_from_slice(&stops);
+            }
+            let _ = t0;
+            self.st.tail_ends.push(self.st.tail.len());
+        }
+        self.st.steps = steps;
+        self.st.out_motion = None;
+        Ok(())
+    }
+
     /// Remove a word and the blanks before it.
     fn remove_word(&mut self, li: usize, w: &Word) {
         let line_start = self.lx.lines[li].start;
@@ -806,6 +1133,15 @@ impl<'a> Emitter<'a> {
             }
         }
     }
+}
+
+/// Whether LinuxCNC, given the corrected numbers, would reach the first hole of a G98 block at
+/// another height than the program makes it: at the tool's height rather than at the retract
+/// level above the R plane, or the other way round. (It decides by comparing the tool's height
+/// with the R plane, which a correction may put the other way round when they were equal; in
+/// G99, or when the retract level is the R plane, both ways travel at the R plane.)
+fn approach_changes(cy: &crate::interp::Cycle, choices: (bool, bool), level: f64, r: f64) -> bool {
+    cy.g98 && choices.1 != cy.choices.1 && !choices.0 && level > r
 }
 
 /// Squared distance from p to the segment a-b (XYZ).

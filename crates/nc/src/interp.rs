@@ -61,6 +61,163 @@ pub struct Record {
     pub center: [f64; 2],
     /// Arc turns (P word), 1 for an ordinary arc.
     pub turns: u32,
+    /// A move of a canned cycle: 0 = not one, [`CYCLE_MOVE`], or [`CYCLE_BOTTOM`] for the feed to
+    /// the bottom of a hole (the hole's sample point; its displacement moves the whole hole).
+    pub cycle: u8,
+}
+
+/// [`Record::cycle`] of a move of a canned cycle.
+pub const CYCLE_MOVE: u8 = 1;
+/// [`Record::cycle`] of the feed that ends at the bottom of a hole.
+pub const CYCLE_BOTTOM: u8 = 2;
+
+/// A canned-cycle block as the interpreter read it: what the emitter needs to rewrite it. Its
+/// holes are the ends of its [`CYCLE_BOTTOM`] records.
+#[derive(Clone, Debug)]
+pub struct Cycle {
+    /// 0-based line index.
+    pub line: u32,
+    /// The cycle's G code × 10 (810 for G81).
+    pub code: i32,
+    /// Retract to the initial level (G98) rather than to the R plane (G99).
+    pub g98: bool,
+    /// The first cycle block since a motion that is not a cycle: the initial level (LinuxCNC's
+    /// `cycle_il`) is the Z before it.
+    pub sets_level: bool,
+    /// R plane and bottom of its holes, mm.
+    pub r: f64,
+    pub bottom: f64,
+    /// Peck depth (program units) and dwell (seconds), as in force for the block.
+    pub q: f64,
+    pub p: f64,
+    /// Repeats (L).
+    pub repeats: u32,
+    /// LinuxCNC's two choices for the block, as the program's numbers make them: the tool rises
+    /// to the R plane first (the initial level is below it), and it reaches the first hole at
+    /// the height it is at (above the R plane) rather than at the retract level.
+    pub choices: (bool, bool),
+}
+
+/// One step of a canned cycle as LinuxCNC runs it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CycleStep {
+    /// A move (rapid or feed) to a point (program units); `true` for the feed to a hole's bottom.
+    Move(Motion, [f64; 3], bool),
+    /// A dwell of the block's P seconds.
+    Dwell,
+}
+
+/// Where a hole of a cycle block is and its R plane and bottom (program units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hole {
+    pub x: f64,
+    pub y: f64,
+    pub r: f64,
+    pub bottom: f64,
+}
+
+/// Canned cycles whose motion the engine follows (G17 only): G73, G74, G81–G86, G89.
+pub fn cycle_traced(code: i32) -> bool {
+    matches!(code, 730 | 740 | 810 | 820 | 830 | 840 | 850 | 860 | 890)
+}
+
+/// The distance G73 and G83 back off above the last peck: LinuxCNC's `G83_RAPID_DELTA`, 0.010
+/// inch, times 25.4 in millimetre programs (program units).
+pub fn peck_clearance(inch: bool) -> f64 {
+    if inch {
+        0.010
+    } else {
+        0.010 * 25.4
+    }
+}
+
+/// The steps of one canned-cycle block in the XY plane, as LinuxCNC's `convert_cycle_xy` and
+/// `CYCLE_MACRO` make them (linuxcnc-uspace 2.9, `interp_cycles.cc`), in program units: from
+/// `cur`, with the initial level `level`, one hole per repeat (all with the same R plane and
+/// bottom when read from a program; the emitter may give each its own). `choices` imposes
+/// [`Cycle::choices`] (else they are made from the numbers). Returns the position after the
+/// block and the choices made.
+pub fn cycle_steps(
+    code: i32,
+    g98: bool,
+    q: f64,
+    rapid_delta: f64,
+    cur: [f64; 3],
+    level: f64,
+    holes: &[Hole],
+    choices: Option<(bool, bool)>,
+    out: &mut Vec<CycleStep>,
+) -> ([f64; 3], (bool, bool)) {
+    let r0 = holes[0].r;
+    let mut old_cc = level;
+    let mut current_cc = cur[2];
+    // below the R plane: straight up to it first
+    let rise = choices.map_or(old_cc < r0, |c| c.0);
+    if rise {
+        out.push(CycleStep::Move(Motion::Rapid, [cur[0], cur[1], r0], false));
+        old_cc = r0;
+        current_cc = r0;
+    }
+    let mut end = cur;
+    let from_current = choices.map_or(current_cc > r0, |c| c.1);
+    let mv = |out: &mut Vec<CycleStep>, m: Motion, x: f64, y: f64, z: f64| {
+        out.push(CycleStep::Move(m, [x, y, z], false))
+    };
+    for (k, h) in holes.iter().enumerate() {
+        let (x, y, r, cc) = (h.x, h.y, h.r, h.bottom);
+        let clear = if g98 { old_cc } else { r };
+        if k == 0 && from_current {
+            mv(out, Motion::Rapid, x, y, current_cc);
+            mv(out, Motion::Rapid, x, y, r);
+        } else {
+            mv(out, Motion::Rapid, x, y, clear);
+            if clear > r {
+                mv(out, Motion::Rapid, x, y, r);
+            }
+        }
+        let bottom = CycleStep::Move(Motion::Feed, [x, y, cc], true);
+        match code {
+            730 | 830 => {
+                let mut depth = r - q;
+                while depth > cc {
+                    mv(out, Motion::Feed, x, y, depth);
+                    if code == 830 {
+                        mv(out, Motion::Rapid, x, y, r);
+                    }
+                    mv(out, Motion::Rapid, x, y, depth + rapid_delta);
+                    depth -= q;
+                }
+                out.push(bottom);
+                mv(out, Motion::Rapid, x, y, clear);
+            }
+            740 | 840 => {
+                out.push(bottom);
+                out.push(CycleStep::Dwell);
+                mv(out, Motion::Feed, x, y, clear);
+            }
+            850 => {
+                out.push(bottom);
+                mv(out, Motion::Feed, x, y, r);
+                mv(out, Motion::Rapid, x, y, clear);
+            }
+            820 | 860 => {
+                out.push(bottom);
+                out.push(CycleStep::Dwell);
+                mv(out, Motion::Rapid, x, y, clear);
+            }
+            890 => {
+                out.push(bottom);
+                out.push(CycleStep::Dwell);
+                mv(out, Motion::Feed, x, y, clear);
+            }
+            _ => {
+                out.push(bottom);
+                mv(out, Motion::Rapid, x, y, clear);
+            }
+        }
+        end = [x, y, clear];
+    }
+    (end, (rise, from_current))
 }
 
 /// A construct the engine does not interpret, with the line where it appears.
@@ -108,6 +265,8 @@ pub struct Interp {
     pub origin: [f64; NAXES],
     /// Line index (0-based, from the program's start) of `line_record[0]`.
     pub line_base: usize,
+    /// The canned-cycle blocks whose motion is traced, in line order.
+    pub cycles: Vec<Cycle>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -162,6 +321,26 @@ struct State {
     incremental: bool,
     arc_absolute: bool,
     active: Active,
+    cyc: CycleModal,
+}
+
+/// What canned cycles keep from block to block, as LinuxCNC keeps it.
+#[derive(Clone, Copy, Debug, Default)]
+struct CycleModal {
+    /// The initial level (mm), set by the first cycle block after another motion.
+    level: Option<f64>,
+    /// The cycle code of the last cycle block, 0 after any other motion: R, Z, Q and P may be
+    /// left out only in a block of the same cycle.
+    last: i32,
+    /// R and Z as last written (program units; relative in G91), Q and P.
+    r: f64,
+    z: f64,
+    q: f64,
+    p: f64,
+    /// G98 (true) or G99 (false) once the program sets one.
+    g98: Option<bool>,
+    /// The program's cycles have been noted as read in rs274's default retract mode.
+    noted_default: bool,
 }
 
 fn code(w: &Word) -> i32 {
@@ -241,6 +420,7 @@ impl Interpreter {
                 incremental: false,
                 arc_absolute: false,
                 active: Active::default(),
+                cyc: CycleModal::default(),
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -266,6 +446,7 @@ impl Interpreter {
             line_record: vec![u32::MAX; nlines],
             origin: self.st.pos,
             line_base,
+            cycles: Vec::new(),
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
@@ -365,6 +546,7 @@ impl Interpreter {
             let mut nm = 0usize;
             let mut named: u16 = 0;
             let mut l_word: Option<f64> = None;
+            let mut q_word: Option<f64> = None;
             let mut e_word: Option<usize> = None;
             let mut seen: u32 = 0;
             for w in words {
@@ -410,6 +592,7 @@ impl Interpreter {
                     b'R' => r = Some((w.value, col(w))),
                     b'P' => p = Some(w.value),
                     b'L' => l_word = Some(w.value),
+                    b'Q' => q_word = Some(w.value),
                     b'E' => e_word = Some(col(w)),
                     b'T' => {
                         let t = w.value.round() as u32;
@@ -580,7 +763,9 @@ impl Interpreter {
                             st.active.inverse_time = Some((li as u32, idx));
                         }
                     }
-                    960 | 970 | 980 | 990 => {} // spindle mode, canned return level
+                    960 | 970 => {} // spindle mode
+                    980 => st.cyc.g98 = Some(true),
+                    990 => st.cyc.g98 = Some(false),
                     // G80 beside another motion code leaves that one in force, as in LinuxCNC
                     800 => {
                         if motion_word.is_none() {
@@ -698,11 +883,18 @@ impl Interpreter {
             }
             if let Some((m, mc)) = motion_word {
                 if let Mode::Canned(c) = m {
-                    // canned cycles stay modal until G80
-                    let idx = push_unsupported(out, li, mc, &format!("canned cycle {}", g_name(c)));
-                    st.active.canned = Some((li as u32, idx));
+                    // cycles the engine does not follow stay reported until G80
+                    if let Some(why) = cycle_refused(c) {
+                        let idx = push_unsupported(out, li, mc, &why);
+                        st.active.canned = Some((li as u32, idx));
+                    } else {
+                        st.active.canned = None;
+                    }
                 } else {
                     st.active.canned = None;
+                    // any other motion ends the cycles' initial level and sticky words
+                    st.cyc.level = None;
+                    st.cyc.last = 0;
                 }
                 st.mode = m;
             }
@@ -834,14 +1026,16 @@ impl Interpreter {
                     push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                 }
                 Mode::Canned(c) => {
-                    if let Some((_, idx)) = st.active.canned {
-                        out.unsupported[idx].blocks += 1;
-                    }
-                    // the hole position is known, the height after the cycle is not
-                    let _ = c;
-                    end[2] = f64::NAN;
-                    st.pos = end;
-                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                    let words = CycleWords {
+                        axis: &axis,
+                        r,
+                        q: q_word,
+                        p,
+                        l: l_word,
+                        col: motion_word.map_or(axis_col, |(_, c)| c),
+                    };
+                    let blocked = blocker.or(e_construct);
+                    canned(out, st, li, c, &words, blocked, unit)?;
                 }
                 Mode::Motion(m) => {
                     let mut center = [0.0; 2];
@@ -1071,6 +1265,268 @@ fn target(
     end
 }
 
+/// Why the engine does not follow a canned cycle, or None when it does.
+fn cycle_refused(c: i32) -> Option<String> {
+    match c {
+        760 => Some("threading cycle G76".into()),
+        870 => Some(
+            "canned cycle G87 (back boring, with spindle orientation) the engine does not follow"
+                .into(),
+        ),
+        880 => Some(
+            "canned cycle G88 (the operator retracts by hand: the position after it is unknown)"
+                .into(),
+        ),
+        _ if cycle_traced(c) => None,
+        _ => Some(format!("canned cycle {}", g_name(c))),
+    }
+}
+
+/// The words of a canned-cycle block.
+struct CycleWords<'a> {
+    axis: &'a [Option<f64>; NAXES],
+    r: Option<(f64, usize)>,
+    q: Option<f64>,
+    p: Option<f64>,
+    l: Option<f64>,
+    /// Where errors point: the cycle's G word, or the first axis word.
+    col: usize,
+}
+
+/// A block in canned-cycle mode: its holes traced move by move as LinuxCNC runs them, or, when
+/// the engine cannot follow it faithfully, an unsupported construct at its line with every XYZ
+/// axis unknown afterwards.
+fn canned(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    c: i32,
+    w: &CycleWords,
+    blocked: Option<usize>,
+    unit: f64,
+) -> Result<(), NcError> {
+    let named = (0..NAXES).fold(0u16, |m, k| m | ((w.axis[k].is_some() as u16) << k));
+    // after a cycle the engine does not follow, the height is unknown; in G17 a hole's X and Y
+    // are where its words put it (the last of L repeats in G91 is not traced: unknown too)
+    let repeats_one = w.l.is_none_or(|l| l == 1.0);
+    let unknown_after = |out: &mut Interp, st: &mut State, idx: usize| {
+        out.unsupported[idx].blocks += 1;
+        let hole = target(&st.pos, w.axis, st.incremental, unit);
+        let xy_known = st.plane == 0 && (repeats_one || !st.incremental);
+        for (k, (q, h)) in st.pos.iter_mut().zip(hole).take(3).enumerate() {
+            *q = if k < 2 && xy_known { h } else { f64::NAN };
+        }
+        push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+    };
+    if let Some((_, idx)) = st.active.canned {
+        unknown_after(out, st, idx);
+        return Ok(());
+    }
+    let name = g_name(c);
+    let same = st.cyc.last == c;
+    // the words LinuxCNC requires, and the values it keeps from the block before
+    let r_raw = match w.r {
+        Some((v, _)) => v,
+        None if same => st.cyc.r,
+        None => {
+            return Err(ierr(
+                li,
+                w.col,
+                format!("{name} needs an R word (the R plane) in its first block"),
+            ))
+        }
+    };
+    let repeats = match w.l {
+        None => 1,
+        Some(v) if v >= 1.0 && v.fract() == 0.0 && v <= 1e6 => v as u32,
+        Some(v) => {
+            return Err(ierr(
+                li,
+                w.col,
+                format!("the L word (repeats) of {name} must be a whole number >= 1, got {v}"),
+            ))
+        }
+    };
+    let z_raw = match w.axis[2] {
+        Some(v) => v,
+        None if same => st.cyc.z,
+        None => {
+            return Err(ierr(
+                li,
+                w.col,
+                format!("{name} needs a Z word (the bottom) in its first block"),
+            ))
+        }
+    };
+    let q = match (c, w.q) {
+        (730 | 830, Some(v)) => v,
+        (730 | 830, None) if same => st.cyc.q,
+        (730 | 830, None) => {
+            return Err(ierr(
+                li,
+                w.col,
+                format!("{name} needs a Q word (the peck depth)"),
+            ))
+        }
+        _ => w.q.unwrap_or(st.cyc.q),
+    };
+    if matches!(c, 730 | 830) && !(q > 0.0) {
+        return Err(ierr(
+            li,
+            w.col,
+            format!("the Q word (peck depth) of {name} must be > 0, got {q}"),
+        ));
+    }
+    if matches!(c, 820 | 860 | 890) && w.p.is_none() && !same {
+        return Err(ierr(
+            li,
+            w.col,
+            format!("{name} needs a P word (the dwell) in its first block"),
+        ));
+    }
+    let p = w.p.unwrap_or(st.cyc.p);
+    st.cyc.r = r_raw;
+    st.cyc.z = z_raw;
+    st.cyc.q = q;
+    st.cyc.p = p;
+    st.cyc.last = c;
+    // what the engine does not follow faithfully is refused at its line
+    let col = w.col;
+    let refuse = |out: &mut Interp, st: &mut State, why: String| {
+        let idx = push_unsupported(out, li, col, &why);
+        unknown_after(out, st, idx);
+    };
+    if st.plane != 0 {
+        let plane = ["G17", "G18", "G19"][st.plane as usize];
+        refuse(
+            out,
+            st,
+            format!("canned cycle {name} in the {plane} plane (only G17 cycles are followed)"),
+        );
+        return Ok(());
+    }
+    if named & !0b111 != 0 {
+        refuse(
+            out,
+            st,
+            format!("canned cycle {name} with A B C U V W words"),
+        );
+        return Ok(());
+    }
+    let needs = [
+        st.incremental || w.axis[0].is_none(),
+        st.incremental || w.axis[1].is_none(),
+        true,
+    ];
+    if (0..3).any(|k| needs[k] && !st.pos[k].is_finite())
+        || st.cyc.level.is_some_and(|v| !v.is_finite())
+    {
+        refuse(
+            out,
+            st,
+            format!("canned cycle {name} from an unknown position (give X, Y and Z a G0 or G1 move before it)"),
+        );
+        return Ok(());
+    }
+    let sets_level = st.cyc.level.is_none();
+    if sets_level {
+        st.cyc.level = Some(st.pos[2]);
+    }
+    let cur = [st.pos[0] / unit, st.pos[1] / unit, st.pos[2] / unit];
+    let level = st.cyc.level.unwrap_or(st.pos[2]) / unit;
+    let (r, cc, mut aa, mut bb, inc) = if st.incremental {
+        let r = r_raw + level;
+        (
+            r,
+            r + z_raw,
+            cur[0],
+            cur[1],
+            [w.axis[0].unwrap_or(0.0), w.axis[1].unwrap_or(0.0)],
+        )
+    } else {
+        (
+            r_raw,
+            z_raw,
+            w.axis[0].unwrap_or(cur[0]),
+            w.axis[1].unwrap_or(cur[1]),
+            [0.0; 2],
+        )
+    };
+    if r < cc {
+        return Err(ierr(
+            li,
+            w.col,
+            format!("the R plane of {name} ({r}) is below its bottom Z ({cc})"),
+        ));
+    }
+    let g98 = match st.cyc.g98 {
+        Some(v) => v,
+        None => {
+            if !st.cyc.noted_default {
+                st.cyc.noted_default = true;
+                out.notes.push(Note {
+                    line: li as u32,
+                    message: format!("canned cycle {name} with neither G98 nor G99 set: read as G99 (retract to the R plane), rs274's default; a controller that starts in G98 retracts to the initial level instead"),
+                });
+            }
+            false
+        }
+    };
+    let mut holes = Vec::with_capacity(repeats.min(1024) as usize);
+    for _ in 0..repeats {
+        aa += inc[0];
+        bb += inc[1];
+        holes.push(Hole {
+            x: aa,
+            y: bb,
+            r,
+            bottom: cc,
+        });
+    }
+    let mut steps = Vec::new();
+    let (end, choices) = cycle_steps(
+        c,
+        g98,
+        q,
+        peck_clearance(st.inch),
+        cur,
+        level,
+        &holes,
+        None,
+        &mut steps,
+    );
+    let supported = blocked.is_none();
+    if let Some(idx) = blocked {
+        out.unsupported[idx].blocks += 1;
+    }
+    for s in &steps {
+        if let CycleStep::Move(m, p, bottom) = *s {
+            for (q, v) in st.pos.iter_mut().zip(p) {
+                *q = v * unit;
+            }
+            push_record(out, st, li, m, supported && bottom, 0b111, [0.0; 2], 1);
+            out.records.last_mut().unwrap().cycle = if bottom { CYCLE_BOTTOM } else { CYCLE_MOVE };
+            out.summary.counts[m as usize] += 1;
+        }
+    }
+    for (q, v) in st.pos.iter_mut().zip(end) {
+        *q = v * unit;
+    }
+    out.cycles.push(Cycle {
+        line: li as u32,
+        code: c,
+        g98,
+        sets_level,
+        r: r * unit,
+        bottom: cc * unit,
+        q,
+        p,
+        repeats,
+        choices,
+    });
+    Ok(())
+}
+
 fn push_record(
     out: &mut Interp,
     st: &State,
@@ -1094,6 +1550,7 @@ fn push_record(
         end: st.pos,
         center,
         turns,
+        cycle: 0,
     });
 }
 
@@ -1136,14 +1593,16 @@ mod tests {
 
     #[test]
     fn unsupported_reported() {
-        let it = run("G0 X0 Y0 Z0\nG41 D1 G1 X1\nG1 X2\nG40 G1 X3\nG81 X1 Y1 Z-1 R1\nX2\nG80\n");
+        let it = run("G0 X0 Y0 Z0\nG41 D1 G1 X1\nG1 X2\nG40 G1 X3\nG88 X1 Y1 Z-1 R1 P1\nX2\nG80\n");
         let names: Vec<_> = it
             .unsupported
             .iter()
             .map(|u| (u.line, u.construct.clone(), u.blocks))
             .collect();
         assert_eq!(names[0], (1, "cutter compensation G41".to_string(), 2));
-        assert_eq!(names[1], (4, "canned cycle G81".to_string(), 2));
+        assert_eq!(names[1].0, 4);
+        assert!(names[1].1.starts_with("canned cycle G88"), "{names:?}");
+        assert_eq!(names[1].2, 2);
         assert!(it.records[3].supported);
     }
 
@@ -1162,5 +1621,70 @@ mod tests {
         assert_eq!(run("G0 X1 Y2 Z3\nG28.1\n").records.len(), 1);
         let l = lex(b"G0 X1 Y2 Z3\nG28 G1 X4 F1\n").unwrap();
         assert!(interpret(&l).is_err());
+    }
+
+    #[test]
+    fn canned_cycles_traced_as_linuxcnc() {
+        // G98 G81 from Z10: XY at 10, down to R, feed to the bottom, back to 10; G99 to R
+        let it = run("G21 G90 G0 X0 Y0 Z10\nG98 G81 X1 Y2 Z-3 R2 F100\nG99 X5\nG80\n");
+        assert!(it.unsupported.is_empty(), "{:?}", it.unsupported);
+        let ends: Vec<[f64; 3]> = it.records[1..]
+            .iter()
+            .map(|r| [r.end[0], r.end[1], r.end[2]])
+            .collect();
+        assert_eq!(
+            ends,
+            vec![
+                [1.0, 2.0, 10.0],
+                [1.0, 2.0, 2.0],
+                [1.0, 2.0, -3.0],
+                [1.0, 2.0, 10.0],
+                [5.0, 2.0, 10.0],
+                [5.0, 2.0, 2.0],
+                [5.0, 2.0, -3.0],
+                [5.0, 2.0, 2.0],
+            ]
+        );
+        let bottoms: Vec<bool> = it.records[1..]
+            .iter()
+            .map(|r| r.cycle == CYCLE_BOTTOM && r.supported)
+            .collect();
+        assert_eq!(
+            bottoms,
+            vec![false, false, true, false, false, false, true, false]
+        );
+        assert_eq!(it.cycles.len(), 2);
+        assert!(it.cycles[0].sets_level && !it.cycles[1].sets_level);
+        // G73 in inches: the last peck lands on the bottom by rounding and adds a zero-length peck,
+        // as rs274 prints it
+        let it = run("G20 G90 G0 X0 Y0 Z1\nG98 G73 X1 Y2 Z-0.1 R0.05 Q0.03 F10\n");
+        let z: Vec<f64> = it.records[1..]
+            .iter()
+            .map(|r| (r.end[2] / MM_PER_INCH * 1e4).round() / 1e4)
+            .collect();
+        assert_eq!(
+            z,
+            vec![
+                1.0, 0.05, 0.02, 0.03, -0.01, 0.0, -0.04, -0.03, -0.07, -0.06, -0.1, -0.09, -0.1,
+                1.0
+            ]
+        );
+        // a cycle in G18, or from an unknown position, is refused at its line
+        let it = run("G21 G90 G0 X0 Y0 Z10\nG18 G81 X1 Y2 Z-3 R2 F100\n");
+        assert!(it.unsupported[0].construct.contains("G18"));
+        let it = run("G21 G90 G0 X0 Y0\nG81 X1 Y2 Z-3 R2 F100\n");
+        assert!(it.unsupported[0].construct.contains("unknown position"));
+        // words LinuxCNC requires
+        for bad in [
+            "G81 X1 Z-1\n",
+            "G81 X1 R1\n",
+            "G83 X1 Z-1 R1\n",
+            "G82 X1 Z-1 R1\n",
+            "G81 X1 Z1 R0\n",
+            "G81 X1 Z-1 R1 L0\n",
+        ] {
+            let src = format!("G21 G90 G0 X0 Y0 Z10\n{bad}");
+            assert!(interpret(&lex(src.as_bytes()).unwrap()).is_err(), "{bad}");
+        }
     }
 }

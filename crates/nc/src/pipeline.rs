@@ -36,6 +36,8 @@ pub struct Options {
     /// The displacement's length for a shift, as the caller computes it (None: sqrt(dz * dz)
     /// per point, a grid's displacement being (0, 0, dz)).
     pub shift_norm: Option<f64>,
+    /// Write canned cycles as G0/G1 moves.
+    pub expand_cycles: bool,
 }
 
 /// Figures of a finished correction.
@@ -110,7 +112,7 @@ fn warnings(it: &Interp, clearance: Option<f64>, bounds: Option<[f64; 4]>, r: &m
             }
         }
         if let Some(c) = clearance {
-            if m == 0 {
+            if m == 0 && rec.cycle == 0 {
                 let e = rec.end;
                 let mut low = e[2] < c;
                 if let Some([x0, x1, y0, y1]) = bounds {
@@ -193,6 +195,7 @@ fn emit_pieces(
     back: Sender<(Samples, Vec<f64>)>,
     write: SyncSender<Vec<u8>>,
     written: Receiver<Vec<u8>>,
+    expand_cycles: bool,
 ) -> Result<EmitStats, NcError> {
     let mut state: Option<EmitState> = None;
     let mut made = 0;
@@ -211,7 +214,11 @@ fn emit_pieces(
             },
         };
         buf.clear();
-        let st = state.take().unwrap_or_else(|| EmitState::new(&p.interp));
+        let st = state.take().unwrap_or_else(|| {
+            let mut s = EmitState::new(&p.interp);
+            s.expand_cycles = expand_cycles;
+            s
+        });
         let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);
         em.lines(0..p.lexed.lines.len(), &job.samples, &job.disp, &mut buf)?;
         state = Some(em.into_state());
@@ -258,7 +265,9 @@ fn pass(
         let (write_tx, write_rx) = sync_channel::<Vec<u8>>(2);
         let (written_tx, written_rx) = channel::<Vec<u8>>();
         let reading = scope.spawn(move || read_pieces(reader, piece_bytes, style, piece_tx));
-        let emitting = scope.spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx));
+        let expand = opts.expand_cycles;
+        let emitting =
+            scope.spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx, expand));
         let writing = scope.spawn(move || write_pieces(write_rx, written_tx, out));
         let mut report = Report::default();
         let mut norms: Vec<f64> = Vec::new();

@@ -218,8 +218,9 @@ pub fn sample_range(
             *prev_t = t;
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
-        if !prev.iter().all(|v| v.is_finite()) {
-            // from an unknown start only the end is known
+        if !prev.iter().all(|v| v.is_finite()) || rec.cycle == crate::interp::CYCLE_BOTTOM {
+            // from an unknown start only the end is known; a hole of a canned cycle is moved
+            // by the displacement at its bottom
             s.xyz.extend_from_slice(&end);
             s.t.push(1.0);
             s.rec.push(i as u32);

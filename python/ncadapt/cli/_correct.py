@@ -85,6 +85,14 @@ def _shift(ctx, param, value):
     help="Report uncorrected rapids ending below this Z inside the field.",
 )
 @dialect_option
+@click.option(
+    "--expand-cycles",
+    is_flag=True,
+    help="Write canned cycles (G73, G81-G83, G85, G89) as the G0/G1 moves LinuxCNC makes of them. "
+    "Without it a cycle stays a cycle block, each hole moved by the field at its bottom: X and Y by "
+    "its x and y, Z and R by its z (written on the holes whose values change). Cycles in G18/G19, "
+    "G87, G88 and G76, and cycles from an unknown position, are refused.",
+)
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
 def correct(
@@ -101,6 +109,7 @@ def correct(
     keep_unsupported,
     clearance,
     dialect,
+    expand_cycles,
     json_path,
 ):
     """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
@@ -129,6 +138,7 @@ def correct(
             keep_unsupported=keep_unsupported,
             clearance=clearance,
             progress=say,
+            expand_cycles=expand_cycles,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
@@ -169,5 +179,6 @@ def correct(
             "keep_unsupported": keep_unsupported,
             "clearance": clearance,
             "dialect": dialect,
+            "expand_cycles": expand_cycles,
         }
         write_json(json_path, payload)
