@@ -230,3 +230,30 @@ def test_a_program_stop_on_an_arc_made_one_piece_is_kept(tmp_path, stop):
     assert out.text.splitlines()[1].endswith(stop)
     if stop != "M0":
         assert canonical(out.write(tmp_path / "c.ngc")).error is None
+
+
+# ------------------------------------------------------------------------------------- R arcs
+R_ARCS = "G21 G90 G17 G90.1\nG0 X0 Y0 Z1\nG1 Z-1 F100\nG2 X10 Y0 R5\nG1 X20\nG3 X30 Y0 R5\nG18 G2 X38 Z-1 R5\nM2\n"
+
+
+@pytest.mark.parametrize("shift", [(0, 0, 0), (0.1, 0.2, 0.03)])
+def test_r_arcs_under_absolute_centres_keep_their_r_alone(tmp_path, shift):
+    """Under G90.1 an R-format arc names no centre: a uniform shift moves it whole, with R alone
+    (LinuxCNC refuses R beside I/J/K), and rs274 runs it as the input's arcs shifted."""
+    prog = nc.read(_write(tmp_path, R_ARCS))
+    out = prog.correct(fields.Shift(shift), rapids=True)
+    if shift == (0, 0, 0):
+        assert out.data == prog.data
+        return
+    assert all(not any(w in ln for w in ("I", "J", "K")) for ln in out.text.splitlines()[1:])
+    a, b = _run(tmp_path, R_ARCS, "in.ngc"), canonical(out.write(tmp_path / "c.ngc"))
+    assert b.error is None, b.error
+    assert a.kinds == b.kinds and "arc" in a.kinds
+    np.testing.assert_allclose(b.ends[:, :3], a.ends[:, :3] + shift, atol=1e-4)
+    for ra, rb in zip(a.arcs, b.arcs):
+        if ra is not None:
+            # the centre moves with the arc in the arc's own plane
+            plane = {"CANON_PLANE_XY": (0, 1), "CANON_PLANE_XZ": (2, 0), "CANON_PLANE_YZ": (1, 2)}[ra[3]]
+            want = (ra[1] + shift[plane[0]], ra[2] + shift[plane[1]])
+            assert rb[0] == ra[0] and rb[3] == ra[3]
+            np.testing.assert_allclose(rb[1:3], want, atol=1e-4)

@@ -622,7 +622,8 @@ impl<'a> Emitter<'a> {
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
             self.set_axes(li, rec, &target);
-            if keep_arc && rec.arc_absolute {
+            // an R-format arc names no centre: moved as a whole, its radius is the same
+            if keep_arc && rec.arc_absolute && !words.iter().any(|w| w.letter == b'R') {
                 self.shift_centre(li, rec, d0);
             }
             return;
