@@ -460,6 +460,25 @@ def test_demo_report_renders_in_chromium(demo_out, tmp_path):
     assert red.sum() > 500 and blue.sum() > 200
 
 
+def test_demo_report_is_made_for_review(demo_out):
+    """The demo's report has the correction map with its strip, the tolerance table, the sections and
+    the 3-D view; its tolerance share before is the measured deviations' (recounted here)."""
+    from lxml import html as lhtml
+
+    from ncadapt import demo
+
+    out, _ = demo_out
+    doc = lhtml.fromstring((out / "report.html").read_text())
+    text = doc.text_content()
+    assert "The correction to be cut" in text and "in the hatched strip the correction is extrapolated" in text
+    for a, at in demo.SECTIONS:
+        assert doc.get_element_by_id(f"section-{a}={at:g}") is not None
+    assert doc.get_element_by_id("surface3d") is not None
+    dev = measure.read(out / "measurements.csv").deviation
+    row = [td.text_content() for td in doc.get_element_by_id("tolerance").xpath(".//tr")[1].xpath("./td")]
+    assert row[0] == "measured" and abs(float(row[2]) - 100 * np.mean(np.abs(dev) <= demo.TOLERANCE)) <= 0.05
+
+
 def test_a_repeated_point_names_both_lines(tmp_path):
     rows = [",".join(map(str, (*NOM[k], *NRM[k], DEV[k]))) for k in range(4)]
     rows.append(rows[1])

@@ -24,6 +24,9 @@ CURVATURE_AMPLITUDE = 0.10  # mm, A_m
 POLYNOMIAL = {(1, 0): 0.02, (0, 2): -0.015, (1, 1): 0.01}  # mm, coefficients of u_n^i v_n^j
 PROBE_BORDER = 5.0  # mm of unmeasured border strip
 PROBE_SPACING = 2.5  # mm
+# the report's profile tolerance (±20 µm: a fine-milled freeform surface) and its sections
+TOLERANCE = 0.02  # mm
+SECTIONS = (("x", 40.0), ("y", 30.0))  # the part's middle lines, through its bump
 
 
 @dataclass
@@ -124,11 +127,15 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
             title="Freeform compensation: demo part",
             analysis=analysis,
             decomposition=decomposition,
-            xy=nominal,
+            xy=nominal[:, :2],
             deviation=meas.deviation,
             after=after_measured,
             summary=cards,
             files=files,
+            compensation=comp,
+            points=nominal,
+            tolerance=TOLERANCE,
+            sections=[rep.section(comp, nominal[:, :2], a, at) for a, at in SECTIONS],
         ),
     )
     import json

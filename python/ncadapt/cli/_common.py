@@ -121,6 +121,7 @@ EXTRAS = {
     "OCP": ("cad", "OpenCASCADE (STEP and IGES files)"),
     "asyncua": ("opcua", "asyncua (OPC UA)"),
     "matplotlib": ("report", "matplotlib (reports and plots)"),
+    "plotly": ("report", "plotly (the reports' interactive 3-D views)"),
 }
 
 

@@ -63,6 +63,19 @@ def _moran_options(f):
     return f
 
 
+def _section_value(ctx, param, value):  # noqa: ARG001 - a click callback's signature
+    """A click callback: ``AXIS=POS`` lines (``x=40``), as (axis name, position mm) pairs."""
+    from ._common import comma_floats
+
+    out = []
+    for text in value:
+        axis, eq, pos = text.partition("=")
+        if not eq or not axis.strip():
+            raise click.BadParameter(f"expected AXIS=POSITION in mm (x=40), got {text!r}")
+        out.append((axis.strip(), comma_floats(pos, 1, "AXIS=POSITION in mm (x=40)")[0]))
+    return tuple(out)
+
+
 def _moran_kw(weights, power, threshold, neighbors, alpha):
     return {"weights": weights, "power": power, "threshold": threshold, "neighbors": neighbors, "alpha": alpha}
 
@@ -310,6 +323,7 @@ def analyze(
                 xy=frame.uv(meas.nominal),
                 names=frame.names,
                 deviation=meas.deviation,
+                points=meas.nominal,
             ),
         )
 
@@ -394,6 +408,21 @@ def analyze(
     help="With --nominal: the whole compensated part, .step/.stp (the compensated faces in place of the nominal "
     "ones; --surface then writes those faces alone).",
 )
+@click.option(
+    "--tolerance",
+    type=FiniteRange(0, constants.COORD_MAX, min_open=True),
+    help="Profile tolerance ±T, mm: the share of points inside it before and predicted after (measured − "
+    "systematic), in the summary, the JSON and the report's tolerance-banded maps.",
+)
+@click.option(
+    "--section",
+    "section_lines",
+    multiple=True,
+    callback=_section_value,
+    metavar="AXIS=POS",
+    help="A section of the report along the line AXIS = POS mm of the part's plane (x=40, y=30 for a part "
+    "measured from +z): nominal, measured, systematic and compensated profiles. Repeat for several.",
+)
 @_moran_options
 @handle_errors
 def compensate(
@@ -417,6 +446,8 @@ def compensate(
     face_ids,
     max_distance,
     part_path,
+    tolerance,
+    section_lines,
     weights,
     power,
     threshold,
@@ -432,6 +463,7 @@ def compensate(
     from .. import cad, measure
     from .. import nc as ncmod
     from ..processes import freeform as pf
+    from ..report import freeform as rep
 
     if (program is None) != (output is None):
         raise click.UsageError("--program and -o go together")
@@ -466,6 +498,14 @@ def compensate(
                 )
         if part_path is not None and cad.FORMATS.get(part_path.suffix.lower()) != "step":
             raise click.UsageError(f"--part {part_path}: the part is written as STEP (.step or .stp)")
+        for name, given in (("--tolerance", tolerance), ("--section", section_lines)):
+            if given:
+                raise click.UsageError(
+                    f"{name} is not available with --nominal yet (the CAD report draws each face in its own "
+                    "(u, v)); run analyze or compensate without --nominal for the tolerance bands and sections"
+                )
+    if section_lines and report_path is None:
+        raise click.UsageError("--section draws in the report: give --report")
     if program is not None and tool_radius is None:
         raise click.UsageError(
             "--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
@@ -511,6 +551,7 @@ def compensate(
                 str(measurements),
             )
         c = pf.compensate(surf, meas, d.systematic, frame=frame, border=border)
+        secs = [rep.section(c, frame.uv(meas.nominal), a, at, frame.names) for a, at in section_lines]
         corr = None
         if program is not None:
             say(f"correcting {program}")
@@ -531,6 +572,17 @@ def compensate(
     if points_out is not None:
         _write_points(points_out, meas, d, c.points_compensated)
     payload = {"input": str(measurements), **a.as_dict(), **sysd}
+    if tolerance is not None:
+        tol = {
+            "value": tolerance,
+            "before": rep.tolerance_shares(meas.deviation, tolerance),
+            "predicted": rep.tolerance_shares(meas.deviation - d.systematic, tolerance),
+        }
+        payload["tolerance"] = tol
+        summary(
+            f"tolerance ±{tolerance:g} mm: {100 * tol['before']['inside']:.1f} % of the points inside before, "
+            f"{100 * tol['predicted']['inside']:.1f} % predicted after (measured − systematic)"
+        )
     if ext.max_distance > 0:
         payload["extrapolation"] = ext.as_dict()
         echo_err(
@@ -542,7 +594,6 @@ def compensate(
     if json_path:
         write_json(json_path, payload)
     if report_path:
-        from ..report import freeform as rep
         from ..report import write
 
         write(
@@ -558,6 +609,10 @@ def compensate(
                     k: str(v) for k, v in (("program", output), ("surface", surface_path), ("points", points_out)) if v
                 },
                 extrapolation=ext if ext.max_distance > 0 else None,
+                compensation=c,
+                points=meas.nominal,
+                tolerance=tolerance,
+                sections=secs,
             ),
         )
 
