@@ -549,10 +549,12 @@ impl Interpreter {
             let mut q_word: Option<f64> = None;
             let mut e_word: Option<usize> = None;
             let mut seen: u32 = 0;
+            let mut wcol = [0usize; 26];
             for w in words {
                 // LinuxCNC reads each letter once per block (G and M words excepted)
                 if w.letter.is_ascii_uppercase() && !matches!(w.letter, b'G' | b'M') {
                     let bit = 1u32 << (w.letter - b'A');
+                    wcol[(w.letter - b'A') as usize] = col(w);
                     if seen & bit != 0 {
                         return Err(ierr(
                             li,
@@ -898,6 +900,34 @@ impl Interpreter {
                 }
                 st.mode = m;
             }
+            // words no code of the block uses are an error, as in LinuxCNC (its check_other_codes):
+            // on a Fanuc control R, I, K on a G1 round or chamfer the corner, which a split move
+            // would put in the wrong place
+            if untraced.is_none() && unknown_m.is_none() {
+                let to_be = match motion_word {
+                    Some((m, _)) => Some(m),
+                    // axis words for the modal motion, or centre words alone for a modal arc (a
+                    // full circle)
+                    None if (named != 0
+                        || (ijk.iter().any(|v| v.is_some())
+                            && matches!(st.mode, Mode::Motion(m) if m.is_arc())))
+                        && nonmodal_axis_user.is_none()
+                        && home.is_none() =>
+                    {
+                        Some(st.mode)
+                    }
+                    None => None,
+                };
+                let gcodes: Vec<i32> = gs[..ng].iter().map(|g| g.0).collect();
+                let mcodes: Vec<i32> = ms[..nm].iter().map(|m| m.0).collect();
+                if let Some((letter, users)) = unused_word(seen, to_be, &gcodes, &mcodes) {
+                    return Err(ierr(
+                        li,
+                        wcol[(letter - b'A') as usize],
+                        format!("{} word with no {users} to use it", letter as char),
+                    ));
+                }
+            }
             // a G code the engine does not know may change the motion mode too; for an unknown M code,
             // what it does with the machine, and with the block's axis words, is not known
             if let Some(idx) = untraced.or(unknown_m) {
@@ -1198,6 +1228,68 @@ fn g_group(c: i32) -> Option<u8> {
         150 | 160 => 18,
         _ => return None,
     })
+}
+
+/// The first of the words I J K R P Q L H D in `seen` (a bit per letter) that no code of the block
+/// uses, with the codes that would, as LinuxCNC 2.9 checks them (interp_check.cc). `to_be` is the
+/// motion the block runs: its own motion code, or the modal one when it has axis words for it.
+fn unused_word(
+    seen: u32,
+    to_be: Option<Mode>,
+    gs: &[i32],
+    ms: &[i32],
+) -> Option<(u8, &'static str)> {
+    let has = |l: u8| seen & (1 << (l - b'A')) != 0;
+    let g = |c: i32| gs.contains(&c);
+    let m = |f: fn(i32) -> bool| ms.iter().any(|&c| f(c));
+    let arc = matches!(to_be, Some(Mode::Motion(Motion::ArcCw | Motion::ArcCcw)));
+    let cycle = |cs: &[i32]| matches!(to_be, Some(Mode::Canned(c)) if cs.contains(&c));
+    let any_cycle = matches!(to_be, Some(Mode::Canned(_)));
+    // codes the engine refuses anyway (splines, threading, G10, rotation G68, scaling G51) use
+    // these words too
+    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510].iter().any(|&c| g(c));
+    let user_m = m(|c| (100..=199).contains(&c));
+    let rules: [(u8, bool, &'static str); 9] = [
+        (b'I', arc || cycle(&[870]) || other, "G2, G3 or G87"),
+        (b'J', arc || cycle(&[870]) || other, "G2, G3 or G87"),
+        (b'K', arc || cycle(&[870]) || other, "G2, G3 or G87"),
+        (
+            b'R',
+            arc || any_cycle || other || m(|c| c == 19),
+            "G2, G3, canned cycle or G10",
+        ),
+        (
+            b'P',
+            // (a P on any canned cycle is kept: Fanuc controls ignore it where the cycle has no dwell)
+            arc || any_cycle
+                || g(40)
+                || g(640)
+                || other
+                || user_m
+                || m(|c| (50..=53).contains(&c) || (62..=66).contains(&c) || c == 98),
+            "G2, G3, G4, G64, dwell cycle or M code",
+        ),
+        (
+            b'Q',
+            cycle(&[730, 830]) || g(640) || other || user_m || m(|c| matches!(c, 19 | 66..=68)),
+            "G64, G73, G83 or M code",
+        ),
+        (
+            b'L',
+            any_cycle || g(411) || g(421) || other || m(|c| c == 66 || c == 98),
+            "canned cycle, G10 or M code",
+        ),
+        (b'H', g(430) || g(432) || other, "G43"),
+        (
+            b'D',
+            g(410) || g(411) || g(420) || g(421) || g(960) || other,
+            "G41, G42 or G96",
+        ),
+    ];
+    rules
+        .iter()
+        .find(|&&(l, used, _)| has(l) && !used)
+        .map(|&(l, _, users)| (l, users))
 }
 
 /// Modal group of an M code as LinuxCNC groups them; None for codes the engine does not know.
