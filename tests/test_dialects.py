@@ -78,6 +78,11 @@ def test_cli_reports_the_dialect_and_refuses_with_nothing_written(tmp_path):
     payload = json.loads(res.stdout)
     assert payload["dialect"] == {"name": "fanuc", "detected": True, "line": 2, "evidence": "O1001"}
     assert payload["options"]["dialect"] == "auto"
+    assert payload["field_interpolation"] == "a constant shift"
+    grid = tmp_path / "g.csv"
+    grid.write_text("x,y,dz\n" + "".join(f"{x},{y},0.01\n" for y in (-1, 5, 11) for x in (-1, 11)))
+    res = r.invoke(main, ["correct", str(prog), "--field", str(grid), "-o", str(tmp_path / "o2.nc")])
+    assert res.exit_code == 0 and "field: grid 2 x 3 (bilinear), outside the grid: error" in res.stdout
     res = r.invoke(main, ["inspect", str(prog), "--dialect", "grbl"])
     assert res.exit_code == 0 and "dialect: grbl (given)" in res.stdout
 

@@ -81,7 +81,8 @@ def _engine(fn, name):
 def _unsupported_error(name, uns) -> RefusedError:
     return RefusedError(
         f"{name}: {len(uns)} unsupported construct(s); nothing written "
-        "(--keep-unsupported / keep_unsupported=True copies those blocks unchanged and corrects the rest)",
+        "(--keep-unsupported, keep_unsupported=True in Python, copies those blocks unchanged and corrects the "
+        "rest)",
         [asdict(u) for u in uns],
     )
 
@@ -385,7 +386,7 @@ def _correct(
     if n_outside:
         raise RefusedError(
             f"{name}: {n_outside:,} point(s) outside the field's domain {domain}; nothing written "
-            f"(first at line {outside[0]['line']}); use outside='clamp' or 'extrapolate' to allow them",
+            f"(first at line {outside[0]['line']}); --outside clamp or extrapolate (outside= in Python) allows them",
             outside,
         )
     worst_norm = worst[0][0] if worst else 0.0

@@ -130,6 +130,10 @@ class Field:
     def _eval(self, p: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def describe(self) -> str:
+        """How the field interpolates, for a summary."""
+        return repr(self)
+
 
 class Shift(Field):
     """The same displacement everywhere.
@@ -146,6 +150,10 @@ class Shift(Field):
 
     def _eval(self, p):
         return np.broadcast_to(self.d, p.shape).copy()
+
+    def describe(self) -> str:
+        """How the field interpolates, for a summary."""
+        return "a constant shift"
 
     def __repr__(self):
         return f"Shift({self.d.tolist()})"
@@ -214,6 +222,11 @@ class GridField(Field):
                 self._spline = RectBivariateSpline(self.xs, self.ys, self.dz.T, kx=3, ky=3, s=0)
             d[:, 2] = self._spline.ev(x, y)
         return d
+
+    def describe(self) -> str:
+        """How the field interpolates, for a summary."""
+        how = "bilinear" if self.method == "linear" else "bicubic"
+        return f"grid {len(self.xs)} x {len(self.ys)} ({how}), outside the grid: {self.outside}"
 
     def __repr__(self):
         return f"GridField({len(self.xs)}x{len(self.ys)}, {self.method}, outside={self.outside!r})"
@@ -308,6 +321,10 @@ class ScatteredField(Field):
             _, k = self._tree.query(xy[out])
             d[out] = self.displacements[k]
         return d
+
+    def describe(self) -> str:
+        """How the field interpolates, for a summary."""
+        return f"scattered, {len(self.points):,} points (thin-plate spline)"
 
     def __repr__(self):
         return f"ScatteredField({len(self.points)} points, outside={self.outside!r})"

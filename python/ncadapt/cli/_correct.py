@@ -80,9 +80,11 @@ def _shift(ctx, param, value):
 )
 @click.option(
     "--clearance",
-    type=FiniteRange(),
+    type=FiniteRange(-constants.COORD_MAX, constants.COORD_MAX),
     default=None,
-    help="Report uncorrected rapids ending below this Z inside the field.",
+    metavar="Z",
+    help="Report uncorrected rapids ending below this Z inside the field, mm (inch programs too: their Z is "
+    "compared in mm).",
 )
 @dialect_option
 @click.option(
@@ -142,6 +144,7 @@ def correct(
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
+    summary(f"  field: {field.describe()}")
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
         f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"
@@ -169,6 +172,7 @@ def correct(
         }
         payload.update(c.as_dict())
         payload["dialect"] = d.as_dict()
+        payload["field_interpolation"] = field.describe()
         payload["options"] = {
             "max_segment": max_segment,
             "chord_tol": chord_tol,
