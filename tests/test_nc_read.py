@@ -103,10 +103,24 @@ def test_work_offsets_tools_and_g53():
     info = prog.inspect()
     assert info["work_offsets"] == ["G55", "G59.3"]
     assert info["tools"] == [3]
-    assert not info["unsupported"]
+    # moves in a second work system are elsewhere on the machine than the field was measured
+    (u,) = info["unsupported"]
+    assert (u["line"], u["col"]) == (4, 1) and "work coordinate system G59.3 after moves in G55" in u["construct"]
     assert info["notes"][0]["line"] == 3 and "G53" in info["notes"][0]["message"]
     # after G53 the Z the program runs at is not known
     assert np.isnan(prog.blocks.end[1, 2])
+
+
+def test_one_work_system_is_read_and_a_change_forgets_the_position():
+    # G54 named again, or a system chosen before any move: nothing to refuse
+    assert not nc.parse("G55\nG0 X1 Y2 Z3\nG55 G1 X4 F100\nM2\n").unsupported
+    prog = nc.parse("G0 X1 Y2 Z3\nG55\nG1 X4 F100\nG54\nG1 X5\nM2\n")
+    assert [u.line for u in prog.unsupported] == [2]
+    # the tool's coordinates in G55 depend on offsets the program does not give: unknown, not X1 Y2 Z3
+    ends = prog.blocks.end
+    assert np.isnan(ends[1, 1]) and np.isnan(ends[1, 2]) and ends[1, 0] == 4.0
+    # back in G54 the position is unknown too until a move names the axes
+    assert np.isnan(ends[2, 1])
 
 
 def test_inch_and_incremental_positions():

@@ -91,6 +91,13 @@ def wavy(p):
     return d
 
 
+#: How far a written path may be from the predicted one, per axis: half a unit of the last written
+#: digit for the rounding of a written end, and as much again where pieces on one straight line
+#: (within half a unit) are written as one move: one unit of 4 decimals in mm, of 5 in inches.
+TOL_MM = 1e-4 + 1e-6
+TOL_INCH = 1e-5 * 25.4 + 1e-6
+
+
 def assert_follows(out, tol):
     """The corrected program, read back, runs its feed moves through the predicted points."""
     c = out.correction
@@ -131,8 +138,8 @@ def test_absolute_and_incremental_are_the_same_path(mv):
     pb = cb.correction.points + cb.correction.displacements
     np.testing.assert_allclose(pa, pb, atol=1e-9)
     # both corrected programs, read back, follow that path to the written digits
-    assert_follows(ca, 0.5e-4 + 1e-6)
-    assert_follows(cb, 0.5e-4 + 1e-6)
+    assert_follows(ca, TOL_MM)
+    assert_follows(cb, TOL_MM)
     assert "G91" in cb.text
 
 
@@ -150,8 +157,8 @@ def test_inch_and_mm_are_the_same_path(mv):
     np.testing.assert_allclose(pa, pb, atol=1e-9)
     # corrected inch programs stay in inches and follow the path to 5 inch decimals (1.3e-4 mm)
     assert cb.text.startswith("G20")
-    assert_follows(ca, 0.5e-4 + 1e-6)
-    assert_follows(cb, 0.5e-5 * 25.4 + 1e-6)
+    assert_follows(ca, TOL_MM)
+    assert_follows(cb, TOL_INCH)
 
 
 @SETTINGS

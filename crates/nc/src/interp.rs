@@ -282,6 +282,8 @@ struct Active {
     inverse_time: Option<(u32, usize)>,
     flow: Option<(u32, usize)>,
     tool_offset: Option<(u32, usize)>,
+    /// A work coordinate system other than the one the program's moves began in.
+    wcs: Option<(u32, usize)>,
 }
 
 impl Active {
@@ -297,6 +299,7 @@ impl Active {
             self.canned,
             self.inverse_time,
             self.tool_offset,
+            self.wcs,
         ]
         .iter()
         .flatten()
@@ -322,6 +325,9 @@ struct State {
     arc_absolute: bool,
     active: Active,
     cyc: CycleModal,
+    /// The work coordinate system in force (G54 = 540, ...), and the one the first move was in.
+    wcs: i32,
+    wcs_moves: Option<i32>,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -421,6 +427,8 @@ impl Interpreter {
                 arc_absolute: false,
                 active: Active::default(),
                 cyc: CycleModal::default(),
+                wcs: 540,
+                wcs_moves: None,
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -755,6 +763,33 @@ impl Interpreter {
                         if !out.summary.work_offsets.contains(&o) {
                             out.summary.work_offsets.push(o);
                         }
+                        if c != st.wcs {
+                            // the tool stays where it is; its coordinates in the new system depend
+                            // on offsets the program does not know
+                            st.pos = [f64::NAN; NAXES];
+                        }
+                        st.wcs = c;
+                        // a field is measured in one work system's coordinates: moves in another
+                        // (a second fixture, a second part) are elsewhere on the machine
+                        match st.wcs_moves {
+                            Some(first) if first != c => {
+                                if st.active.wcs.is_none() {
+                                    let idx = push_unsupported(
+                                        out,
+                                        li,
+                                        gc,
+                                        &format!(
+                                            "work coordinate system {} after moves in {} (a field is in one system's coordinates)",
+                                            g_name(c),
+                                            g_name(first)
+                                        ),
+                                    );
+                                    st.active.wcs = Some((li as u32, idx));
+                                }
+                            }
+                            Some(_) => st.active.wcs = None,
+                            None => {}
+                        }
                     }
                     530 => g53 = true,
                     610 | 611 | 640 => {} // path control
@@ -882,6 +917,9 @@ impl Interpreter {
                 out.summary.inch_lines += 1;
             } else {
                 out.summary.mm_lines += 1;
+            }
+            if st.wcs_moves.is_none() && (named != 0 || motion_word.is_some()) {
+                st.wcs_moves = Some(st.wcs);
             }
             if let Some((m, mc)) = motion_word {
                 if let Mode::Canned(c) = m {
@@ -1247,7 +1285,9 @@ fn unused_word(
     let any_cycle = matches!(to_be, Some(Mode::Canned(_)));
     // codes the engine refuses anyway (splines, threading, G10, rotation G68, scaling G51) use
     // these words too
-    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510].iter().any(|&c| g(c));
+    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510]
+        .iter()
+        .any(|&c| g(c));
     let user_m = m(|c| (100..=199).contains(&c));
     let rules: [(u8, bool, &'static str); 9] = [
         (b'I', arc || cycle(&[870]) || other, "G2, G3 or G87"),
