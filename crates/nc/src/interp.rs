@@ -772,23 +772,21 @@ impl Interpreter {
                         // a field is measured in one work system's coordinates: moves in another
                         // (a second fixture, a second part) are elsewhere on the machine
                         match st.wcs_moves {
-                            Some(first) if first != c => {
-                                if st.active.wcs.is_none() {
-                                    let idx = push_unsupported(
-                                        out,
-                                        li,
-                                        gc,
-                                        &format!(
-                                            "work coordinate system {} after moves in {} (a field is in one system's coordinates)",
-                                            g_name(c),
-                                            g_name(first)
-                                        ),
-                                    );
-                                    st.active.wcs = Some((li as u32, idx));
-                                }
+                            Some(first) if first == c => st.active.wcs = None,
+                            Some(first) if st.active.wcs.is_none() => {
+                                let idx = push_unsupported(
+                                    out,
+                                    li,
+                                    gc,
+                                    &format!(
+                                        "work coordinate system {} after moves in {} (a field is in one system's coordinates)",
+                                        g_name(c),
+                                        g_name(first)
+                                    ),
+                                );
+                                st.active.wcs = Some((li as u32, idx));
                             }
-                            Some(_) => st.active.wcs = None,
-                            None => {}
+                            _ => {}
                         }
                     }
                     530 => g53 = true,
