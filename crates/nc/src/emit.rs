@@ -114,59 +114,69 @@ impl Format {
             }
         };
         let a = m.unsigned_abs();
-        let (q, mut r) = (a / scale, a % scale);
-        // the fraction's D digits, and how many of them are written
-        let mut frac = [b'0'; 10];
+        let (q, r) = (a / scale, a % scale);
+        // the text is put together in 32 bytes and copied at once: sign, whole digits (omitted
+        // for ".5" when the program writes so), point, the fraction's D digits, of which those
+        // up to the last non-zero one are kept unless the program writes trailing zeros (and "0"
+        // after a bare point unless the program writes "5.")
+        let mut b = [0u8; 32];
+        let mut i = (m < 0) as usize;
+        b[0] = b'-';
+        // (with D >= 4, some fraction digit is written when the style is fixed or r > 0)
+        if !(self.style.no_leading_zero && q == 0 && (self.style.fixed || r != 0)) {
+            if q < 10 {
+                b[i] = b'0' + q as u8;
+                i += 1;
+            } else if q < 100 {
+                b[i] = DIGIT_PAIRS[2 * q as usize];
+                b[i + 1] = DIGIT_PAIRS[2 * q as usize + 1];
+                i += 2;
+            } else {
+                let mut nq = 3;
+                while nq < 16 && q >= POW10_U64[nq] {
+                    nq += 1;
+                }
+                let mut x = q;
+                let mut j = i + nq;
+                while j >= i + 2 {
+                    let d = (x % 100) as usize;
+                    x /= 100;
+                    b[j - 2] = DIGIT_PAIRS[2 * d];
+                    b[j - 1] = DIGIT_PAIRS[2 * d + 1];
+                    j -= 2;
+                }
+                if j > i {
+                    b[i] = b'0' + x as u8;
+                }
+                i += nq;
+            }
+        }
+        b[i] = b'.';
+        i += 1;
+        // (at most 1 + 16 + 1 bytes so far: the D <= 9 digits below fit)
+        let f = &mut b[i..i + D];
+        let mut r = r as u32; // r < 10^D <= 10^9
         let mut k = D;
         while k >= 2 {
             let d = (r % 100) as usize;
             r /= 100;
-            frac[k - 2] = DIGIT_PAIRS[2 * d];
-            frac[k - 1] = DIGIT_PAIRS[2 * d + 1];
+            f[k - 2] = DIGIT_PAIRS[2 * d];
+            f[k - 1] = DIGIT_PAIRS[2 * d + 1];
             k -= 2;
         }
         if k == 1 {
-            frac[0] = b'0' + r as u8;
+            f[0] = b'0' + r as u8;
         }
         let mut digits = D;
         if !self.style.fixed {
-            while digits > 0 && frac[digits - 1] == b'0' {
+            while digits > 0 && f[digits - 1] == b'0' {
                 digits -= 1;
             }
         }
-        // the text is put together in 32 bytes and copied at once: sign, whole digits (omitted
-        // for ".5" when the program writes so), point, fraction (or "0" after a bare point unless
-        // the program writes "5.")
-        let mut b = [0u8; 32];
-        let mut i = (m < 0) as usize;
-        b[0] = b'-';
-        if !(self.style.no_leading_zero && q == 0 && digits > 0) {
-            let mut nq = 1;
-            while nq < 16 && q >= POW10_U64[nq] {
-                nq += 1;
-            }
-            let mut x = q;
-            let mut j = i + nq;
-            while j >= i + 2 {
-                let d = (x % 100) as usize;
-                x /= 100;
-                b[j - 2] = DIGIT_PAIRS[2 * d];
-                b[j - 1] = DIGIT_PAIRS[2 * d + 1];
-                j -= 2;
-            }
-            if j > i {
-                b[i] = b'0' + x as u8;
-            }
-            i += nq;
-        }
-        b[i] = b'.';
-        i += 1;
-        // (at most 1 + 16 + 1 bytes so far: the ten below fit)
-        b[i..i + 10].copy_from_slice(&frac);
         if digits > 0 {
             i += digits;
         } else if !self.style.bare_point {
-            i += 1; // frac[0] is '0'
+            i += 1; // f[0] is '0'
         }
         out.reserve(b.len());
         let len = out.len();

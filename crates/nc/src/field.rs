@@ -77,11 +77,12 @@ fn cell(grid: &[f64], step: Option<f64>, x: f64) -> (usize, f64) {
             };
             // SAFETY: 0 <= f <= n - 2 (a NaN, from a NaN point, takes cell 0: its value is NaN)
             let i = if f >= 0.0 {
-                unsafe { f.to_int_unchecked::<u64>() as usize }
+                unsafe { f.to_int_unchecked::<i64>() as usize }
             } else {
                 0
             };
-            (i, u - i as f64)
+            // f is the whole number i (u - f is NaN for a NaN f, as u is then NaN too)
+            (i, u - f)
         }
         None => {
             // np.searchsorted(grid, x, side="right") - 1, clipped to 0..n-2
@@ -170,18 +171,23 @@ impl Field {
                 true
             }
             Field::Grid(g) => {
-                out.resize(xyz.len(), 0.0);
                 let mut ok = true;
-                for (p, d) in xyz.chunks_exact(3).zip(out.chunks_exact_mut(3)) {
+                // written straight into the reserved room: (0, 0, dz) per point
+                let room = &mut out.spare_capacity_mut()[..xyz.len() - xyz.len() % 3];
+                for (p, d) in xyz.chunks_exact(3).zip(room.chunks_exact_mut(3)) {
                     ok &= p[0].is_finite() && p[1].is_finite() && p[2].is_finite();
                     match g.dz(p[0], p[1]) {
                         Some(dz) => {
                             ok &= dz.is_finite();
-                            d[2] = dz;
+                            d[0].write(0.0);
+                            d[1].write(0.0);
+                            d[2].write(dz);
                         }
                         None => return false,
                     }
                 }
+                // SAFETY: every element up to this length was written above
+                unsafe { out.set_len(xyz.len() - xyz.len() % 3) };
                 ok
             }
         }

@@ -338,12 +338,29 @@ impl<'a> GridLines<'a> {
 }
 
 /// Fractions u in (0, 1) where the segment a→b crosses one of the sorted lines.
-#[inline]
+#[inline(always)]
 fn crossings(lines: &GridLines, a: f64, b: f64, out: &mut Vec<f64>) {
     if lines.v.is_empty() || a == b {
         return;
     }
     let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    // most pieces lie within one cell: when the lines around the guessed cell hold both ends,
+    // no line lies in (lo, hi) (the search below would find an empty range)
+    let v = lines.v;
+    let k = (lo - lines.first) * lines.per_mm;
+    if k >= 0.0 && k < (v.len() - 1) as f64 {
+        // SAFETY: 0 <= k < n - 1, so its whole part and the one after are valid indices
+        let i = unsafe { k.to_int_unchecked::<i64>() } as usize;
+        if v[i] <= lo && hi < v[i + 1] {
+            return;
+        }
+    }
+    crossings_found(lines, a, b, lo, hi, out);
+}
+
+/// [`crossings`] when the ends may lie in different cells.
+#[inline(never)]
+fn crossings_found(lines: &GridLines, a: f64, b: f64, lo: f64, hi: f64, out: &mut Vec<f64>) {
     let i0 = lines.partition::<true>(lo);
     let i1 = lines.partition::<false>(hi).max(i0);
     for &v in &lines.v[i0..i1] {
@@ -417,6 +434,43 @@ mod tests {
                     v.partition_point(|&a| a < x),
                     "{x} in {v:?}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn crossings_are_every_line_strictly_inside() {
+        let uniform: Vec<f64> = (0..=100).map(|i| i as f64).collect();
+        let irregular = vec![-3.0, -1.0, 0.0, 0.001, 0.5, 7.0, 7.0000001, 100.0];
+        let mut seed = 0x9E3779B97F4A7C15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for v in [uniform, irregular, vec![1.0]] {
+            let g = GridLines::new(&v);
+            for k in 0..20000 {
+                let a = next() * 120.0 - 10.0;
+                // short pieces (within a cell mostly), long ones, and ends on a line
+                let b = match k % 4 {
+                    0 => a + (next() - 0.5) * 0.5,
+                    1 => a + (next() - 0.5) * 20.0,
+                    2 => v[k % v.len()],
+                    _ => a,
+                };
+                let a = if k % 8 == 3 { v[(k / 8) % v.len()] } else { a };
+                let mut got = Vec::new();
+                crossings(&g, a, b, &mut got);
+                // every line, one by one
+                let expect: Vec<f64> = v
+                    .iter()
+                    .filter(|&&l| a != b && l > a.min(b) && l < a.max(b))
+                    .map(|&l| (l - a) / (b - a))
+                    .filter(|&u| u > 1e-12 && u < 1.0 - 1e-12)
+                    .collect();
+                assert_eq!(got, expect, "{a} {b} in {v:?}");
             }
         }
     }
