@@ -394,6 +394,7 @@ def analyze(
     help="With --nominal: the whole compensated part, .step/.stp (the compensated faces in place of the nominal "
     "ones; --surface then writes those faces alone).",
 )
+@_align_options
 @_moran_options
 @handle_errors
 def compensate(
@@ -417,6 +418,9 @@ def compensate(
     face_ids,
     max_distance,
     part_path,
+    align,
+    align_dof,
+    datums,
     weights,
     power,
     threshold,
@@ -442,6 +446,7 @@ def compensate(
             "measurements": measurements,
             "input program": program,
             "nominal": nominal,
+            "datums": datums,
             **companion_inputs(measurements),
         },
         {
@@ -466,6 +471,7 @@ def compensate(
                 )
         if part_path is not None and cad.FORMATS.get(part_path.suffix.lower()) != "step":
             raise click.UsageError(f"--part {part_path}: the part is written as STEP (.step or .stp)")
+    _check_align(nominal, align, align_dof, datums)
     if program is not None and tool_radius is None:
         raise click.UsageError(
             "--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
@@ -482,6 +488,7 @@ def compensate(
             kw,
             probe_radius=probe_radius,
             units=units,
+            align=dict(align=align, align_dof=align_dof, datums=datums),
             program=program,
             output=output,
             tool_radius=tool_radius,
@@ -603,6 +610,7 @@ def _compensate_cad(
     *,
     probe_radius,
     units,
+    align,
     program,
     output,
     tool_radius,
@@ -622,7 +630,13 @@ def _compensate_cad(
     with progress() as say:
         say(f"reading {measurements} and projecting onto {nominal}")
         proj = measure.project_on_cad(
-            measurements, nominal, faces=face_ids, max_distance=max_distance, probe_radius=probe_radius, units=units
+            measurements,
+            nominal,
+            faces=face_ids,
+            max_distance=max_distance,
+            probe_radius=probe_radius,
+            units=units,
+            **align,
         )
         meas = proj.measurements
         a = pf.analyze(meas, coords=meas.nominal, progress=_said(say, "Moran's I"), **kw)
@@ -641,6 +655,7 @@ def _compensate_cad(
         if part_path is not None:
             say(f"writing {part_path}")
             cad.write_shape(pc.part, part_path)
+    _print_alignment(meas.alignment)
     _print_analysis(a)
     _print_decomposition(a, d)
     for f in pc.faces:
@@ -665,6 +680,7 @@ def _compensate_cad(
     payload = {
         "input": str(measurements),
         "nominal": str(nominal),
+        "alignment": meas.alignment.as_dict(),
         **a.as_dict(),
         **d.as_dict(),
         "faces": pc.ids,
