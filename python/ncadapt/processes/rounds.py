@@ -85,6 +85,7 @@ class Grid:
         return RegularGridInterpolator((self.u, self.v), self.df)(q)
 
     def as_dict(self) -> dict:
+        """``u``, ``v``, ``df`` (and ``face``) as lists."""
         d = {"u": self.u.tolist(), "v": self.v.tolist(), "df": self.df.tolist()}
         return ({"face": self.face} | d) if self.face is not None else d
 
@@ -104,9 +105,11 @@ class Correction:
     gains: dict | None = None
 
     def grid(self, face: int | None = None) -> Grid | None:
+        """The grid of CAD face ``face`` (None: the frame's), or None when there is none."""
         return next((g for g in self.grids if g.face == face), None)
 
     def as_dict(self) -> dict:
+        """The JSON object ``correction`` (docs/freeform.md gives its keys)."""
         d: dict = {"format": FORMAT, "kind": self.kind, "units": "mm", "round": self.round}
         if self.frame is not None:
             d["frame"] = np.asarray(self.frame).tolist()
