@@ -67,13 +67,14 @@ def _grid(a0, a1, b0, b1, n):
     return a.ravel(), b.ravel()
 
 
-def _box_points(n):
-    """n × n points on each of the faces z = H, y = 0 and x = 0, 5 mm from their edges."""
-    a, b = _grid(5, L - 5, 5, W - 5, n)
+def _box_points(n, margin=5.0):
+    """n × n points on each of the faces z = H, y = 0 and x = 0, ``margin`` mm from their edges."""
+    g = margin
+    a, b = _grid(g, L - g, g, W - g, n)
     top = np.column_stack([a, b, np.full_like(a, H)])
-    a, b = _grid(5, L - 5, 5, H - 5, n)
+    a, b = _grid(g, L - g, g, H - g, n)
     front = np.column_stack([a, np.zeros_like(a), b])
-    a, b = _grid(5, W - 5, 5, H - 5, n)
+    a, b = _grid(g, W - g, g, H - g, n)
     left = np.column_stack([np.zeros_like(a), a, b])
     return np.vstack([top, front, left])
 
@@ -369,3 +370,101 @@ def test_alignment_options_that_are_refused(tmp_path, args, message):
 
 def test_the_examples_run():
     assert doctest.testmod(_align, optionflags=doctest.NORMALIZE_WHITESPACE).failed == 0
+
+
+# ------------------------------------------------------------------------- compensate --align
+def _box_form_error(p, n):
+    """A smooth form error on each measured face of the box (mm, along the outward normal n)."""
+    x, y, z = p.T
+    top = 0.05 + 0.10 * np.sin(x / 40) * np.cos(y / 35)
+    front = 0.08 * np.cos(x / 45) * np.sin(z / 35) - 0.04
+    left = 0.06 * np.sin(y / 35) + 0.04 * np.cos(z / 25)
+    return np.where(n[:, 2] > 0.5, top, np.where(n[:, 1] < -0.5, front, left))
+
+
+def _rigid_rows(p, n):
+    """The normal displacement of a small rigid motion (t, θ) at p: n·t + (p × n)·θ, as rows [n, p × n]."""
+    return np.column_stack([n, np.cross(p, n)])
+
+
+def _box_normals(q):
+    return np.where(
+        np.isclose(q[:, 2], H)[:, None],
+        [0.0, 0.0, 1.0],
+        np.where(np.isclose(q[:, 1], 0)[:, None], [0, -1.0, 0], [-1.0, 0, 0]),
+    )
+
+
+MARGIN = 2.5  # mm: the unmeasured border strip of each face in the test below
+
+
+def test_compensate_aligns_then_compensates_the_form(tmp_path):
+    # the box's three faces with a form error E moved by the known transform, 5 µm noise per
+    # coordinate: compensate --align bestfit returns the transform within 1 µm and 1e-5 rad, and the
+    # compensated part meets the truth targets of tests/test_cad_compensate.py. A best fit cannot
+    # tell a rigid motion of the part from the same motion in the form error, so E is made free of
+    # rigid motions over the measured points (least squares with numpy: E − [n, p × n] c); E keeps
+    # 9-18 µm RMS per face
+    from OCP.TopAbs import TopAbs_FACE
+
+    step = _box(tmp_path / "box.step")
+    q = _box_points(40, MARGIN)
+    nq = _box_normals(q)
+    c = np.linalg.lstsq(_rigid_rows(q, nq), _box_form_error(q, nq), rcond=None)[0]
+
+    def truth(p, n):
+        return _box_form_error(p, n) - _rigid_rows(p, n) @ c
+
+    e = truth(q, nq)
+    assert np.abs(_rigid_rows(q, nq).T @ e).max() < 1e-9
+    m = _to_measurement(q + e[:, None] * nq) + np.random.default_rng(6).normal(scale=NOISE, size=q.shape)
+    a = _csv(tmp_path / "a.csv", m)
+    out, js = tmp_path / "box_c.step", tmp_path / "c.json"
+    r = CliRunner().invoke(
+        main,
+        ["compensate", str(a), "--nominal", str(step), "--align", "bestfit", "--part", str(out), "--json", str(js)],
+    )
+    assert r.exit_code == 0, r.output
+    assert "alignment (bestfit, x,y,z,rx,ry,rz; 4,800 points" in r.output
+    j = json.loads(js.read_text())
+    assert np.abs(np.array(j["alignment"]["translation"]) - T_TRUE).max() < 1e-3
+    assert np.abs(np.radians(j["alignment"]["rotation"]) - ANGLES_TRUE).max() < 1e-5
+    assert j["alignment"]["rms"] == pytest.approx(np.sqrt(np.mean(e**2) + NOISE**2), rel=0.1)
+    assert sorted(j["faces"]) == [1, 3, 6]  # x = 0, y = 0, z = H in OpenCASCADE's order
+    # the written part, read back with OpenCASCADE and cut along the faces' normals (as in
+    # tests/test_cad_compensate.py): the form error left, E − dF, against E
+    from test_cad_compensate import _along, _count, _read_step, _truth_figures, _valid
+
+    back = _read_step(out)
+    assert _valid(back) and _count(back, TopAbs_FACE) == 6
+    rs = np.random.default_rng(9)
+    ps, ns, inner = [], [], []
+    for axes, size, fixed, normal in (
+        ((0, 1), (L, W), (2, H), (0, 0, 1.0)),
+        ((0, 2), (L, H), (1, 0.0), (0, -1.0, 0)),
+        ((1, 2), (W, H), (0, 0.0), (-1.0, 0, 0)),
+    ):
+        p = np.zeros((800, 3))
+        p[:, axes[0]] = rs.uniform(0.5, size[0] - 0.5, 800)
+        p[:, axes[1]] = rs.uniform(0.5, size[1] - 0.5, 800)
+        p[:, fixed[0]] = fixed[1]
+        ps.append(p)
+        ns.append(np.tile(normal, (800, 1)))
+        inner.append(np.all((p[:, axes] >= MARGIN) & (p[:, axes] <= np.array(size) - MARGIN), axis=1))
+    p, n, measured = np.vstack(ps), np.vstack(ns), np.concatenate(inner)
+    t = _along(back, p, n, reach=0.3)
+    assert np.isfinite(t).all()
+    f = _truth_figures(truth(p, n), t, measured)
+    assert f["inside"] <= 0.10 and f["border"] <= 0.20 and f["inside_rms"] <= 0.002, f
+
+
+def test_compensate_alignment_options_are_checked(tmp_path):
+    step = _plane(tmp_path / "plate.step")
+    a = _csv(tmp_path / "a.csv", np.array([[1.0, 1.0, 5.0], [2.0, 1.0, 5.0], [1.0, 3.0, 5.0]]))
+    for args, message in (
+        (["--align", "bestfit"], "--align needs --nominal"),
+        (["--nominal", str(step), "--align-dof", "z"], "--align-dof needs --align bestfit or datums"),
+        (["--nominal", str(step), "--align", "datums"], "--align datums needs --datums FILE.toml"),
+    ):
+        r = CliRunner().invoke(main, ["compensate", str(a), *args])
+        assert r.exit_code == 2 and message in r.output, r.output

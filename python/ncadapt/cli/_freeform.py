@@ -423,6 +423,20 @@ def analyze(
     help="A section of the report along the line AXIS = POS mm of the part's plane (x=40, y=30 for a part "
     "measured from +z): nominal, measured, systematic and compensated profiles. Repeat for several.",
 )
+@_align_options
+@click.option(
+    "--previous",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="A later round: the --json of the round whose corrected program cut the measured part; the new "
+    "correction is its correction plus --gain times the systematic error measured now.",
+)
+@click.option(
+    "--gain",
+    type=FiniteRange(0, 2, min_open=True, max_open=True),
+    default=None,
+    help="With --previous: the gain on the new systematic error, damped by the share of it that is not "
+    "filtered noise (docs/freeform.md) [default: 1].",
+)
 @_moran_options
 @handle_errors
 def compensate(
@@ -448,6 +462,11 @@ def compensate(
     part_path,
     tolerance,
     section_lines,
+    align,
+    align_dof,
+    datums,
+    previous,
+    gain,
     weights,
     power,
     threshold,
@@ -474,6 +493,8 @@ def compensate(
             "measurements": measurements,
             "input program": program,
             "nominal": nominal,
+            "datums": datums,
+            "--previous": previous,
             **companion_inputs(measurements),
         },
         {
@@ -506,6 +527,10 @@ def compensate(
                 )
     if section_lines and report_path is None:
         raise click.UsageError("--section draws in the report: give --report")
+    _check_align(nominal, align, align_dof, datums)
+    if gain is not None and previous is None:
+        raise click.UsageError("--gain needs --previous")
+    prev = _read_previous(previous)
     if program is not None and tool_radius is None:
         raise click.UsageError(
             "--program needs --tool-radius: the ball-end radius of its tool in mm (0 when the "
@@ -522,6 +547,8 @@ def compensate(
             kw,
             probe_radius=probe_radius,
             units=units,
+            align=dict(align=align, align_dof=align_dof, datums=datums),
+            rounds=(previous, prev, 1.0 if gain is None else gain),
             program=program,
             output=output,
             tool_radius=tool_radius,
@@ -537,6 +564,10 @@ def compensate(
         say(f"reading {measurements}")
         meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
+        if prev is not None:
+            from ..processes import rounds
+
+            rounds.check_frame(prev, frame.axes, str(previous))
         a = pf.analyze(meas, frame=frame, progress=_said(say, "Moran's I"), **kw)
         say("separating systematic and random error")
         d = pf.decompose(meas, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, frame=frame, **kw)
@@ -550,7 +581,13 @@ def compensate(
                 "accept that, or an --extent within the measured area",
                 str(measurements),
             )
-        c = pf.compensate(surf, meas, d.systematic, frame=frame, border=border)
+        base, g = None, 1.0
+        if prev is not None:
+            base = prev.grids[0].at
+            g = (1.0 if gain is None else gain) * rounds.damping(
+                method, frame.uv(meas.nominal), d.systematic, d.parameters
+            )
+        c = pf.compensate(surf, meas, d.systematic, frame=frame, border=border, base=base, gain=g)
         secs = [rep.section(c, frame.uv(meas.nominal), a, at, frame.names) for a, at in section_lines]
         corr = None
         if program is not None:
@@ -591,6 +628,7 @@ def compensate(
         )
     if corr is not None:
         payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
+    payload["correction"] = _correction_of(c, frame, prev, previous)
     if json_path:
         write_json(json_path, payload)
     if report_path:
@@ -658,6 +696,8 @@ def _compensate_cad(
     *,
     probe_radius,
     units,
+    align,
+    rounds,
     program,
     output,
     tool_radius,
@@ -677,12 +717,25 @@ def _compensate_cad(
     with progress() as say:
         say(f"reading {measurements} and projecting onto {nominal}")
         proj = measure.project_on_cad(
-            measurements, nominal, faces=face_ids, max_distance=max_distance, probe_radius=probe_radius, units=units
+            measurements,
+            nominal,
+            faces=face_ids,
+            max_distance=max_distance,
+            probe_radius=probe_radius,
+            units=units,
+            **align,
         )
         meas = proj.measurements
+        previous, prev, gain = rounds
+        if prev is not None:
+            from ..processes import rounds as rmod
+
+            rmod.check_nominal(prev, nominal, {int(f) for f in proj.face}, str(previous))
         a = pf.analyze(meas, coords=meas.nominal, progress=_said(say, "Moran's I"), **kw)
         say("separating systematic and random error on each face, rebuilding the part")
-        pc = pf.compensate_cad(proj, **options, **kw)
+        pc = pf.compensate_cad(
+            proj, **options, **kw, previous=None if prev is None else {g.face: g.at for g in prev.grids}, gain=gain
+        )
         d = pf.part_decomposition(pc, meas, **kw)
         corr = None
         if program is not None:
@@ -696,6 +749,7 @@ def _compensate_cad(
         if part_path is not None:
             say(f"writing {part_path}")
             cad.write_shape(pc.part, part_path)
+    _print_alignment(meas.alignment)
     _print_analysis(a)
     _print_decomposition(a, d)
     for f in pc.faces:
@@ -716,15 +770,21 @@ def _compensate_cad(
             f"max displacement {corr.max_displacement:.4f} mm"
         )
     if points_out is not None:
-        _write_points(points_out, meas, d, meas.nominal - d.systematic[:, None] * meas.normal, proj.face)
+        at = d.systematic.copy()
+        if prev is not None:  # the whole correction at the points: previous + gain × systematic
+            for f in pc.faces:
+                at[f.points] = f.df(proj.uv[f.points, 0], proj.uv[f.points, 1])
+        _write_points(points_out, meas, d, meas.nominal - at[:, None] * meas.normal, proj.face)
     payload = {
         "input": str(measurements),
         "nominal": str(nominal),
+        "alignment": meas.alignment.as_dict(),
         **a.as_dict(),
         **d.as_dict(),
         "faces": pc.ids,
         "by_face": [f.as_dict() for f in pc.faces],
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
+        "correction": _cad_correction_of(pc, nominal, prev, previous),
     }
     if corr is not None:
         payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
@@ -755,6 +815,58 @@ def _compensate_cad(
                 },
             ),
         )
+
+
+def _read_previous(previous):
+    """The correction of ``--previous`` (None without it)."""
+    if previous is None:
+        return None
+    from ..processes import rounds
+
+    return rounds.read(previous)
+
+
+def _round_said(prev, previous, gains) -> None:
+    if prev is None:
+        return
+    said = ", ".join(f"face {k} {g:.3f}" if k else f"{g:.3f}" for k, g in gains.items())
+    summary(
+        f"round {prev.round + 1} (--previous {previous}): correction = previous + effective gain × the systematic "
+        f"part measured now; effective gain (--gain × damping) {said}"
+    )
+
+
+def _correction_of(c, frame, prev, previous) -> dict:
+    """The ``correction`` JSON object of a nominal from the measured points (and the round's line)."""
+    from ..processes import rounds
+
+    gains = {0: c.gain}
+    _round_said(prev, previous, gains)
+    s = c.surface
+    r = rounds.Correction(
+        "frame",
+        (rounds.Grid(s.u, s.v, c.df_grid),),
+        1 if prev is None else prev.round + 1,
+        frame=frame.axes,
+        gains=gains,
+    )
+    return r.as_dict() | ({"previous": str(previous)} if prev is not None else {})
+
+
+def _cad_correction_of(pc, nominal, prev, previous) -> dict:
+    """The ``correction`` JSON object of a CAD nominal (and the round's line)."""
+    from ..processes import rounds
+
+    gains = {f.face: f.gain for f in pc.faces}
+    _round_said(prev, previous, gains)
+    r = rounds.Correction(
+        "faces",
+        tuple(rounds.Grid(f.u, f.v, f.df_grid, f.face) for f in pc.faces),
+        1 if prev is None else prev.round + 1,
+        nominal={"path": str(nominal), "sha256": rounds.file_digest(nominal)},
+        gains=gains,
+    )
+    return r.as_dict() | ({"previous": str(previous)} if prev is not None else {})
 
 
 def _border_said(f) -> str:

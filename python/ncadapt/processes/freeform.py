@@ -264,6 +264,7 @@ class Compensation:
     compensated: Surface  # P_c = P − dF n
     points_compensated: np.ndarray  # (n, 3) the measured points' nominals moved by −dF n
     frame: Frame  # the (u, v) of the surface grid
+    gain: float = 1.0  # the gain this round's systematic part was taken with (rounds)
 
     def field(self, tool_radius: float = 0.0, outside: str = "error") -> FramedField:
         """The NC correction field: −dF·n at the tool-tip positions of a ball-end tool of radius R
@@ -320,12 +321,21 @@ def _linear_onto(xy, values, U, V) -> np.ndarray:
 
 
 def compensate(
-    surface: Surface, meas: Measurements, systematic, *, frame: Frame | None = None, border: str = BORDER
+    surface: Surface,
+    meas: Measurements,
+    systematic,
+    *,
+    frame: Frame | None = None,
+    border: str = BORDER,
+    base=None,
+    gain: float = 1.0,
 ) -> Compensation:
     """Carry the systematic part onto the surface grid, extrapolate it and mirror the surface.
 
     The surface's (u, v) must be the frame's (u, v) of the measured points (as
-    :func:`fit_height_surface` makes it with the same frame)."""
+    :func:`fit_height_surface` makes it with the same frame). A later round
+    (:mod:`ncadapt.processes.rounds`): dF = ``base``(u, v) + ``gain`` × the systematic part, ``base``
+    the previous round's dF (a callable of the frame's (u, v) in mm, any shape, returning mm)."""
     sysv = np.asarray(systematic, float)
     frame = frame_of(meas, frame)
     xy = frame.uv(meas.nominal)
@@ -335,10 +345,14 @@ def compensate(
     if known.sum() < 16:
         raise InputError("the measured points cover fewer than 16 nodes of the surface grid", meas.source)
     df = extrapolate_border(surface.u, surface.v, np.where(known, inside, 0.0), known, mode=border)
+    at_points = sysv
+    if base is not None:
+        df = base(U, V) + gain * df
+        at_points = base(xy[:, 0], xy[:, 1]) + gain * sysv
     n = surface.normal(U, V)
     comp = surface.with_grid(surface.grid - df[..., None] * n)
-    pc = meas.nominal - sysv[:, None] * meas.normal
-    return Compensation(surface, df, known, comp, pc, frame)
+    pc = meas.nominal - at_points[:, None] * meas.normal
+    return Compensation(surface, df, known, comp, pc, frame, gain if base is not None else 1.0)
 
 
 @dataclass(frozen=True)
@@ -480,6 +494,7 @@ class FaceCompensation:
     compensated: Surface
     rebuild_error: float
     border: str
+    gain: float = 1.0  # rounds: this round's effective gain on the face's systematic part
 
     def df(self, u, v) -> np.ndarray:
         """dF (mm) at face parameters (u, v): the bicubic spline through ``df_grid``."""
@@ -579,6 +594,8 @@ def compensate_cad(
     auto: bool = False,
     border: str = BORDER,
     alpha: float = 0.05,
+    previous=None,
+    gain: float = 1.0,
     **moran_options,
 ) -> PartCompensation:
     """Compensate the faces of a CAD part that the measured points fell on
@@ -597,6 +614,10 @@ def compensate_cad(
     it, a face that cannot be rebuilt as one B-spline (a seam or a pole) or whose B-spline misses
     P − dF·n by more than :data:`REBUILD_TOL`, a part not valid after the replacement, or a
     compensated face off −dF by more than :data:`CHECK_TOL` in the part.
+
+    A later round (:mod:`ncadapt.processes.rounds`): ``previous`` {face id: its previous dF, a
+    callable of the face's (u, v) returning mm}; on each face dF = previous + ``gain`` × w × the
+    systematic part, w the face's :func:`~ncadapt.processes.rounds.damping`.
     """
     from .. import cad
 
@@ -628,7 +649,14 @@ def compensate_cad(
         d = decompose(
             sub, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, coords=xy, alpha=alpha, **moran_options
         )
-        out.append(_face_grid(fid, face, idx, scale, xy, a, d, border, src))
+        base, g = None, 1.0
+        if previous is not None:
+            from .rounds import damping
+
+            base = previous.get(fid)
+            g = gain * damping(method, xy, d.systematic, d.parameters)
+            base = base or (lambda U, V: np.zeros(np.shape(U)))
+        out.append(_face_grid(fid, face, idx, scale, xy, a, d, border, src, base, g))
     new = {f.face: cad.face_on_surface(proj.faces[f.face - 1], f.compensated) for f in out}
     before = cad.part_summary(proj.shape)
     tol = 2.0 * max(float(np.abs(f.df_grid).max()) for f in out) + 1e-3
@@ -673,7 +701,7 @@ def _subset(meas: Measurements, idx) -> Measurements:
     )
 
 
-def _face_grid(fid, face, idx, scale, xy, a, d, border, src) -> FaceCompensation:
+def _face_grid(fid, face, idx, scale, xy, a, d, border, src, base=None, gain=1.0) -> FaceCompensation:
     """The compensation grid of one face, refined until its B-spline reproduces P − dF·n."""
     from scipy.interpolate import RectBivariateSpline
 
@@ -703,6 +731,8 @@ def _face_grid(fid, face, idx, scale, xy, a, d, border, src) -> FaceCompensation
                 src,
             )
         df = extrapolate_border(u, v, np.where(known, inside, 0.0), known, mode=border)
+        if base is not None:
+            df = base(U, V) + gain * df
         surf = Surface(u, v, P - df[..., None] * N)
         # the B-spline against P − dF·n at the cells' centres, dF the spline through the grid
         um, vm = np.meshgrid((u[1:] + u[:-1]) / 2, (v[1:] + v[:-1]) / 2, indexing="ij")
@@ -718,7 +748,7 @@ def _face_grid(fid, face, idx, scale, xy, a, d, border, src) -> FaceCompensation
                 src,
             )
         nu, nv = min(2 * nu - 1, MAX_FACE_NODES), min(2 * nv - 1, MAX_FACE_NODES)
-    return FaceCompensation(fid, idx, xy, scale, a, d, u, v, df, known, in_face, N, surf, err, border)
+    return FaceCompensation(fid, idx, xy, scale, a, d, u, v, df, known, in_face, N, surf, err, border, gain)
 
 
 def _check_face(f: FaceCompensation, nominal_face, placed) -> tuple[float, int]:

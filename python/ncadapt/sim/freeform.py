@@ -11,7 +11,10 @@ The testbed plays the machine for the freeform method:
    z-map: every cell keeps min over tool positions c of c_z + R − √(R² − d²), d the distance from
    the cell to c in (x, y) (the ball's lower surface). The machine does not go where it is told: it
    adds a systematic error E(x, y) along the surface normal at every tool position, c' = c + E n,
-   a function of the surface that repeats on every part cut (:class:`ErrorModel`).
+   a function of the surface that repeats on every part cut (:class:`ErrorModel`); or the machine's
+   own errors (:class:`MachineError`); or a tool that yields in proportion to the depth it really
+   cuts (:class:`DepthDeflection`), so that a corrected program, cutting deeper, is cut with a
+   different error — what rounds of compensation must converge on.
 4. **Measurement.** A nominal point p with outward normal n is measured where the line p + t n meets
    the z-map (bilinear), plus normal noise of ``noise`` mm along n, seeded.
 
@@ -115,6 +118,66 @@ class MachineError:
         return d
 
 
+@dataclass(frozen=True)
+class DepthDeflection:
+    """A finishing cut whose tool yields in proportion to the depth it really cuts.
+
+    The semi-finishing pass left stock a(x, y) = ``stock`` + ``stock_taper`` (x − x_c)/(L/2) mm over the
+    nominal along its normal (a pass that left a taper). A tool position c (the ball's tip) lies
+    T(c_x, c_y) − c_z below the tip that just touches the nominal surface at its (x, y) (T: the drop-cutter
+    tip heights of :func:`tip_heights`), so along the normal n it cuts the depth
+
+        d = a + (T(c_x, c_y) − c_z) n_z      (n, n_z at the tool's (x, y); d ≥ 0)
+
+    and the cutting force, which grows with d, pushes the tool (and the part) away from the surface by
+
+        δ = κ(x, y) d,    κ = ``compliance`` (1 + ``compliance_growth`` ((y − y_c)/(W/2))²)
+
+    along n (the part clamped along its middle in y, more compliant towards its free edges in y).
+    A correction that moves the tool dF deeper makes it cut d + dF and yield κ (d + dF): each round
+    leaves κ times the error of the one before, so a single round does not remove it.
+
+    The constants are of the order of an 8 mm carbide ball end 40 mm out of its holder finishing
+    steel: a cantilever stiffness 3EI/L³ ≈ 2.3 N/µm (E 600 GPa, a core of 6.4 mm) against finishing
+    forces that grow by some 0.3 N/µm of depth gives δ/d ≈ 0.12; they are chosen, not measured. With
+    0.3 ± 0.1 mm of stock, δ is 24–72 µm (the freeform paper's parts had 35–40 µm of error).
+    """
+
+    surface: Surface
+    tool_radius: float = 4.0
+    stock: float = 0.30
+    stock_taper: float = 0.10
+    compliance: float = 0.12
+    compliance_growth: float = 0.5
+    h: float = 0.125
+
+    def displacement(self, c: np.ndarray) -> np.ndarray:
+        """Where a tool position ``c`` (m, 3) really goes, minus where it was told to go."""
+        s = self.surface
+        xc, yc = (s.u[0] + s.u[-1]) / 2, (s.v[0] + s.v[-1]) / 2
+        hx, hy = (s.u[-1] - s.u[0]) / 2, (s.v[-1] - s.v[0]) / 2
+        x = np.clip(c[:, 0], s.u[0], s.u[-1])
+        y = np.clip(c[:, 1], s.v[0], s.v[-1])
+        xs, ys, tip = _tips(s, self.tool_radius, self.h)
+        t = ndimage.map_coordinates(tip, [(x - xs[0]) / self.h, (y - ys[0]) / self.h], order=1, mode="nearest")
+        n = s.normal(x, y)
+        a = self.stock + self.stock_taper * (x - xc) / hx
+        depth = np.maximum(a + (t - c[:, 2]) * n[:, 2], 0.0)
+        kappa = self.compliance * (1 + self.compliance_growth * ((y - yc) / hy) ** 2)
+        return (kappa * depth)[:, None] * n
+
+
+_TIPS: dict = {}
+
+
+def _tips(surface: Surface, tool_radius: float, h: float):
+    key = (id(surface), tool_radius, h)
+    if key not in _TIPS:
+        _TIPS.clear()
+        _TIPS[key] = tip_heights(surface, tool_radius, h)
+    return _TIPS[key]
+
+
 def random_error(n: int, amplitude: float, kind: str = "normal", seed: int = 0) -> np.ndarray:
     """Random error: ``normal`` (std = amplitude) or ``uniform`` (±amplitude)."""
     rng = np.random.default_rng(seed)
@@ -134,6 +197,18 @@ def _ball(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     return np.where(inside, np.sqrt(np.maximum(radius * radius - d2, 0.0)), 0.0), inside
 
 
+def tip_heights(surface: Surface, tool_radius: float, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Drop cutter: the ball's tip height over a grid of (x, y) h mm apart covering the surface (its
+    axes xs, ys and the heights (len(xs), len(ys)), mm): max over surface points q within R of
+    q_z + √(R² − |q_xy − (x, y)|²) − R, the surface continued flat beyond its border."""
+    xs = np.arange(surface.u[0], surface.u[-1] + 1e-9, h)
+    ys = np.arange(surface.v[0], surface.v[-1] + 1e-9, h)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    Z = surface.point(X, Y)[..., 2]
+    cap, inside = _ball(tool_radius, h)
+    return xs, ys, ndimage.grey_dilation(Z, footprint=inside, structure=cap, mode="nearest") - tool_radius
+
+
 def finishing_program(
     surface: Surface,
     tool_radius: float = 4.0,
@@ -144,13 +219,8 @@ def finishing_program(
 ) -> str:
     """A zig-zag raster finishing program (G21 G90) along x for a ball-end tool, by drop cutter."""
     h = min(step, stepover) / 2
-    xs = np.arange(surface.u[0], surface.u[-1] + 1e-9, h)
-    ys = np.arange(surface.v[0], surface.v[-1] + 1e-9, h)
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    Z = surface.point(X, Y)[..., 2]
-    cap, inside = _ball(tool_radius, h)
-    # outside the part the surface is continued flat at its border height (mode="nearest")
-    tip = ndimage.grey_dilation(Z, footprint=inside, structure=cap, mode="nearest") - tool_radius
+    # outside the part the surface is continued flat at its border height
+    xs, ys, tip = tip_heights(surface, tool_radius, h)
     ix = np.round(np.arange(surface.u[0], surface.u[-1] + 1e-9, step) / h).astype(int) - int(round(surface.u[0] / h))
     iy = np.round(np.arange(surface.v[0], surface.v[-1] + 1e-9, stepover) / h).astype(int) - int(
         round(surface.v[0] / h)
@@ -205,10 +275,11 @@ def machine(
     step: float = 0.25,
 ) -> ZMap:
     """Cut ``program`` (an :class:`ncadapt.nc.Program`) into a z-map of the part's area, the tool
-    displaced by ``error``: an :class:`ErrorModel` along the normal, or a :class:`MachineError`."""
+    displaced by ``error``: an :class:`ErrorModel` along the normal, or a :class:`MachineError` or
+    :class:`DepthDeflection` (anything with ``displacement(c)``)."""
     tp = program.toolpath(max_segment=step, rapids=False)
     c = tp.points[np.isfinite(tp.points).all(axis=1)]
-    if isinstance(error, MachineError):
+    if isinstance(error, (MachineError, DepthDeflection)):
         c = c + error.displacement(c)
     elif error is not None:
         # the machine's systematic error, along the part's normal where the tool works
