@@ -603,3 +603,55 @@ def test_secured_exchange_equals_the_in_process_run(tmp_path, monkeypatch):
     ref = sk.run("kalman", seed=4).as_dict()
     assert json.loads((tmp_path / "srv.json").read_text())["checkpoints"] == ref["checkpoints"]
     assert json.loads((tmp_path / "cl.json").read_text())["steps"] == ref["compensator_steps"]
+
+
+def test_trust_lists_on_both_sides(tmp_path, monkeypatch):
+    """`skin serve --trust DIR` accepts only the client certificates in DIR, and `skin loop`
+    refuses a controller presenting another certificate than --server-cert. Two pairs from
+    `skin certs` differ only in their keys (same names and URIs): a client with the other pair's
+    certificate is refused, and both sides say so; the trusted one runs the pockets."""
+    pytest.importorskip("asyncua")
+    for name in ("a", "b", "trust"):
+        (tmp_path / name).mkdir()
+    for name in ("a", "b"):
+        assert _cli("skin", "certs", tmp_path / name).exit_code == 0
+    (tmp_path / "trust" / "client.der").write_bytes((tmp_path / "a" / "client.der").read_bytes())
+    monkeypatch.setenv("NCADAPT_OPCUA_PASSWORD", "s3cret")
+    a, b = tmp_path / "a", tmp_path / "b"
+    serve = ("--cert", a / "controller.der", "--key", a / "controller.pem", "--user", "op")
+    r = _cli("skin", "serve", *serve, "--trust", a)  # a private key in the trust folder
+    assert r.exit_code == 2 and "not a certificate" in r.output and "client.pem" in r.output
+    r = _cli("skin", "serve", "--insecure", "--trust", tmp_path / "trust")
+    assert r.exit_code == 2 and "--trust" in r.output
+    url = "opc.tcp://127.0.0.1:48421/ncadapt/"
+    env = dict(__import__("os").environ, NCADAPT_OPCUA_PASSWORD="s3cret")
+    srv = skin_server("--endpoint", url, *serve, "--trust", tmp_path / "trust", "--ack-timeout", 120, env=env)
+    common = ("skin", "loop", "--opcua", url, "--target", sk.T_TARGET, "--depth", sk.A_G, "--user", "op")
+
+    def client(pair, server_pair):
+        return (
+            "--cert",
+            pair / "client.der",
+            "--key",
+            pair / "client.pem",
+            "--server-cert",
+            server_pair / "controller.der",
+        )
+
+    try:
+        assert "client certificates trusted from" in srv.stderr.readline()
+        r = _cli(*common, *client(b, a))
+        assert r.exit_code == 2, r.output
+        assert url in r.output and "does not trust this client's certificate" in r.output
+        line = srv.stderr.readline()
+        assert "refused a client certificate" in line and "BadCertificateUntrusted" in line
+        r = _cli(*common, *client(a, b))
+        assert r.exit_code == 2, r.output
+        assert url in r.output and "not the one given" in r.output and "--server-cert" in r.output
+        r = _cli(*common, *client(a, a))
+        assert r.exit_code == 0, r.output
+        out, err = srv.communicate(timeout=60)
+    finally:
+        srv.kill()
+        srv.communicate()
+    assert srv.returncode == 0, err

@@ -40,14 +40,17 @@ CLIENT_URI = "urn:ncadapt:skin:client"
 class Security:
     """OPC UA security of the exchange: Basic256Sha256 with SignAndEncrypt, an application
     certificate (DER) and private key (PEM) per side, and a user name and password. The client also
-    names the controller's certificate (``peer_cert``); the controller accepts ``user`` with
-    ``password`` only. None instead of a Security is NoSecurity (``--insecure``)."""
+    names the controller's certificate (``peer_cert``: a controller presenting another one is
+    refused); the controller accepts ``user`` with ``password`` only and, with ``trust`` (a folder
+    of DER or PEM certificates), only the client certificates in it or issued by one in it. None
+    instead of a Security is NoSecurity (``--insecure``)."""
 
     cert: str
     key: str
     user: str
     password: str
     peer_cert: str | None = None
+    trust: str | None = None
 
 
 async def make_certificates(folder, host: str = "127.0.0.1") -> dict:
@@ -70,6 +73,72 @@ async def make_certificates(folder, host: str = "127.0.0.1") -> dict:
         key.chmod(0o600)  # a private key: its owner's only
         out[name] = (str(cert), str(key))
     return out
+
+
+def trusted_certificates(folder) -> list:
+    """The certificate files of a trust folder (``*.der``, ``*.pem``, as asyncua's TrustStore loads
+    them), sorted; :class:`ncadapt.errors.InputError` when there is none, or one is no certificate."""
+    from pathlib import Path
+
+    from cryptography import x509
+
+    from .errors import InputError
+
+    folder = Path(folder)
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in (".der", ".pem"))
+    if not files:
+        raise InputError(
+            "no certificate (*.der, *.pem) in the trust folder: every client would be refused", str(folder)
+        )
+    for p in files:
+        data = p.read_bytes()
+        try:
+            x509.load_pem_x509_certificate(data) if p.suffix.lower() == ".pem" else x509.load_der_x509_certificate(data)
+        except ValueError:
+            raise InputError("not a certificate (a private key does not belong in a trust folder)", str(p)) from None
+    return files
+
+
+async def trust_validator(folder, on_refused=None):
+    """asyncua's certificate validator for the controller: a client's certificate must be valid now,
+    name the client's application URI, allow the client's key and extended key usages, and be in
+    the trust folder or issued by a certificate in it (``TRUSTED_VALIDATION``); anything else ends
+    the session request with BadCertificateUntrusted (or the check it failed), and
+    ``on_refused(certificate, status)`` is told (the certificate as :func:`describe_certificate`
+    gives it, the status code's name)."""
+    from pathlib import Path
+
+    from asyncua import ua
+    from asyncua.common.utils import ServiceError
+    from asyncua.crypto.truststore import TrustStore
+    from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+
+    trusted_certificates(folder)
+    store = TrustStore([Path(folder)], [])
+    await store.load()
+    options = CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
+    validator = CertificateValidator(options, store)
+    if on_refused is None:
+        return validator
+
+    async def validate(cert, description):
+        try:
+            await validator(cert, description)
+        except ServiceError as e:
+            on_refused(describe_certificate(cert), ua.StatusCode(e.code).name)
+            raise
+
+    return validate
+
+
+def describe_certificate(cert) -> str:
+    """A certificate as people compare them: its common name and SHA-256 fingerprint."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+
+    names = cert.subject.get_attributes_for_oid(x509.NameOID.COMMON_NAME)
+    name = str(names[0].value) if names else "no common name"
+    return f"{name!r}, SHA-256 {cert.fingerprint(hashes.SHA256()).hex(':')[:23]}…"
 
 
 def ua_error():
@@ -231,13 +300,16 @@ async def serve_machine(
     status: dict | None = None,
     ack_timeout: float = 5.0,
     security: Security | None = None,
+    on_refused=None,
 ):
     """An OPC UA server playing the controller: runs each virtual machine in turn, publishing
     its readings and applying the client's W1 offsets. Publishes Sequence = −1 when all are done.
     ``Pockets`` tells the client how many pockets there are; a client that sets ``Fault`` stops
     the run with W1 held (``status["fault"]`` becomes True). A client that does not acknowledge a
     reading within ``ack_timeout`` seconds is taken as lost: W1 held, the run stopped
-    (``status["lost"]`` becomes True) — the controller's watchdog."""
+    (``status["lost"]`` becomes True) — the controller's watchdog. With ``security.trust`` a
+    client certificate outside the trust folder is refused (:func:`trust_validator`;
+    ``on_refused`` is told)."""
     from asyncua import Server, ua
 
     server = Server(user_manager=_user_manager(security)) if security is not None else Server()
@@ -251,6 +323,8 @@ async def serve_machine(
         server.set_security_IDs(["Username"])
         await server.load_certificate(security.cert)
         await server.load_private_key(security.key)
+        if security.trust is not None:
+            server.set_certificate_validator(await trust_validator(security.trust, on_refused))
     idx = await server.register_namespace(NAMESPACE)
     obj = await server.nodes.objects.add_object(idx, "Controller")
     thick = await obj.add_variable(idx, "Thickness", math.nan)
@@ -308,6 +382,11 @@ class ControllerLost(Exception):
     """The OPC UA controller stopped publishing readings, or the connection broke."""
 
 
+class ServerUntrusted(Exception):
+    """The controller presents another certificate than the one the client was given: the client
+    refuses it (it could be another machine, or a man in the middle)."""
+
+
 class ConnectionRefused(Exception):
     """The controller refused the session: no endpoint with the client's security, or the user
     name, password or certificate rejected."""
@@ -338,8 +417,12 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
             client.set_user(security.user)
             client.set_password(security.password)
         try:
+            if security is not None and security.peer_cert is not None:
+                await check_server_certificate(url, security.peer_cert, request_timeout)
             await client.connect()
             return client
+        except ServerUntrusted:
+            raise
         except ua_error() as e:
             with contextlib.suppress(Exception):
                 await client.disconnect()
@@ -351,6 +434,42 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
                 raise
             await asyncio.sleep(delay)
             delay = min(2 * delay, 1.0)
+
+
+async def check_server_certificate(url: str, expected: str, request_timeout: float = 4.0) -> None:
+    """Refuse a controller whose endpoint for Basic256Sha256 SignAndEncrypt presents another
+    certificate than ``expected`` (a DER or PEM file): :class:`ServerUntrusted` naming both. The
+    endpoints are read over the discovery channel every OPC UA server offers without security;
+    asyncua's own check comes only after the secure channel, which a controller with another key
+    cannot open (the client would only see a timeout)."""
+    from asyncua import Client, ua
+    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+    from asyncua.crypto.uacrypto import load_certificate
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+
+    want = await load_certificate(expected)
+    endpoints = await Client(url=url, timeout=request_timeout).connect_and_get_server_endpoints()
+    secured = [
+        e
+        for e in endpoints
+        if e.SecurityPolicyUri == SecurityPolicyBasic256Sha256.URI
+        and e.SecurityMode == ua.MessageSecurityMode.SignAndEncrypt
+    ]
+    if not secured:
+        return  # no such endpoint: the session is refused as such (ConnectionRefused)
+    der = secured[0].ServerCertificate or b""
+    der = der[: int.from_bytes(der[2:4], "big") + 4]  # the first certificate of a chain
+    if der == want.public_bytes(Encoding.DER):
+        return
+    try:
+        got = describe_certificate(x509.load_der_x509_certificate(der))
+    except ValueError:
+        got = "no readable certificate"
+    raise ServerUntrusted(
+        f"the controller presents the certificate {got}, not the one given ({expected}: "
+        f"{describe_certificate(want)}); refused"
+    )
 
 
 async def run_opcua(

@@ -352,7 +352,8 @@ def _quiet_asyncua() -> None:
     docs/skin.md instead) and the tracebacks of failures the commands report themselves."""
     import logging
 
-    logging.getLogger("asyncua").setLevel(logging.CRITICAL)
+    for name in ("asyncua", "asyncuagds"):  # asyncuagds: its trust store's notes
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 @skin.command("loop")
@@ -560,7 +561,15 @@ def loop_cmd(
             )
         except ps.LoopStopped as e:
             stopped, where, steps = e, url, info.get("steps", 0)
+        except lp.ServerUntrusted as e:
+            raise InputError(f"{e} (--server-cert)", url) from None
         except lp.ConnectionRefused as e:
+            if "BadCertificateUntrusted" in str(e):
+                raise InputError(
+                    f"the controller refused the session: it does not trust this client's certificate "
+                    f"({cert}): add the certificate to the controller's trust folder (skin serve --trust)",
+                    url,
+                ) from None
             raise InputError(
                 f"the controller refused the session: {e}; check --cert, --key, --server-cert, --user "
                 f"and {PASSWORD_ENV} (or --insecure on both sides)",
@@ -653,29 +662,52 @@ def loop_cmd(
     help="Seconds to wait for the client's Ack before holding W1 and stopping (the watchdog).",
 )
 @_security_options(client=False)
+@click.option(
+    "--trust",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="Folder of the client certificates (DER or PEM) the controller accepts; a client whose "
+    "certificate is not in it (nor issued by one in it) is refused. Without it, any client "
+    "certificate with the right user and password is accepted.",
+)
 @json_option
 @handle_errors
-def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, user, json_path):
+def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, user, trust, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1
     offsets a client writes (try `skin loop --opcua` against it before a real controller), and
     report the errors at the 13 checkpoints of each pocket when both pockets are finished."""
     import asyncio
+    import dataclasses
     import threading
 
     from .. import loop as lp
     from ..sim import skin as sk
 
     security = _security(insecure, cert, key, user, client=False)
+    if trust is not None:
+        if security is None:
+            raise click.UsageError("--trust and --insecure exclude each other (NoSecurity has no certificates)")
+        lp.trusted_certificates(trust)
+        security = dataclasses.replace(security, trust=str(trust))
     check_outputs({}, {"--json": json_path})
     _quiet_asyncua()
     ms = sk.machines(noise=noise, latency_ms=latency_ms, seed=seed)
     ready = threading.Event()
     status: dict = {}
 
+    def refused(cert, status):
+        click.echo(f"{endpoint}: refused a client certificate {cert}: {status} (not in --trust {trust})", err=True)
+
     async def main():
         task = asyncio.create_task(
             lp.serve_machine(
-                ms, sk.A_G, endpoint=endpoint, ready=ready, status=status, ack_timeout=ack_timeout, security=security
+                ms,
+                sk.A_G,
+                endpoint=endpoint,
+                ready=ready,
+                status=status,
+                ack_timeout=ack_timeout,
+                security=security,
+                on_refused=refused,
             )
         )
         while not ready.is_set() and not task.done():
@@ -684,7 +716,8 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, u
             click.echo(
                 f"serving the skin testbed at {endpoint} (seed {seed}): target thickness {sk.T_TARGET} mm, "
                 f"depth {sk.A_G} mm, {len(ms)} pockets, "
-                + ("NoSecurity" if security is None else "Basic256Sha256 SignAndEncrypt"),
+                + ("NoSecurity" if security is None else "Basic256Sha256 SignAndEncrypt")
+                + (f", client certificates trusted from {trust}" if trust is not None else ""),
                 err=True,
             )
         await task
