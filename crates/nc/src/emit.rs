@@ -7,8 +7,8 @@
 
 use crate::error::NcError;
 use crate::interp::{
-    cycle_steps, peck_clearance, CycleStep, Hole, Interp, Motion, Record, AXES, CYCLE_BOTTOM,
-    MM_PER_INCH, NAXES, PLANE_AXES,
+    axis_index, cycle_steps, peck_clearance, CycleStep, Hole, Interp, Motion, Record, AXES,
+    CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
 };
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
@@ -250,23 +250,6 @@ fn is_motion_g(w: &Word) -> bool {
 #[inline]
 fn is_stop_m(w: &Word) -> bool {
     w.letter == b'M' && matches!(round(w.value) as i32, 0 | 1 | 2 | 30 | 60)
-}
-
-#[inline]
-fn axis_index(letter: u8) -> Option<usize> {
-    // the index in AXES ("XYZABCUVW")
-    match letter {
-        b'X' => Some(0),
-        b'Y' => Some(1),
-        b'Z' => Some(2),
-        b'A' => Some(3),
-        b'B' => Some(4),
-        b'C' => Some(5),
-        b'U' => Some(6),
-        b'V' => Some(7),
-        b'W' => Some(8),
-        _ => None,
-    }
 }
 
 /// What the emitter carries from one run of lines to the next: the position the output's
