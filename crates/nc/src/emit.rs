@@ -599,15 +599,24 @@ impl<'a> Emitter<'a> {
         // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
         // piece must also be where that one move puts it at the piece's fraction
         let only_xyz = rec.named & !0b111 == 0;
+        // (XYZ of `target_at`)
+        let xyz_at = |k: usize| {
+            [
+                xyz[3 * k] + disp[3 * k],
+                xyz[3 * k + 1] + disp[3 * k + 1],
+                xyz[3 * k + 2] + disp[3 * k + 2],
+            ]
+        };
         let straight = !rec.motion.is_arc()
             && (n == 1 || {
-                let e = target_at(n - 1, 1.0);
+                let e = xyz_at(n - 1);
+                let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
                 (0..n - 1).all(|k| {
-                    let p = target_at(k, ts[k]);
+                    let p = xyz_at(k);
                     if only_xyz {
-                        dist2_to_segment(&p, &self.st.epos, &e) <= half_mm * half_mm
+                        dist2_to_segment(&p, &a, &e) <= half_mm * half_mm
                     } else {
-                        dist2_at_fraction(&p, &self.st.epos, &e, ts[k]) <= half_mm * half_mm
+                        dist2_at_fraction(&p, &a, &e, ts[k]) <= half_mm * half_mm
                     }
                 })
             });
@@ -661,25 +670,35 @@ impl<'a> Emitter<'a> {
         } else {
             b""
         };
+        // XYZ and the other axes the block names, in the order of AXES
+        let axes = 0b111 | rec.named;
+        let half = self.fmt.half(rec.inch);
         for k in pieces {
-            let p = target_at(k, ts[k]);
             let t0 = self.st.tail.len();
             let body = t0 + prefix.len();
             self.st.tail.extend_from_slice(prefix);
-            for a in 0..NAXES {
-                if a >= 3 && rec.named & (1 << a) == 0 {
-                    continue;
-                }
+            let mut bits = axes;
+            while bits != 0 {
+                let a = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                // (the axis of `target_at(k, ts[k])`)
+                let pa = if a < 3 {
+                    xyz[3 * k + a] + disp[3 * k + a]
+                } else if ts[k] == 1.0 {
+                    rec.end[a]
+                } else {
+                    start[a] + ts[k] * (rec.end[a] - start[a])
+                };
                 let u = Self::unit(rec, a);
                 let want = if rec.incremental {
-                    (p[a] - self.st.epos[a]) / u
+                    (pa - self.st.epos[a]) / u
                 } else {
-                    p[a] / u
+                    pa / u
                 };
                 let differs = if rec.incremental {
-                    want.abs() >= self.fmt.half(rec.inch)
+                    want.abs() >= half
                 } else {
-                    (p[a] - self.st.epos[a]).abs() / u >= self.fmt.half(rec.inch)
+                    (pa - self.st.epos[a]).abs() / u >= half
                 };
                 if differs {
                     if self.st.tail.len() > body {
@@ -1139,7 +1158,8 @@ fn approach_changes(cy: &crate::interp::Cycle, choices: (bool, bool), level: f64
 }
 
 /// Squared distance from p to the segment a-b (XYZ).
-fn dist2_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 {
+#[inline]
+fn dist2_to_segment(p: &[f64; 3], a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
     let l2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
@@ -1153,7 +1173,8 @@ fn dist2_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64
 }
 
 /// Squared distance from p to the point at fraction t of the segment a-b (XYZ).
-fn dist2_at_fraction(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES], t: f64) -> f64 {
+#[inline]
+fn dist2_at_fraction(p: &[f64; 3], a: &[f64; 3], b: &[f64; 3], t: f64) -> f64 {
     (0..3)
         .map(|k| (p[k] - (a[k] + t * (b[k] - a[k]))).powi(2))
         .sum::<f64>()
