@@ -7,8 +7,8 @@
 
 use crate::error::NcError;
 use crate::interp::{
-    cycle_steps, peck_clearance, CycleStep, Hole, Interp, Motion, Record, AXES, CYCLE_BOTTOM,
-    MM_PER_INCH, NAXES, PLANE_AXES,
+    axis_index, cycle_steps, peck_clearance, CycleStep, Hole, Interp, Motion, Record, AXES,
+    CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
 };
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
@@ -250,23 +250,6 @@ fn is_motion_g(w: &Word) -> bool {
 #[inline]
 fn is_stop_m(w: &Word) -> bool {
     w.letter == b'M' && matches!(round(w.value) as i32, 0 | 1 | 2 | 30 | 60)
-}
-
-#[inline]
-fn axis_index(letter: u8) -> Option<usize> {
-    // the index in AXES ("XYZABCUVW")
-    match letter {
-        b'X' => Some(0),
-        b'Y' => Some(1),
-        b'Z' => Some(2),
-        b'A' => Some(3),
-        b'B' => Some(4),
-        b'C' => Some(5),
-        b'U' => Some(6),
-        b'V' => Some(7),
-        b'W' => Some(8),
-        _ => None,
-    }
 }
 
 /// What the emitter carries from one run of lines to the next: the position the output's
@@ -616,15 +599,24 @@ impl<'a> Emitter<'a> {
         // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
         // piece must also be where that one move puts it at the piece's fraction
         let only_xyz = rec.named & !0b111 == 0;
+        // (XYZ of `target_at`)
+        let xyz_at = |k: usize| {
+            [
+                xyz[3 * k] + disp[3 * k],
+                xyz[3 * k + 1] + disp[3 * k + 1],
+                xyz[3 * k + 2] + disp[3 * k + 2],
+            ]
+        };
         let straight = !rec.motion.is_arc()
             && (n == 1 || {
-                let e = target_at(n - 1, 1.0);
+                let e = xyz_at(n - 1);
+                let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
                 (0..n - 1).all(|k| {
-                    let p = target_at(k, ts[k]);
+                    let p = xyz_at(k);
                     if only_xyz {
-                        dist2_to_segment(&p, &self.st.epos, &e) <= half_mm * half_mm
+                        dist2_to_segment(&p, &a, &e) <= half_mm * half_mm
                     } else {
-                        dist2_at_fraction(&p, &self.st.epos, &e, ts[k]) <= half_mm * half_mm
+                        dist2_at_fraction(&p, &a, &e, ts[k]) <= half_mm * half_mm
                     }
                 })
             });
@@ -678,25 +670,35 @@ impl<'a> Emitter<'a> {
         } else {
             b""
         };
+        // XYZ and the other axes the block names, in the order of AXES
+        let axes = 0b111 | rec.named;
+        let half = self.fmt.half(rec.inch);
         for k in pieces {
-            let p = target_at(k, ts[k]);
             let t0 = self.st.tail.len();
             let body = t0 + prefix.len();
             self.st.tail.extend_from_slice(prefix);
-            for a in 0..NAXES {
-                if a >= 3 && rec.named & (1 << a) == 0 {
-                    continue;
-                }
+            let mut bits = axes;
+            while bits != 0 {
+                let a = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                // (the axis of `target_at(k, ts[k])`)
+                let pa = if a < 3 {
+                    xyz[3 * k + a] + disp[3 * k + a]
+                } else if ts[k] == 1.0 {
+                    rec.end[a]
+                } else {
+                    start[a] + ts[k] * (rec.end[a] - start[a])
+                };
                 let u = Self::unit(rec, a);
                 let want = if rec.incremental {
-                    (p[a] - self.st.epos[a]) / u
+                    (pa - self.st.epos[a]) / u
                 } else {
-                    p[a] / u
+                    pa / u
                 };
                 let differs = if rec.incremental {
-                    want.abs() >= self.fmt.half(rec.inch)
+                    want.abs() >= half
                 } else {
-                    (p[a] - self.st.epos[a]).abs() / u >= self.fmt.half(rec.inch)
+                    (pa - self.st.epos[a]).abs() / u >= half
                 };
                 if differs {
                     if self.st.tail.len() > body {
@@ -1156,7 +1158,8 @@ fn approach_changes(cy: &crate::interp::Cycle, choices: (bool, bool), level: f64
 }
 
 /// Squared distance from p to the segment a-b (XYZ).
-fn dist2_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64 {
+#[inline]
+fn dist2_to_segment(p: &[f64; 3], a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
     let l2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
@@ -1170,7 +1173,8 @@ fn dist2_to_segment(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES]) -> f64
 }
 
 /// Squared distance from p to the point at fraction t of the segment a-b (XYZ).
-fn dist2_at_fraction(p: &[f64; NAXES], a: &[f64; NAXES], b: &[f64; NAXES], t: f64) -> f64 {
+#[inline]
+fn dist2_at_fraction(p: &[f64; 3], a: &[f64; 3], b: &[f64; 3], t: f64) -> f64 {
     (0..3)
         .map(|k| (p[k] - (a[k] + t * (b[k] - a[k]))).powi(2))
         .sum::<f64>()

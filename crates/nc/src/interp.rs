@@ -288,23 +288,18 @@ struct Active {
 
 impl Active {
     fn first(&self) -> Option<usize> {
-        [
-            self.flow,
-            self.shift,
-            self.rotation,
-            self.scaling,
-            self.polar,
-            self.diameter,
-            self.cutter_comp,
-            self.canned,
-            self.inverse_time,
-            self.tool_offset,
-            self.wcs,
-        ]
-        .iter()
-        .flatten()
-        .map(|&(_, idx)| idx)
-        .next()
+        self.flow
+            .or(self.shift)
+            .or(self.rotation)
+            .or(self.scaling)
+            .or(self.polar)
+            .or(self.diameter)
+            .or(self.cutter_comp)
+            .or(self.canned)
+            .or(self.inverse_time)
+            .or(self.tool_offset)
+            .or(self.wcs)
+            .map(|(_, idx)| idx)
     }
 }
 
@@ -589,7 +584,7 @@ impl Interpreter {
                         ));
                     }
                     b'X' | b'Y' | b'Z' | b'A' | b'B' | b'C' | b'U' | b'V' | b'W' => {
-                        let k = AXES.iter().position(|&a| a == w.letter).unwrap();
+                        let k = axis_index(w.letter).unwrap();
                         if axis[k].is_none() {
                             axis_col = col(w);
                         }
@@ -653,11 +648,11 @@ impl Interpreter {
             }
             // axis words used by a code other than a motion (G10, G28, G30, G43.1, G52, G92, an M code
             // the engine does not know, ...) do not move along the motion mode
-            let axis_user_count = gs[..ng]
-                .iter()
-                .filter(|&&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500))
-                .count();
-            if axis_user_count > 0 && named != 0 {
+            if named != 0
+                && gs[..ng]
+                    .iter()
+                    .any(|&(c, _)| matches!(c, 100 | 280 | 300 | 431 | 520 | 920 | 500))
+            {
                 if let Some(&(c, gc)) = gs[..ng]
                     .iter()
                     .find(|&&(c, _)| g_group(c) == Some(1) && c != 800)
@@ -939,7 +934,7 @@ impl Interpreter {
             // words no code of the block uses are an error, as in LinuxCNC (its check_other_codes):
             // on a Fanuc control R, I, K on a G1 round or chamfer the corner, which a split move
             // would put in the wrong place
-            if untraced.is_none() && unknown_m.is_none() {
+            if untraced.is_none() && unknown_m.is_none() && seen & CHECKED_WORDS != 0 {
                 let to_be = match motion_word {
                     Some((m, _)) => Some(m),
                     // axis words for the modal motion, or centre words alone for a modal arc (a
@@ -954,9 +949,16 @@ impl Interpreter {
                     }
                     None => None,
                 };
-                let gcodes: Vec<i32> = gs[..ng].iter().map(|g| g.0).collect();
-                let mcodes: Vec<i32> = ms[..nm].iter().map(|m| m.0).collect();
-                if let Some((letter, users)) = unused_word(seen, to_be, &gcodes, &mcodes) {
+                let (mut gcodes, mut mcodes) = ([0i32; 32], [0i32; 8]);
+                for (c, g) in gcodes.iter_mut().zip(&gs[..ng]) {
+                    *c = g.0;
+                }
+                for (c, m) in mcodes.iter_mut().zip(&ms[..nm]) {
+                    *c = m.0;
+                }
+                if let Some((letter, users)) =
+                    unused_word(seen, to_be, &gcodes[..ng], &mcodes[..nm])
+                {
                     return Err(ierr(
                         li,
                         wcol[(letter - b'A') as usize],
@@ -1205,12 +1207,20 @@ impl Interpreter {
                     // unknown start is corrected at its end only); arcs need their centre
                     // an arc, and an axis other than XYZ that the block moves, needs its start too: their
                     // pieces are interpolated from it (a move is never changed in kind from an unknown start)
-                    let known = (0..NAXES).all(|k| {
-                        let needed = k < 3 || named & (1 << k) != 0;
-                        !needed || end[k].is_finite()
-                    }) && center.iter().all(|v| v.is_finite())
-                        && (!m.is_arc() || st.pos[..3].iter().all(|v| v.is_finite()))
-                        && (3..NAXES).all(|k| named & (1 << k) == 0 || st.pos[k].is_finite());
+                    let finite = |p: &[f64; NAXES], axes: u16| {
+                        let mut bits = axes;
+                        let mut ok = true;
+                        while bits != 0 {
+                            ok &= p[bits.trailing_zeros() as usize].is_finite();
+                            bits &= bits - 1;
+                        }
+                        ok
+                    };
+                    let known = finite(&end, 0b111 | named)
+                        && center[0].is_finite()
+                        && center[1].is_finite()
+                        && (!m.is_arc() || finite(&st.pos, 0b111))
+                        && finite(&st.pos, named & !0b111);
                     let supported = blocker.is_none() && e_construct.is_none();
                     if let Some(idx) = blocker {
                         out.unsupported[idx].blocks += 1;
@@ -1265,6 +1275,35 @@ fn g_group(c: i32) -> Option<u8> {
         _ => return None,
     })
 }
+
+/// The index of an axis letter in [`AXES`].
+#[inline]
+pub fn axis_index(letter: u8) -> Option<usize> {
+    match letter {
+        b'X' => Some(0),
+        b'Y' => Some(1),
+        b'Z' => Some(2),
+        b'A' => Some(3),
+        b'B' => Some(4),
+        b'C' => Some(5),
+        b'U' => Some(6),
+        b'V' => Some(7),
+        b'W' => Some(8),
+        _ => None,
+    }
+}
+
+/// The words [`unused_word`] checks (a bit per letter): I J K R P Q L H D.
+const CHECKED_WORDS: u32 = {
+    let mut m = 0u32;
+    let letters = *b"IJKRPQLHD";
+    let mut i = 0;
+    while i < letters.len() {
+        m |= 1 << (letters[i] - b'A');
+        i += 1;
+    }
+    m
+};
 
 /// The first of the words I J K R P Q L H D in `seen` (a bit per letter) that no code of the block
 /// uses, with the codes that would, as LinuxCNC 2.9 checks them (interp_check.cc). `to_be` is the

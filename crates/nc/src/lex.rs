@@ -491,9 +491,29 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
     Ok(out)
 }
 
+/// The first `b` in `s`, eight bytes at a time.
 #[inline]
 fn memchr(b: u8, s: &[u8]) -> Option<usize> {
-    s.iter().position(|&c| c == b)
+    const LO: u64 = 0x0101_0101_0101_0101;
+    const HI: u64 = 0x8080_8080_8080_8080;
+    let pat = LO * b as u64;
+    let mut chunks = s.chunks_exact(8);
+    let mut at = 0;
+    for c in &mut chunks {
+        let w = u64::from_le_bytes(c.try_into().unwrap()) ^ pat;
+        // a high bit in each byte of w that is zero; a borrow can only mark bytes after a zero
+        // one, so the lowest mark is the first match
+        let z = w.wrapping_sub(LO) & !w & HI;
+        if z != 0 {
+            return Some(at + (z.trailing_zeros() / 8) as usize);
+        }
+        at += 8;
+    }
+    chunks
+        .remainder()
+        .iter()
+        .position(|&c| c == b)
+        .map(|k| at + k)
 }
 
 #[cfg(test)]
@@ -536,6 +556,30 @@ mod tests {
         assert_eq!(first_error(b"G0 X0\rG1 X1\r"), (1, 6));
         // a CR before the line end is a blank, as in LinuxCNC
         assert!(lex(b"G0 X0\r\r\nG1 X1 \r\n").unwrap().errors.is_empty());
+    }
+
+    #[test]
+    fn memchr_finds_the_first() {
+        let mut seed = 0x2545F4914F6CDD1Du64;
+        for _ in 0..20_000 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let n = (seed % 40) as usize;
+            let s: Vec<u8> = (0..n)
+                .map(|k| {
+                    // the bytes sought and their near misses (one bit or one unit away)
+                    let b = [b'\n', b')', b'a', 0x8a, 0x0b, 0x09, 0xa9, 0x28, 0xff];
+                    b[((seed >> (k % 60)) % 9) as usize]
+                })
+                .collect();
+            assert_eq!(
+                memchr(b'\n', &s),
+                s.iter().position(|&c| c == b'\n'),
+                "{s:?}"
+            );
+            assert_eq!(memchr(b')', &s), s.iter().position(|&c| c == b')'), "{s:?}");
+        }
     }
 
     #[test]
