@@ -7,6 +7,7 @@ import os
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -418,12 +419,110 @@ def test_demo_meets_the_accuracy_target(demo_out):
     assert s["systematic_rms_after"] <= 0.10 * s["systematic_rms_before"]
     assert s["moran"]["systematic"] is True
     assert "systematic error RMS before" in text
-    for name in ("corrected.ngc", "compensated.step", "report.html", "measurements.csv"):
+    for name in ("corrected.ngc", "compensated.step", "report.html", "measurements.csv", "actual.csv", "part.step"):
         assert (out / name).stat().st_size > 0
+    assert s["faces"] == [1] and s["part"]["solids"] == 1 and s["part"]["faces"] == 6
+    # the README shows this run: its transcript is what the command printed
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    shown = readme.split("$ ncadapt demo --out demo-out\n", 1)[1].split("```", 1)[0].splitlines()
+    printed = [line.replace(str(out), "demo-out") for line in text.splitlines() if line.strip()]
+    assert [line for line in printed if line in shown] == shown
     # the shipped program is the generator's output
     from ncadapt import demo
 
     assert demo.program_text() == ff.finishing_program(ff.demo_part(), demo.TOOL_RADIUS, demo.STEPOVER, demo.STEP)
+
+
+def _occ_read(path):
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_Reader
+
+    r = STEPControl_Reader()
+    assert r.ReadFile(str(path)) == IFSelect_RetDone
+    r.TransferRoots()
+    return r.OneShape()
+
+
+def _occ_faces(shape):
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out, ex = [], TopExp_Explorer(shape, TopAbs_FACE)
+    while ex.More():
+        out.append(TopoDS.Face(ex.Current()))
+        ex.Next()
+    return out
+
+
+def _occ_volume(shape) -> float:
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    g = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, g)
+    return g.Mass()
+
+
+def test_the_shipped_demo_part_is_the_testbeds_surface_on_a_block():
+    """data/demo_part.step, read by OpenCASCADE's STEP reader: a valid solid of 6 faces whose top face
+    is the testbed's surface (scipy's spline) at its own (u, v) = (x, y), whose volume is the spline's
+    integral over 80 × 60 mm (the bottom at z = 0), and which the generator makes again."""
+    pytest.importorskip("OCP")
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    from ncadapt import demo
+
+    part = ff.demo_part()
+    shipped = _occ_read(demo.nominal_path())
+    again = demo.nominal_shape()
+    assert BRepCheck_Analyzer(shipped).IsValid() and len(_occ_faces(shipped)) == 6
+    from scipy.interpolate import RectBivariateSpline
+
+    z = RectBivariateSpline(part.u, part.v, part.grid[..., 2], kx=3, ky=3, s=0)
+    spline_volume = z.integral(0.0, 80.0, 0.0, 60.0) - demo.BOTTOM * 80.0 * 60.0
+    for shape in (shipped, again):
+        assert _occ_volume(shape) == pytest.approx(spline_volume, rel=2e-6)
+    rng = np.random.default_rng(0)
+    u, v = rng.uniform(0, 80, 300), rng.uniform(0, 60, 300)
+    truth = part.point(u, v)
+    for shape in (shipped, again):
+        top = BRep_Tool.Surface_s(_occ_faces(shape)[0])
+        got = np.array([(q.X(), q.Y(), q.Z()) for q in (top.Value(float(a), float(b)) for a, b in zip(u, v))])
+        np.testing.assert_allclose(got, truth, atol=1e-9)
+
+
+def test_the_demos_compensated_part(demo_out):
+    """compensated.step read back by OpenCASCADE: a valid solid (BRepCheck_Analyzer); along the normals
+    at the probe points its top face lies opposite the systematic error of the first cut (measured on
+    the testbed's z-map without noise): what is left of it, E + t, is ≤ 10 % of E's RMS."""
+    pytest.importorskip("OCP")
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
+    from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
+
+    from ncadapt import demo
+    from ncadapt import nc as ncmod
+
+    out, _ = demo_out
+    back = _occ_read(out / "compensated.step")
+    assert BRepCheck_Analyzer(back).IsValid() and len(_occ_faces(back)) == 6
+    part = ff.demo_part()
+    err = ff.ErrorModel(part, (("curvature", demo.CURVATURE_AMPLITUDE), ("polynomial", demo.POLYNOMIAL)))
+    first = ff.machine(ncmod.read(out / "part.ngc"), part, err, demo.TOOL_RADIUS)
+    p, n = ff.probe_points(part, demo.PROBE_BORDER, demo.PROBE_SPACING)
+    e = np.einsum("ij,ij->i", ff.measure(first, p, n) - p, n)
+    it = IntCurvesFace_ShapeIntersector()
+    it.Load(back, 1e-9)
+    t = np.full(len(p), np.nan)
+    for k, (a, b) in enumerate(zip(p, n)):
+        it.Perform(gp_Lin(gp_Pnt(*map(float, a)), gp_Dir(*map(float, b))), -1.0, 1.0)
+        ts = [it.WParameter(i) for i in range(1, it.NbPnt() + 1)]
+        t[k] = min(ts, key=abs) if ts else np.nan
+    assert np.isfinite(t).all()
+    rms = lambda v: float(np.sqrt(np.mean(v * v)))  # noqa: E731
+    assert rms(e + t) <= 0.10 * rms(e), (rms(e + t), rms(e))
 
 
 def test_demo_report_renders_in_chromium(demo_out, tmp_path):

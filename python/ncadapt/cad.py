@@ -69,6 +69,58 @@ def face(surface):
     return BRepBuilderAPI_MakeFace(_occ_surface(surface), 1e-6).Face()
 
 
+def block(surface, bottom: float):
+    """A solid under a height-field surface: the surface's B-spline face on top (its (u, v) are the
+    surface's), four vertical planar sides through the face's boundary curves, a flat bottom at
+    z = ``bottom`` mm; sewn (``BRepBuilderAPI_Sewing``) and oriented outward. The surface must be a
+    height field over its (x, y) rectangle lying above ``bottom`` (a :class:`ValueError` otherwise)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import (
+        BRepBuilderAPI_MakeEdge,
+        BRepBuilderAPI_MakeFace,
+        BRepBuilderAPI_MakeSolid,
+        BRepBuilderAPI_MakeWire,
+        BRepBuilderAPI_Sewing,
+    )
+    from OCP.BRepLib import BRepLib
+    from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_SHELL
+    from OCP.TopExp import TopExp, TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    g = np.asarray(surface.grid, float)
+    if float(g[..., 2].min()) <= bottom:
+        raise ValueError(f"the surface reaches down to z {g[..., 2].min():g} mm, not above the bottom {bottom:g} mm")
+    top = BRepBuilderAPI_MakeFace(_occ_surface(surface), 1e-7).Face()
+    sew = BRepBuilderAPI_Sewing(1e-6)
+    sew.Add(top)
+    ex = TopExp_Explorer(top, TopAbs_EDGE)
+    while ex.More():
+        e = TopoDS.Edge(ex.Current())
+        ex.Next()
+        p0 = BRep_Tool.Pnt_s(TopExp.FirstVertex_s(e))
+        p1 = BRep_Tool.Pnt_s(TopExp.LastVertex_s(e))
+        q0, q1 = gp_Pnt(p0.X(), p0.Y(), bottom), gp_Pnt(p1.X(), p1.Y(), bottom)
+        w = BRepBuilderAPI_MakeWire(
+            e,
+            BRepBuilderAPI_MakeEdge(p1, q1).Edge(),
+            BRepBuilderAPI_MakeEdge(q1, q0).Edge(),
+            BRepBuilderAPI_MakeEdge(q0, p0).Edge(),
+        )
+        if not w.IsDone():
+            raise ValueError("a side of the block does not close")
+        sew.Add(BRepBuilderAPI_MakeFace(w.Wire(), True).Face())
+    x0, x1, y0, y1 = float(g[0, 0, 0]), float(g[-1, 0, 0]), float(g[0, 0, 1]), float(g[0, -1, 1])
+    sew.Add(BRepBuilderAPI_MakeFace(gp_Pln(gp_Pnt(0.0, 0.0, bottom), gp_Dir(0.0, 0.0, 1.0)), x0, x1, y0, y1).Face())
+    sew.Perform()
+    ex = TopExp_Explorer(sew.SewedShape(), TopAbs_SHELL)
+    if not ex.More():
+        raise ValueError("the faces of the block do not sew into a shell")
+    solid = BRepBuilderAPI_MakeSolid(TopoDS.Shell(ex.Current())).Solid()
+    BRepLib.OrientClosedSolid_s(solid)
+    return solid
+
+
 def write(surface, path: str | os.PathLike) -> Path:
     """Write the surface as STEP (``.step``/``.stp``) or IGES (``.igs``/``.iges``), atomically."""
     return write_shape(face(surface), path)

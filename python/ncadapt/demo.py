@@ -1,11 +1,13 @@
-"""The main job on shipped data: a freeform part, its ball-end finishing program, simulated
-measurements → analysis → decomposition → compensation → corrected program → re-machining.
+"""The main job on shipped data: a freeform part as a CAD model, its ball-end finishing program,
+simulated measurements of actual points → projection onto the CAD faces → analysis → decomposition
+→ the compensated part (STEP) and the corrected program → re-machining.
 
-The part (:func:`ncadapt.sim.freeform.demo_part`) and its program (``data/freeform_finish.ngc``,
-made by :func:`ncadapt.sim.freeform.finishing_program` with the constants below) ship with the
-package. The machine's systematic error is a curvature term (A_m = 0.10 mm) plus a second-degree
-polynomial in the normalised (u, v) (the freeform paper's models (4) and (7)); the measurement adds
-5 µm normal noise along the normal. Seeded: the same seed gives the same numbers.
+The part (:func:`ncadapt.sim.freeform.demo_part`) ships as a STEP solid (``data/demo_part.step``,
+made by :func:`nominal_shape`: the part's B-spline surface on top of a block down to z = 0) and its
+program (``data/freeform_finish.ngc``, made by :func:`ncadapt.sim.freeform.finishing_program` with
+the constants below). The machine's systematic error is a curvature term (A_m = 0.10 mm) plus a
+second-degree polynomial in the normalised (u, v) (the freeform paper's models (4) and (7)); the
+measurement adds 5 µm normal noise along the normal. Seeded: the same seed gives the same numbers.
 """
 
 from __future__ import annotations
@@ -29,20 +31,61 @@ TOLERANCE = 0.02  # mm
 SECTIONS = (("x", 40.0), ("y", 30.0))  # the part's middle lines, through its bump
 
 
+BOTTOM = 0.0  # mm, the z of the block's flat bottom under the part's surface
+
+
 @dataclass
 class DemoResult:
+    """What :func:`run` made: ``summary`` (the figures of ``summary.json``) and ``files`` {what: file
+    name in the output folder}."""
+
     summary: dict
     files: dict
 
 
 def program_text() -> str:
+    """The shipped finishing program (G-code text)."""
     return (resources.files("ncadapt") / "data" / "freeform_finish.ngc").read_text()
 
 
-def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: None) -> DemoResult:
-    from . import cad, measure, nc
-    from ._io import atomic_write
+def nominal_path() -> Path:
+    """The shipped CAD model of the demo part (STEP), made by :func:`nominal_shape`."""
+    return Path(str(resources.files("ncadapt") / "data" / "demo_part.step"))
+
+
+def nominal_shape():
+    """The demo part as an OpenCASCADE solid: :func:`ncadapt.sim.freeform.demo_part`'s surface on a
+    block down to z = :data:`BOTTOM` (:func:`ncadapt.cad.block`); its top face's (u, v) are (x, y)."""
+    from . import cad
+    from .sim import freeform as ff
+
+    return cad.block(ff.demo_part(), BOTTOM)
+
+
+def _plane_view(face, meas):
+    """The compensated top face as a :class:`~ncadapt.processes.freeform.Compensation` over (x, y)
+    for the report's correction map and sections: the face's (u, v) must be its points' (x, y)."""
     from .processes import freeform as pf
+    from .surfaces import Frame, Surface
+
+    U, V = np.meshgrid(face.u, face.v, indexing="ij")
+    p = np.asarray(face.compensated.grid) + face.df_grid[..., None] * face.normal
+    if not np.allclose(p[..., 0], U, atol=1e-6) or not np.allclose(p[..., 1], V, atol=1e-6):
+        raise ValueError("the demo part's top face is not parametrised by (x, y)")
+    nominal = Surface(face.u, face.v, p)
+    pc = meas.nominal - face.decomposition.systematic[:, None] * meas.normal
+    return pf.Compensation(
+        nominal, face.df_grid, face.measured_region, face.compensated, pc, Frame(np.eye(3)), face.gain
+    )
+
+
+def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: None) -> DemoResult:
+    """Run the demo into the folder ``out`` (created): machine, measure, compensate against the CAD
+    model, correct the program, machine again; write the files of :attr:`DemoResult.files`."""
+    import json
+
+    from . import freeform, nc
+    from ._io import atomic_write
     from .report import freeform as rep
     from .report import write as write_report
     from .sim import freeform as ff
@@ -53,6 +96,8 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
     error = ff.ErrorModel(part, (("curvature", CURVATURE_AMPLITUDE), ("polynomial", POLYNOMIAL)))
     prog_path = out / "part.ngc"
     atomic_write(prog_path, program_text().encode())
+    step_path = out / "part.step"
+    atomic_write(step_path, nominal_path().read_bytes())
     prog = nc.read(prog_path)
     say("machining the first part (virtual)")
     first = ff.machine(prog, part, error, TOOL_RADIUS)
@@ -62,20 +107,28 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
         f"P{k + 1}," + ",".join(f"{v:.6f}" for v in (*p, *n, *m))
         for k, (p, n, m) in enumerate(zip(nominal, normal, measured))
     ]
-    meas_path = out / "measurements.csv"
-    atomic_write(meas_path, ("\n".join(rows) + "\n").encode())
-    meas = measure.read(meas_path)
-    say("analysing")
-    analysis = pf.analyze(meas)
-    decomposition = pf.decompose(meas, method)
-    comp = pf.compensate(part, meas, decomposition.systematic)
-    say("correcting the program")
+    atomic_write(out / "measurements.csv", ("\n".join(rows) + "\n").encode())
+    # what a CMM reports against a CAD model: the actual points only
+    rows = ["id,x,y,z"] + [f"P{k + 1}," + ",".join(f"{v:.6f}" for v in m) for k, m in enumerate(measured)]
+    actual_path = out / "actual.csv"
+    atomic_write(actual_path, ("\n".join(rows) + "\n").encode())
+    say(f"projecting the actual points onto {step_path.name}, compensating its top face, correcting the program")
     corrected_path = out / "corrected.ngc"
-    # the surface is the whole part: tool centres along its edge, up to a tool radius beyond the
-    # tips' hull, take the edge value
-    corr = prog.correct_to(corrected_path, comp.field(TOOL_RADIUS, "clamp"), progress=say)
-    step_path = out / "compensated.step"
-    cad.write(comp.compensated, step_path)
+    # the program runs along the part's edge: tool centres up to a tool radius beyond the face's
+    # tips take the edge value
+    res = freeform.run(
+        actual_path,
+        nominal=step_path,
+        program=prog_path,
+        output=corrected_path,
+        tool_radius=TOOL_RADIUS,
+        outside="clamp",
+        method=method,
+        part=out / "compensated.step",
+    )
+    meas, analysis, decomposition, pc = res.measurements, res.analysis, res.decomposition, res.compensation
+    (face,) = pc.faces
+    comp = _plane_view(face, meas)
     say("machining the second part with the corrected program (virtual)")
     second = ff.machine(nc.read(corrected_path), part, error, TOOL_RADIUS)
     # the systematic error itself: the same points measured without noise
@@ -99,7 +152,9 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
         "offset": analysis.offset.as_dict(),
         "verdict": analysis.verdict.as_dict(),
         "filter": decomposition.as_dict(),
-        "program": corr.as_dict(),
+        "faces": pc.ids,
+        "part": pc.as_dict(),
+        "program": res.program.as_dict(),
         "model": {
             "tool_radius": TOOL_RADIUS,
             "stepover": STEPOVER,
@@ -110,9 +165,11 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
     }
     files = {
         "program": "part.ngc",
+        "nominal part": "part.step",
         "measurements": "measurements.csv",
+        "actual points": "actual.csv",
         "corrected program": "corrected.ngc",
-        "compensated surface": "compensated.step",
+        "compensated part": "compensated.step",
         "report": "report.html",
         "summary": "summary.json",
     }
@@ -127,18 +184,16 @@ def run(out: Path, seed: int = 1, method: str = "bilateral", say=lambda msg: Non
             title="Freeform compensation: demo part",
             analysis=analysis,
             decomposition=decomposition,
-            xy=nominal[:, :2],
+            xy=meas.nominal[:, :2],
             deviation=meas.deviation,
             after=after_measured,
             summary=cards,
             files=files,
             compensation=comp,
-            points=nominal,
+            points=meas.nominal,
             tolerance=TOLERANCE,
-            sections=[rep.section(comp, nominal[:, :2], a, at) for a, at in SECTIONS],
+            sections=[rep.section(comp, meas.nominal[:, :2], a, at) for a, at in SECTIONS],
         ),
     )
-    import json
-
     atomic_write(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
     return DemoResult(summary, files)

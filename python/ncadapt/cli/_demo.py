@@ -37,10 +37,11 @@ from ._common import handle_errors, progress, summary
 def demo(out_dir, seed, method):
     """Compensate a shipped freeform part from simulated measurements, end to end.
 
-    Machines the part virtually with a systematic machine error, measures it with 5 µm noise,
-    tests the deviations with Moran's I, separates the systematic part, writes the corrected
-    program, the compensated STEP surface, an HTML report and summary.json into OUT, re-machines
-    with the corrected program and prints the systematic error before and after.
+    Machines the part virtually with a systematic machine error, measures actual points on it with
+    5 µm noise, projects them onto the part's shipped STEP model (compensate --nominal), tests the
+    deviations with Moran's I, separates the systematic part, writes the corrected program, the
+    compensated STEP part, an HTML report and summary.json into OUT, re-machines with the corrected
+    program and prints the systematic error before and after.
     """
     from .. import demo as run_demo
 
