@@ -161,6 +161,7 @@ def _align_options(f):
 
 
 def _cad_options(f):
+    """``--nominal``, ``--face`` and ``--max-distance``: a CAD model as the nominal."""
     opts = [
         click.option(
             "--nominal",
@@ -223,26 +224,7 @@ def _print_alignment(al) -> None:
 
 @click.command()
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option(
-    "--nominal",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="The CAD model (STEP or IGES) as the nominal: MEASUREMENTS are actual points (CSV x,y,z), each projected "
-    "onto the nearest selected face, the deviation along its outward normal.",
-)
-@click.option(
-    "--face",
-    "face_ids",
-    type=click.IntRange(min=1),
-    multiple=True,
-    help="A face of --nominal (1-based, OpenCASCADE's order; repeat for several; default: all).",
-)
-@click.option(
-    "--max-distance",
-    type=FiniteRange(0, constants.COORD_MAX, min_open=True),
-    default=1.0,
-    show_default=True,
-    help="With --nominal: refuse points farther than this from every face, mm.",
-)
+@_cad_options
 @_align_options
 @_moran_options
 @handle_errors
