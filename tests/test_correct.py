@@ -152,3 +152,45 @@ def test_correct_to_refusal_leaves_nothing(tmp_path, monkeypatch):
     with pytest.raises(RefusedError, match="outside the field's domain"):
         nc.parse(PART).correct_to(out, field)
     assert out.read_text() == "old\n" and sorted(x.name for x in tmp_path.iterdir()) == ["out.ngc"]
+
+
+# ---------------------------------------------------------------------------- approach rapids
+APPROACH = "G21 G90\nG0 X5 Y5 Z5\nG0 Z0.1\n(plunge)\nG1 Z-0.1 F100\nG1 X10\nG0 Z5\nM2\n"
+
+
+def _up(dz):
+    # the measured surface is dz above the nominal one everywhere on a 20 mm square
+    return fields.GridField([0.0, 20.0], [0.0, 20.0], np.full((2, 2), dz))
+
+
+@pytest.mark.parametrize("piece", [1 << 30, 1])
+@pytest.mark.parametrize("native", [True, False])
+def test_a_rapid_that_would_run_into_the_raised_part_is_refused(tmp_path, monkeypatch, piece, native):
+    """The rapid ends at Z0.1, the plunge after it descends 0.2 mm: a surface raised by 0.3 mm puts
+    the corrected plunge's end at Z0.2, above the rapid's end, which is then inside the material
+    (hand-derived). Refused, nothing written, whether the two blocks share a piece or not, and
+    whether the engine or Python evaluates the field."""
+    monkeypatch.setattr(nc, "_PIECE_BYTES", piece)
+    monkeypatch.setattr(correction, "_PIECE_BYTES", piece)
+    src = tmp_path / "p.ngc"
+    src.write_text(APPROACH)
+    out = tmp_path / "o.ngc"
+    field = _up(0.3) if native else (lambda p: np.column_stack([0 * p[:, 0], 0 * p[:, 0], 0 * p[:, 0] + 0.3]))
+    with pytest.raises(
+        RefusedError, match=r"rapid at line 3 ends at Z0\.1000.*line 5\) ends once corrected \(Z0\.2000\)"
+    ):
+        nc.correct_file(src, out, field)
+    assert not out.exists()
+
+
+def test_an_approach_with_clearance_left_or_corrected_rapids_is_written(tmp_path):
+    prog = nc.parse(APPROACH)
+    # raised by 0.15 mm: the corrected plunge ends at Z0.05, below the rapid's end (not refused; the
+    # clearance left, 0.1 − 0.15 above the nominal surface, is what --clearance reports)
+    out = prog.correct(_up(0.15))
+    assert "G1 Z0.05 F100" in out.text and "G0 Z0.1\n" in out.text
+    # --rapids moves the approach with the surface
+    out = prog.correct(_up(0.3), rapids=True)
+    assert "G0 Z0.4\n" in out.text and "G1 Z0.2 F100" in out.text
+    # a cut that rises from the rapid's end is no approach
+    assert "G1 Z0.5" in nc.parse(APPROACH.replace("Z-0.1 F100", "Z0.2 F100")).correct(_up(0.3)).text

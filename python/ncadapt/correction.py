@@ -129,6 +129,50 @@ def _axes_at(pts: np.ndarray, rec: np.ndarray, r: dict) -> np.ndarray:
     return out
 
 
+class _Approach:
+    """Uncorrected rapids that run into the part: a rapid (left as programmed) followed by a cut that
+    descends from its end, which once corrected ends at or above the rapid's end — the surface has
+    moved up by more than the whole descent, so the rapid ends inside the material. Followed across
+    pieces (the engine's own pipeline makes the same check)."""
+
+    def __init__(self):
+        self.pending: tuple[int, float] | None = None  # (line, Z) of an uncorrected rapid, the last record
+        self.found: tuple[int, float, int, float] | None = None
+
+    def add(self, r: dict, recs_i: np.ndarray, pts: np.ndarray, disp: np.ndarray) -> None:
+        n = len(r["line"])
+        if not n:
+            return
+        last = np.full(n, -1, dtype=np.int64)  # each record's last sample (its end), -1 for none
+        last[recs_i.astype(np.int64)] = np.arange(len(recs_i))
+        m, end_z = r["motion"], r["end"][:, 2]
+        rapid = (m == 0) & ((r["flags"] & 16) == 0) & (last < 0) & np.isfinite(end_z)
+        cut = (m >= 1) & (m <= 3) & (last >= 0)
+        p_rapid = np.concatenate([[self.pending is not None], rapid[:-1]])
+        p_z = np.concatenate([[self.pending[1] if self.pending else np.nan], end_z[:-1]])
+        p_line = np.concatenate([[self.pending[0] if self.pending else 0], r["line"][:-1]])
+        j = np.where(cut, last, 0)
+        cz = pts[j, 2] + disp[j, 2] if len(pts) else np.full(n, np.nan)
+        with np.errstate(invalid="ignore"):
+            hit = np.flatnonzero(cut & p_rapid & (end_z < p_z) & (cz >= p_z))
+        if len(hit) and self.found is None:
+            i = int(hit[0])
+            self.found = (int(p_line[i]), float(p_z[i]), int(r["line"][i]), float(cz[i]))
+        self.pending = (int(r["line"][-1]), float(end_z[-1])) if rapid[-1] else None
+
+    def error(self, name) -> RefusedError | None:
+        if self.found is None:
+            return None
+        rl, rz, cl, cz = self.found
+        return RefusedError(
+            f"{name}: the rapid at line {rl} ends at Z{rz:.4f} (mm), below where the cut after it (line {cl}) "
+            f"ends once corrected (Z{cz:.4f}): the field raises the surface there by more than the cut descends, "
+            "so the rapid would run into the part; nothing written (--rapids corrects the rapids too, or give "
+            "the approach more clearance)",
+            [{"line": rl, "z": rz, "cut_line": cl, "corrected_z": cz}],
+        )
+
+
 class _Warnings:
     """Warnings gathered piece by piece: cutting moves left as written because the program does
     not say where they are, and uncorrected rapids below a clearance plane."""
@@ -328,6 +372,7 @@ def _correct(
     worst: list[tuple[float, int, np.ndarray, np.ndarray]] = []  # the largest displacements seen
     n_pts, total, refused = 0, 0.0, False
     notes = _Warnings(field, clearance)
+    approach = _Approach()
     while (chunk := _engine(run.next, name)) is not None:
         first, end, xyz, rec, recs = chunk
         say(f"correcting lines {first + 1:,}-{end:,}")
@@ -363,6 +408,8 @@ def _correct(
         if not np.isfinite(disp).all():
             bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
             raise RefusedError(f"{name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
+        approach.add(r, recs_i, pts, disp)
+        refused |= approach.found is not None
         norms = np.sqrt(np.einsum("ij,ij->i", disp, disp))
         n_pts += len(norms)
         total += float(norms.sum())
@@ -390,6 +437,8 @@ def _correct(
             outside,
         )
     worst_norm = worst[0][0] if worst else 0.0
+    if (e := approach.error(name)) is not None:
+        raise e
     if worst_norm > limit:
         details = [
             {"line": ln, "position": p.round(4).tolist(), "displacement": d.round(4).tolist(), "magnitude": round(m, 4)}

@@ -126,6 +126,36 @@ fn warnings(it: &Interp, clearance: Option<f64>, bounds: Option<[f64; 4]>, r: &m
     }
 }
 
+/// Uncorrected rapids followed by a cut that descends from their end, followed across pieces:
+/// when the corrected cut ends at or above the rapid's end, the rapid runs into the part (the
+/// check of `ncadapt.correction._Approach`, which reports it).
+#[derive(Default)]
+struct Approach {
+    /// The Z (mm) an uncorrected rapid ended at, when it is the last record seen.
+    pending: Option<f64>,
+}
+
+impl Approach {
+    fn runs_into_part(&mut self, it: &Interp, samples: &Samples, disp: &[f64]) -> bool {
+        for (k, rec) in it.records.iter().enumerate() {
+            let (f, c) = samples.of(k);
+            let m = rec.motion as u8;
+            if (1..=3).contains(&m) && c > 0 {
+                if let Some(rz) = self.pending {
+                    let j = f + c - 1;
+                    let cz = samples.xyz[3 * j + 2] + disp[3 * j + 2];
+                    if rec.end[2] < rz && cz >= rz {
+                        return true;
+                    }
+                }
+            }
+            self.pending = (m == 0 && rec.cycle == 0 && c == 0 && rec.end[2].is_finite())
+                .then_some(rec.end[2]);
+        }
+        false
+    }
+}
+
 /// What the reading thread ends with: the style the pieces were written in, the program's own,
 /// and the interpreter's reports.
 struct ReadEnd {
@@ -271,6 +301,7 @@ fn pass(
         let writing = scope.spawn(move || write_pieces(write_rx, written_tx, out));
         let mut report = Report::default();
         let mut norms: Vec<f64> = Vec::new();
+        let mut approach = Approach::default();
         let mut refused = false;
         let mut failed: Option<NcError> = None;
         let mut made = 0;
@@ -322,7 +353,10 @@ fn pass(
             if top > report.max {
                 report.max = top;
             }
-            if report.max > opts.limit || !report.max.is_finite() {
+            if approach.runs_into_part(&piece.interp, &samples, &disp)
+                || report.max > opts.limit
+                || !report.max.is_finite()
+            {
                 refused = true;
                 break;
             }
