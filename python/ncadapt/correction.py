@@ -437,8 +437,9 @@ def _correct(
             outside,
         )
     worst_norm = worst[0][0] if worst else 0.0
-    if (e := approach.error(name)) is not None:
-        raise e
+    into_part = approach.error(name)
+    if into_part is not None:
+        raise into_part
     if worst_norm > limit:
         details = [
             {"line": ln, "position": p.round(4).tolist(), "displacement": d.round(4).tolist(), "magnitude": round(m, 4)}
