@@ -177,7 +177,8 @@ def test_a_rapid_that_would_run_into_the_raised_part_is_refused(tmp_path, monkey
     out = tmp_path / "o.ngc"
     field = _up(0.3) if native else (lambda p: np.column_stack([0 * p[:, 0], 0 * p[:, 0], 0 * p[:, 0] + 0.3]))
     with pytest.raises(
-        RefusedError, match=r"rapid at line 3 ends at Z0\.1000.*line 5\) ends once corrected \(Z0\.2000\)"
+        RefusedError,
+        match=r"rapid at line 3 ends at Z0\.1000.*plunge after it \(line 5\) ends once corrected \(Z0\.2000\)",
     ):
         nc.correct_file(src, out, field)
     assert not out.exists()
@@ -194,3 +195,6 @@ def test_an_approach_with_clearance_left_or_corrected_rapids_is_written(tmp_path
     assert "G0 Z0.4\n" in out.text and "G1 Z0.2 F100" in out.text
     # a cut that rises from the rapid's end is no approach
     assert "G1 Z0.5" in nc.parse(APPROACH.replace("Z-0.1 F100", "Z0.2 F100")).correct(_up(0.3)).text
+    # nor is a side entry beside the part, even one that descends a little as it moves in
+    side = "G21 G90\nG0 X-5 Y5 Z5\nG0 Z-1\nG1 X10 Z-1.1 F100\nM2\n"
+    assert nc.parse(side).correct(fields.Shift((0, 0, 0.3))).text.splitlines()[-2].endswith("Z-0.8")

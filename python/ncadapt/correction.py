@@ -130,13 +130,16 @@ def _axes_at(pts: np.ndarray, rec: np.ndarray, r: dict) -> np.ndarray:
 
 
 class _Approach:
-    """Uncorrected rapids that run into the part: a rapid (left as programmed) followed by a cut that
-    descends from its end, which once corrected ends at or above the rapid's end — the surface has
-    moved up by more than the whole descent, so the rapid ends inside the material. Followed across
-    pieces (the engine's own pipeline makes the same check)."""
+    """Uncorrected rapids that end inside the part: a rapid (left as programmed) followed by a
+    straight plunge (a G1 that descends from its end, X and Y unchanged) which, once corrected,
+    ends at or above the rapid's end — the surface has moved up by more than the whole plunge.
+    Followed across pieces (the engine's own pipeline makes the same check)."""
+
+    #: A descent larger than rounding: a plunge, not a level move (mm).
+    PLUNGE_MIN = 1e-6
 
     def __init__(self):
-        self.pending: tuple[int, float] | None = None  # (line, Z) of an uncorrected rapid, the last record
+        self.pending: tuple[int, np.ndarray] | None = None  # (line, XYZ) of an uncorrected rapid, the last record
         self.found: tuple[int, float, int, float] | None = None
 
     def add(self, r: dict, recs_i: np.ndarray, pts: np.ndarray, disp: np.ndarray) -> None:
@@ -145,30 +148,38 @@ class _Approach:
             return
         last = np.full(n, -1, dtype=np.int64)  # each record's last sample (its end), -1 for none
         last[recs_i.astype(np.int64)] = np.arange(len(recs_i))
-        m, end_z = r["motion"], r["end"][:, 2]
-        rapid = (m == 0) & ((r["flags"] & 16) == 0) & (last < 0) & np.isfinite(end_z)
-        cut = (m >= 1) & (m <= 3) & (last >= 0)
+        m, end = r["motion"], r["end"][:, :3]
+        rapid = (m == 0) & ((r["flags"] & 16) == 0) & (last < 0) & np.isfinite(end).all(axis=1)
+        plunge = (m == 1) & (last >= 0)
+        nan3 = np.full((1, 3), np.nan)
         p_rapid = np.concatenate([[self.pending is not None], rapid[:-1]])
-        p_z = np.concatenate([[self.pending[1] if self.pending else np.nan], end_z[:-1]])
+        p_end = np.vstack([self.pending[1][None, :] if self.pending else nan3, end[:-1]])
         p_line = np.concatenate([[self.pending[0] if self.pending else 0], r["line"][:-1]])
-        j = np.where(cut, last, 0)
+        j = np.where(plunge, last, 0)
         cz = pts[j, 2] + disp[j, 2] if len(pts) else np.full(n, np.nan)
         with np.errstate(invalid="ignore"):
-            hit = np.flatnonzero(cut & p_rapid & (end_z < p_z) & (cz >= p_z))
+            hit = np.flatnonzero(
+                plunge
+                & p_rapid
+                & (end[:, 0] == p_end[:, 0])
+                & (end[:, 1] == p_end[:, 1])
+                & (end[:, 2] < p_end[:, 2] - self.PLUNGE_MIN)
+                & (cz >= p_end[:, 2])
+            )
         if len(hit) and self.found is None:
             i = int(hit[0])
-            self.found = (int(p_line[i]), float(p_z[i]), int(r["line"][i]), float(cz[i]))
-        self.pending = (int(r["line"][-1]), float(end_z[-1])) if rapid[-1] else None
+            self.found = (int(p_line[i]), float(p_end[i, 2]), int(r["line"][i]), float(cz[i]))
+        self.pending = (int(r["line"][-1]), end[-1].copy()) if rapid[-1] else None
 
     def error(self, name) -> RefusedError | None:
         if self.found is None:
             return None
         rl, rz, cl, cz = self.found
         return RefusedError(
-            f"{name}: the rapid at line {rl} ends at Z{rz:.4f} (mm), below where the cut after it (line {cl}) "
-            f"ends once corrected (Z{cz:.4f}): the field raises the surface there by more than the cut descends, "
-            "so the rapid would run into the part; nothing written (--rapids corrects the rapids too, or give "
-            "the approach more clearance)",
+            f"{name}: the rapid at line {rl} ends at Z{rz:.4f} (mm), below where the plunge after it (line {cl}) "
+            f"ends once corrected (Z{cz:.4f}): the field raises the surface there by more than the plunge "
+            "descends, so the rapid would end inside the part; nothing written (--rapids corrects the rapids "
+            "too, or give the approach more clearance)",
             [{"line": rl, "z": rz, "cut_line": cl, "corrected_z": cz}],
         )
 

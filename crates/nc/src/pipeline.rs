@@ -126,31 +126,37 @@ fn warnings(it: &Interp, clearance: Option<f64>, bounds: Option<[f64; 4]>, r: &m
     }
 }
 
-/// Uncorrected rapids followed by a cut that descends from their end, followed across pieces:
-/// when the corrected cut ends at or above the rapid's end, the rapid runs into the part (the
-/// check of `ncadapt.correction._Approach`, which reports it).
+/// Uncorrected rapids followed by a straight plunge (a cut that descends from their end with X
+/// and Y unchanged), followed across pieces: when the corrected plunge ends at or above the
+/// rapid's end, the rapid ends inside the part (the check of `ncadapt.correction._Approach`,
+/// which reports it).
 #[derive(Default)]
 struct Approach {
-    /// The Z (mm) an uncorrected rapid ended at, when it is the last record seen.
-    pending: Option<f64>,
+    /// Where (mm) an uncorrected rapid ended, when it is the last record seen.
+    pending: Option<[f64; 3]>,
 }
+
+/// A descent larger than rounding: a plunge, not a level move.
+const PLUNGE_MIN_MM: f64 = 1e-6;
 
 impl Approach {
     fn runs_into_part(&mut self, it: &Interp, samples: &Samples, disp: &[f64]) -> bool {
         for (k, rec) in it.records.iter().enumerate() {
             let (f, c) = samples.of(k);
             let m = rec.motion as u8;
-            if (1..=3).contains(&m) && c > 0 {
-                if let Some(rz) = self.pending {
+            if m == 1 && c > 0 {
+                if let Some(r) = self.pending {
                     let j = f + c - 1;
                     let cz = samples.xyz[3 * j + 2] + disp[3 * j + 2];
-                    if rec.end[2] < rz && cz >= rz {
+                    let e = rec.end;
+                    if e[0] == r[0] && e[1] == r[1] && e[2] < r[2] - PLUNGE_MIN_MM && cz >= r[2] {
                         return true;
                     }
                 }
             }
-            self.pending = (m == 0 && rec.cycle == 0 && c == 0 && rec.end[2].is_finite())
-                .then_some(rec.end[2]);
+            let r = [rec.end[0], rec.end[1], rec.end[2]];
+            self.pending = (m == 0 && rec.cycle == 0 && c == 0 && r.iter().all(|v| v.is_finite()))
+                .then_some(r);
         }
         false
     }
