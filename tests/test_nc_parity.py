@@ -159,7 +159,8 @@ def test_programs_rs274_rejects_are_refused_at_their_line(tmp_path, src, where, 
 
 
 @pytest.mark.parametrize(
-    "line", ["G2 X10 Y0 I5 J0", "I5 J0", "X5 R3", "G43 H1", "G64 P0.01 Q0.01", "G4 P0.5", "G10 L2 P1 X0"]
+    "line",
+    ["G2 X10 Y0 I5 J0", "I5 J0", "X5 R3", "G43 H1", "G64 P0.01 Q0.01", "G4 P0.5", "G10 L2 P1 X0", "M19 R90 P1"],
 )
 def test_words_their_codes_use_are_read(tmp_path, line):
     """The same letters where a code uses them (a modal arc's centre or radius included): rs274 runs

@@ -154,3 +154,11 @@ def test_full_circle_and_turns():
     ang = np.unwrap(np.arctan2(tp.points[:, 1], tp.points[:, 0]))
     assert ang[-1] == pytest.approx(4 * np.pi, abs=1e-9)
     np.testing.assert_allclose(tp.points[:, 2], -2 * ang / (4 * np.pi), atol=1e-9)
+
+
+@pytest.mark.parametrize("head", ["G91 G28 Z0\nG90", "G53 G0 Z0\n", "G10 L2 P2 X0 Y0 Z0\n"])
+def test_a_work_system_chosen_after_a_homing_or_machine_move_is_the_first(head):
+    # post headers home Z (or move in machine coordinates) before they choose the part's system:
+    # those axis words are no move in a work system, so G55 is the system the moves begin in
+    prog = nc.parse(f"{head} G55 G0 X0 Y0 Z5\nG1 Z-1 F100\nM2\n")
+    assert not [u for u in prog.unsupported if "work coordinate system" in u.construct]

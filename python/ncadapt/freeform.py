@@ -133,7 +133,7 @@ def run(
             gain=gain,
             **moran_options,
         )
-        d = pf.part_decomposition(comp, meas, **moran_options)
+        d = pf.part_decomposition(comp, meas, alpha=alpha, **moran_options)
         field = comp.field(tool_radius or 0.0, outside)
         correction = rounds.Correction(
             "faces",
@@ -150,8 +150,8 @@ def run(
             cad.write_shape(comp.part, part)
             files["part"] = Path(part)
     else:
-        if part is not None or faces or align != "none":
-            raise InputError("part, faces and align need a CAD nominal")
+        if part is not None or faces or align != "none" or datums is not None or align_dof is not None:
+            raise InputError("part, faces, align, align_dof and datums need a CAD nominal")
         meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
         if prev is not None:

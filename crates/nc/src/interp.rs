@@ -911,7 +911,13 @@ impl Interpreter {
             } else {
                 out.summary.mm_lines += 1;
             }
-            if st.wcs_moves.is_none() && (named != 0 || motion_word.is_some()) {
+            // (axis words of G28/G30, G53 or G10/G92 are no move in a work system)
+            if st.wcs_moves.is_none()
+                && (named != 0 || motion_word.is_some())
+                && home.is_none()
+                && nonmodal_axis_user.is_none()
+                && !g53
+            {
                 st.wcs_moves = Some(st.wcs);
             }
             if let Some((m, mc)) = motion_word {
@@ -1343,7 +1349,7 @@ fn unused_word(
                 || g(640)
                 || other
                 || user_m
-                || m(|c| (50..=53).contains(&c) || (62..=66).contains(&c) || c == 98),
+                || m(|c| (50..=53).contains(&c) || (62..=66).contains(&c) || c == 98 || c == 19),
             "G2, G3, G4, G64, dwell cycle or M code",
         ),
         (

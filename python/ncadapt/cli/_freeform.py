@@ -595,7 +595,7 @@ def compensate(
         tol = {
             "value": tolerance,
             "before": rep.tolerance_shares(meas.deviation, tolerance),
-            "predicted": rep.tolerance_shares(meas.deviation - d.systematic, tolerance),
+            "predicted": rep.tolerance_shares(meas.deviation - c.gain * d.systematic, tolerance),
         }
         payload["tolerance"] = tol
         summary(

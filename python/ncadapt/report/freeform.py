@@ -420,7 +420,9 @@ def render(
     if compensation is not None:
         parts.append(("The correction to be cut", _correction_section(compensation, xy, names, extrapolation)))
     if tolerance is not None:
-        parts.append(("Tolerance", _tolerance_section(xy, deviation, sysv, after, tolerance, names, marked)))
+        # what the program moves: this round's gain on the systematic part (1 in a first round)
+        moved = sysv * (getattr(compensation, "gain", 1.0) if compensation is not None else 1.0)
+        parts.append(("Tolerance", _tolerance_section(xy, deviation, moved, after, tolerance, names, marked)))
     parts.append(
         (
             "Deviations",
