@@ -7,6 +7,8 @@ import sys
 
 import numpy as np
 
+from rs274 import Move
+
 
 def skin_server(*args, env=None) -> subprocess.Popen:
     """``ncadapt skin serve ARGS`` in a process of its own (the controller of the OPC UA pair);
@@ -20,13 +22,24 @@ def skin_server(*args, env=None) -> subprocess.Popen:
     )
 
 
-def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol: float) -> None:
+def match_path(
+    predicted: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    tol: float,
+    chords: np.ndarray | None = None,
+    tol_arc: float = 0.0,
+) -> None:
     """Assert that the polyline of segments (starts[i] -> ends[i]) passes through the predicted
     points in order, and that every segment ends on a predicted point.
 
     Pieces that lie on one straight line are written as one move, so several predicted points may
     lie on one segment; every segment end must be one of them. Distances are per axis (the largest
     coordinate difference), as rounding to written decimals is.
+
+    Segments flagged in `chords` are fine chords of an arc the program writes as an arc: the
+    predicted points on them need only be within `tol_arc` (an arc kept an arc is within the
+    chord tolerance of the displaced path), and a chord need not end on one.
     """
     j = 0
     n = len(predicted)
@@ -34,6 +47,7 @@ def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol:
         ab = b - a
         L2 = float(ab @ ab)
         last = None
+        chord = chords is not None and bool(chords[i])
         while j < n:
             p = predicted[j]
             if np.abs(p - b).max() <= tol:
@@ -41,10 +55,12 @@ def match_path(predicted: np.ndarray, starts: np.ndarray, ends: np.ndarray, tol:
                 j += 1
                 break
             t = 0.0 if L2 == 0 else float(np.clip((p - a) @ ab / L2, 0, 1))
-            if np.abs(a + t * ab - p).max() > tol:
+            if np.abs(a + t * ab - p).max() > (tol_arc if chord else tol):
                 break
             last = j
             j += 1
+        if chord:
+            continue
         assert last is not None and np.abs(predicted[last] - b).max() <= tol, (
             f"segment {i} {a.round(5)} -> {b.round(5)} does not end on the predicted path "
             f"(next predicted {predicted[min(j, n - 1)].round(5)})"
@@ -68,3 +84,37 @@ def endpoints_agree(blocks, canon, what: str) -> int:
         f"rs274 {canon.ends[tuple(bad[0])]:.6f}"
     )
     return int(known.any(axis=1).sum())
+
+
+def match_moves(predicted: np.ndarray, mv: list[Move], tol: float, tol_arc: float, names) -> None:
+    """rs274's moves `mv` (``rs274.moves``) pass through the predicted points in order, within `tol`
+    per axis on straight moves and `tol_arc` on arcs, and every move ends on one of them (an arc:
+    at its last turn). Pieces on one straight line are written as one move, so several predicted
+    points may lie on one move; `names(i)` names move i in a failure."""
+    j, n = 0, len(predicted)
+    for i, m in enumerate(mv):
+        if (
+            np.abs(m.end[:3] - m.start[:3]).max() <= tol
+            and m.arc is None
+            and (j == n or np.abs(predicted[j] - m.end[:3]).max() > tol)
+        ):
+            continue  # a move that goes nowhere need not be predicted (its start was checked)
+        last, t = None, 0.0
+        while j < n:
+            p = predicted[j]
+            d, t = m.locate(p, t)
+            at_end = np.abs(p - m.end[:3]).max() <= tol
+            if at_end and (m.arc is None or t * m.sweep * max(m.rs, m.re) >= m.sweep * max(m.rs, m.re) - 2 * tol_arc):
+                last = j
+                j += 1
+                break
+            if d > (tol if m.arc is None else tol_arc):
+                break
+            last = j
+            j += 1
+        assert last is not None and np.abs(predicted[last] - m.end[:3]).max() <= tol, (
+            f"{names(i)}: rs274's {m.kind} {m.start[:3].round(5)} -> {m.end[:3].round(5)} does not end on the "
+            f"predicted path (next predicted {predicted[min(j, n - 1)].round(5)}, "
+            f"{m.dist(predicted[min(j, n - 1)]):.6f} mm off the move)"
+        )
+    assert j == n, f"{n - j} predicted point(s) not reached by rs274's motion, first {predicted[j].round(5)}"

@@ -7,6 +7,7 @@ last set by ``USE_LENGTH_UNITS`` and 4 decimals. :func:`canonical` turns that in
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
@@ -95,3 +96,97 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
         tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
     return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err)
+
+
+class Move:
+    """One canonical move of rs274: a straight line or an arc (helix, turns) from the previous end."""
+
+    def __init__(self, kind: str, start: np.ndarray, end: np.ndarray, arc, res: float = 0.0):
+        self.kind, self.start, self.end = kind, start, end
+        self.arc = arc
+        if arc is not None:
+            rot, c1, c2, plane = arc
+            self.axes = _PLANES[plane]
+            a1, a2, an = self.axes
+            self.c = np.array([c1, c2])
+            self.dir = 1 if rot > 0 else -1
+            self.turns = abs(rot)
+            s, e = start[[a1, a2]] - self.c, end[[a1, a2]] - self.c
+            self.rs, self.re = float(np.hypot(*s)), float(np.hypot(*e))
+            self.ts = math.atan2(s[1], s[0])
+            base = ((math.atan2(e[1], e[0]) - self.ts) * self.dir) % (2 * math.pi)
+            # start and end alike to the printed resolution `res` (the start may have been printed
+            # in other units): a full circle
+            if np.abs(start[[a1, a2]] - end[[a1, a2]]).max() <= 2 * res + 1e-9:
+                base = 2 * math.pi
+            self.sweep = base + 2 * math.pi * (self.turns - 1)
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """XYZ at fractions t of the move."""
+        t = np.asarray(t, dtype=float)
+        a, b = self.start[:3], self.end[:3]
+        if self.arc is None:
+            return a + t[:, None] * (b - a)
+        a1, a2, an = self.axes
+        th = self.ts + self.dir * self.sweep * t
+        r = self.rs + t * (self.re - self.rs)
+        out = np.empty((len(t), 3))
+        out[:, a1] = self.c[0] + r * np.cos(th)
+        out[:, a2] = self.c[1] + r * np.sin(th)
+        out[:, an] = a[an] + t * (b[an] - a[an])
+        return out
+
+    def locate(self, p: np.ndarray, t_from: float = 0.0) -> tuple[float, float]:
+        """(largest coordinate difference, fraction t) between p and the nearest point of the move;
+        on an arc, of the first turn at or after fraction t_from that comes within 1 µm of the
+        nearest (a full circle or P turns pass the same angle more than once)."""
+        a, b = self.start[:3], self.end[:3]
+        if self.arc is None:
+            ab = b - a
+            L2 = float(ab @ ab)
+            t = 0.0 if L2 == 0 else float(np.clip((p - a) @ ab / L2, 0, 1))
+            return float(np.abs(a + t * ab - p).max()), t
+        a1, a2, _ = self.axes
+        d = p[[a1, a2]] - self.c
+        ang = ((math.atan2(d[1], d[0]) - self.ts) * self.dir) % (2 * math.pi)
+        t = np.clip((ang + 2 * math.pi * np.arange(-1, self.turns + 1)) / self.sweep, 0, 1)
+        # the nearest point of the helix near each angle: on a steep helix the angle of p, taken
+        # about rs274's rounded centre, is a poor guess of where along the normal axis it is
+        t = self._nearest(p, t)
+        dist = np.abs(self.at(t) - p).max(axis=1)
+        ok = (t >= t_from - 1e-6) & (dist <= dist.min() + 1e-3)
+        i = int(np.flatnonzero(ok)[0]) if ok.any() else int(np.argmin(dist))
+        return float(dist[i]), float(t[i])
+
+    def _nearest(self, p: np.ndarray, t0: np.ndarray, w: float = 0.15) -> np.ndarray:
+        """Fractions of the points of the move nearest to p within each t0 ± w (a grid, refined)."""
+        t = np.asarray(t0, dtype=float)
+        k = np.linspace(-1, 1, 41)
+        for _ in range(5):
+            grid = np.clip(t[:, None] + w * k[None, :], 0, 1)
+            d2 = np.sum((self.at(grid.ravel()) - p) ** 2, axis=1).reshape(grid.shape)
+            t = grid[np.arange(len(t)), np.argmin(d2, axis=1)]
+            w /= 20
+        return t
+
+    def dist(self, p: np.ndarray) -> float:
+        return self.locate(p)[0]
+
+    def dense(self, step=0.25, sagitta=1e-4) -> np.ndarray:
+        """XYZ along the move, close enough that the polyline stays within `sagitta` of it."""
+        if self.arc is None:
+            n = int(np.ceil(np.linalg.norm(self.end[:3] - self.start[:3]) / step))
+        else:
+            r = max(self.rs, self.re, 1e-6)
+            dth = 2 * math.acos(max(-1.0, 1 - sagitta / r))
+            n = int(np.ceil(self.sweep / dth))
+        return self.at(np.linspace(0, 1, min(max(n, 1), 200000) + 1))
+
+
+def moves(canon: Canon) -> list[Move]:
+    out = []
+    prev = np.zeros(6)  # rs274 starts at the origin
+    for kind, end, arc in zip(canon.kinds, canon.ends, canon.arcs):
+        out.append(Move(kind, prev, end, arc, canon.resolution_mm))
+        prev = end
+    return out

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from conftest import needs_rs274
-from helpers import endpoints_agree, match_path
+from helpers import endpoints_agree, match_moves
 from ncadapt import InputError, fields, nc
-from rs274 import canonical
+from ncadapt.constants import CHORD_TOL
+from rs274 import canonical, moves
 
 pytestmark = [needs_rs274, pytest.mark.rs274]
 
@@ -65,17 +66,17 @@ def _corrected_matches(tmp_path, src: str, field, name="p.ngc", **kw):
     # and the feed moves follow the corrected path we predicted
     c = out.correction
     predicted = c.points + c.displacements
-    feed = np.array([k != "traverse" for k in canon.kinds])
-    ends = canon.ends[:, :3]
-    starts = np.vstack([[np.nan] * 3, ends[:-1]])
-    sel = np.flatnonzero(feed)
+    feed = [m for m in moves(canon) if m.kind != "traverse"]
     # rs274 prints 4 decimals, we write 4 (mm) or 5 (inch): in mm the two roundings add up to the
     # 1e-4 mm required; in inch programs to 0.00005 + 0.000005 in
     ours = 0.5e-5 * 25.4 if prog.units == "inch" else 0.5e-4
     # (+1e-6 mm: pieces that far from a straight line are merged into one move)
     tol = canon.resolution_mm + ours + 1e-6
     assert prog.units == "inch" or tol <= TOL_MM + 1e-6
-    match_path(predicted, starts[sel], ends[sel], tol)
+    # an arc kept an arc is within the chord tolerance of the displaced arc at every point (as
+    # close as its chords would be); rs274 prints its centre rounded too
+    tol_arc = kw.get("chord_tol", CHORD_TOL) + tol + 2 * canon.resolution_mm
+    match_moves(predicted, feed, tol, tol_arc, lambda i: f"feed move {i}")
     return out
 
 
@@ -144,10 +145,16 @@ def test_corrected_program_is_what_rs274_runs(tmp_path, name):
     assert out.correction.blocks_changed > 0
 
 
-def test_grid_field_corrected_program(tmp_path, examples):
+@pytest.mark.parametrize("chord_tol", [CHORD_TOL, 1e-4])
+def test_grid_field_corrected_program(tmp_path, examples, chord_tol):
+    """The probed plate: its four arcs stay arcs where the field along them is a shift and a helix
+    within the chord tolerance, and are cut into chords where it is not (a tolerance of 0.1 µm);
+    either way rs274's motion of the output follows the displaced path."""
     field = fields.read(examples / "nc" / "plate_probe.csv")
-    out = _corrected_matches(tmp_path, (examples / "nc" / "plate.ngc").read_text(), field)
-    assert out.correction.arcs_linearised == 4
+    out = _corrected_matches(tmp_path, (examples / "nc" / "plate.ngc").read_text(), field, chord_tol=chord_tol)
+    arcs = canonical(tmp_path / "c-p.ngc").kinds.count("arc")
+    assert arcs + out.correction.arcs_linearised == 4
+    assert arcs == (4 if chord_tol == CHORD_TOL else 0)
 
 
 def test_shift_keeps_arcs_exact(tmp_path):
@@ -211,3 +218,59 @@ def test_return_with_a_motion_code_is_an_error_as_in_rs274(tmp_path):
     assert "both use axis values" in canonical(p).error
     with pytest.raises(InputError, match=r":2:5: G28 and G1 in one block both use the axis words"):
         nc.read(p)
+
+
+class _Tilt:
+    """A plane tilted along X and shifted in X and Y: displaced by (0.01, -0.02, `g`·x) (closed form)."""
+
+    def __init__(self, g: float):
+        self.g = g
+
+    def __call__(self, points):
+        d = np.zeros_like(points)
+        d[:, 0], d[:, 1] = 0.01, -0.02
+        d[:, 2] = self.g * points[:, 0]
+        return d
+
+
+@pytest.mark.parametrize(
+    "arc, g, dev",
+    [
+        # a full circle of r 0.25 on a slope of 0.002, starting at its highest point: z is 2·g·r
+        # = 1 µm lower on the far side, a shift within the 2 µm chord tolerance: kept a circle
+        ("G2 X10 Y0 I-0.25 J0", 0.002, 2 * 0.002 * 0.25),
+        # a half circle of r 1 on a slope of 0.005, from x = 10 to 8: z = g·(9 + cos θ) against
+        # the helix from g·10 to g·8, apart by g·max(cos θ − 1 + 2θ/π) = 0.2105·g: kept, a G3
+        # with a Z word
+        ("G3 X8 Y0 I-1 J0", 0.005, 0.005 * 0.21051),
+        # the same, its centre absolute (G90.1) and R-format: the centre moves with it
+        ("G90.1 G2 X10 Y0 I9.75 J0", 0.002, 2 * 0.002 * 0.25),
+        ("G3 X8 Y0 R1", 0.005, 0.005 * 0.21051),
+        # a full circle of r 5 on the same slope: 50 µm, no helix: cut into chords
+        ("G2 X10 Y0 I-5 J0", 0.005, None),
+    ],
+)
+def test_arc_kept_within_the_chord_tolerance(tmp_path, arc, g, dev):
+    """An arc whose displacement is a shift and a helix within the chord tolerance stays an arc;
+    rs274's arc of the output is then within the tolerance of the input's arc displaced by the
+    field at every point (1000 points, not only where the engine sampled)."""
+    src = f"G21 G90 G17 G0 X10 Y0 Z1\nG1 Z0 F100\n{arc}\nG1 X12\nM2\n"
+    (tmp_path / "a.ngc").write_text(src)
+    field = _Tilt(g)
+    out = nc.read(tmp_path / "a.ngc").correct(field)
+    p = out.write(tmp_path / "b.ngc")
+    a, b = canonical(tmp_path / "a.ngc"), canonical(p)
+    assert b.error is None
+    kept = dev is not None
+    assert ("arc" in b.kinds) == kept and out.correction.arcs_linearised == (0 if kept else 1)
+    if not kept:
+        return
+    ma, mb = moves(a)[a.kinds.index("arc")], moves(b)[b.kinds.index("arc")]
+    t = np.linspace(0, 1, 1001)
+    pa = ma.at(t)
+    want = pa + field(pa)
+    got = mb.at(t)
+    # the largest distance is the field's departure from a helix, within the chord tolerance
+    # (rs274 prints 4 decimals: its centre and ends are rounded by 5e-5 mm)
+    assert dev <= CHORD_TOL
+    assert abs(np.abs(got - want).max() - dev) <= 1.5e-4

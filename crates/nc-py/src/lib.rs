@@ -326,6 +326,7 @@ impl Corrector {
                 let st = state.take().unwrap_or_else(|| {
                     let mut s = EmitState::new(&p.interp);
                     s.expand_cycles = expand_cycles;
+                    s.arc_tol = chord_tol;
                     s
                 });
                 let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);

@@ -268,6 +268,11 @@ pub struct EmitState {
     tail_ends: Vec<usize>,
     /// Write canned cycles as the G0/G1 moves they make (else they stay cycle blocks).
     pub expand_cycles: bool,
+    /// Largest distance (mm) between a kept arc and the displaced path at the samples: an arc
+    /// whose displacement is a shift in its plane and a helix along its normal within this stays
+    /// an arc (the chord tolerance: its chords would be as far from the arc). 0 keeps only arcs
+    /// moved as a whole.
+    pub arc_tol: f64,
     /// The output's canned-cycle state: its initial level (mm) and its R and Z as last written
     /// (program units).
     cyc_level: f64,
@@ -288,6 +293,7 @@ impl EmitState {
             tail: Vec::new(),
             tail_ends: Vec::new(),
             expand_cycles: false,
+            arc_tol: 0.0,
             cyc_level: f64::NAN,
             cyc_r: None,
             cyc_z: None,
@@ -593,7 +599,26 @@ impl<'a> Emitter<'a> {
         };
         // the output starts this block where the corrected path expects it
         let on_path = (0..3).all(|a| (self.st.epos[a] - (start[a] + d0[a])).abs() < half_mm);
-        let keep_arc = rec.motion.is_arc() && uniform && on_path;
+        // an arc whose displacement is, within the chord tolerance, a shift in its plane and a
+        // helix along its normal from where the output starts it: kept an arc, as close to the
+        // displaced path at every sample as its chords would be
+        let [a1, a2, an] = PLANE_AXES[rec.plane as usize];
+        let ds = [epos0[0] - start[0], epos0[1] - start[1], epos0[2] - start[2]];
+        let de = [disp[3 * n - 3], disp[3 * n - 2], disp[3 * n - 1]];
+        let helix = rec.motion.is_arc()
+            && !uniform
+            && self.st.arc_tol > 0.0
+            && (de[a1] - ds[a1]).abs() < half_mm
+            && (de[a2] - ds[a2]).abs() < half_mm
+            && {
+                let tol2 = self.st.arc_tol * self.st.arc_tol;
+                disp.chunks_exact(3).zip(ts).all(|(d, &t)| {
+                    let dn = ds[an] + t * (de[an] - ds[an]);
+                    (d[a1] - ds[a1]).powi(2) + (d[a2] - ds[a2]).powi(2) + (d[an] - dn).powi(2)
+                        <= tol2
+                })
+            };
+        let keep_arc = rec.motion.is_arc() && (uniform && on_path || helix);
         // a straight move whose corrected pieces all lie on one line, within half a unit of the
         // last written digit (the rounding every written number has), is written as one move; when
         // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
@@ -626,7 +651,7 @@ impl<'a> Emitter<'a> {
             self.set_axes(li, rec, &target);
             // an R-format arc names no centre: moved as a whole, its radius is the same
             if keep_arc && rec.arc_absolute && !words.iter().any(|w| w.letter == b'R') {
-                self.shift_centre(li, rec, d0);
+                self.shift_centre(li, rec, if helix { ds } else { d0 });
             }
             return;
         }

@@ -232,6 +232,7 @@ fn emit_pieces(
     write: SyncSender<Vec<u8>>,
     written: Receiver<Vec<u8>>,
     expand_cycles: bool,
+    arc_tol: f64,
 ) -> Result<EmitStats, NcError> {
     let mut state: Option<EmitState> = None;
     let mut made = 0;
@@ -253,6 +254,7 @@ fn emit_pieces(
         let st = state.take().unwrap_or_else(|| {
             let mut s = EmitState::new(&p.interp);
             s.expand_cycles = expand_cycles;
+            s.arc_tol = arc_tol;
             s
         });
         let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);
@@ -301,9 +303,9 @@ fn pass(
         let (write_tx, write_rx) = sync_channel::<Vec<u8>>(2);
         let (written_tx, written_rx) = channel::<Vec<u8>>();
         let reading = scope.spawn(move || read_pieces(reader, piece_bytes, style, piece_tx));
-        let expand = opts.expand_cycles;
-        let emitting =
-            scope.spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx, expand));
+        let (expand, arc_tol) = (opts.expand_cycles, opts.sample.chord_tol);
+        let emitting = scope
+            .spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx, expand, arc_tol));
         let writing = scope.spawn(move || write_pieces(write_rx, written_tx, out));
         let mut report = Report::default();
         let mut norms: Vec<f64> = Vec::new();
