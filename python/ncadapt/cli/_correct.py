@@ -50,7 +50,8 @@ def _shift(ctx, param, value):
     type=FiniteRange(*constants.CHORD_TOL_RANGE),
     default=constants.CHORD_TOL,
     show_default=True,
-    help="Arc chord tolerance, mm.",
+    help="Arc chord tolerance, mm: the largest distance between an arc and its chords, and between an arc "
+    "kept an arc and the displaced arc.",
 )
 @click.option(
     "--limit",
