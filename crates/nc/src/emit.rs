@@ -603,7 +603,11 @@ impl<'a> Emitter<'a> {
         // helix along its normal from where the output starts it: kept an arc, as close to the
         // displaced path at every sample as its chords would be
         let [a1, a2, an] = PLANE_AXES[rec.plane as usize];
-        let ds = [epos0[0] - start[0], epos0[1] - start[1], epos0[2] - start[2]];
+        let ds = [
+            epos0[0] - start[0],
+            epos0[1] - start[1],
+            epos0[2] - start[2],
+        ];
         let de = [disp[3 * n - 3], disp[3 * n - 2], disp[3 * n - 1]];
         let helix = rec.motion.is_arc()
             && !uniform
