@@ -467,3 +467,60 @@ def test_the_copying_chain_on_a_ramp():
     np.testing.assert_allclose(
         v[-100:] - w[-100:], sw.GAP / 2 + 2 * sw.DRIVE_ZETA * r / wn + r * dt / 2, atol=3e-6
     )  # the held input's saw (±rΔt/2 at 100 Hz) barely passes the 3.5 Hz drive
+
+
+def test_w_as_the_depth_axis_finishes_the_web_as_y_does(shop):
+    """A machine whose depth axis is a parallel W (a quill): the same cell written with W for Y,
+    corrected with --depth-axis W, then cut by the testbed (which reads the depth from Y: the
+    output's W is put back on Y) gives the web the Y program gives, to 1 µm."""
+    text = (shop / "cell_r1c1.ngc").read_text().splitlines()
+    w_lines = [ln.replace("G0 X0.000 Y0.000", "G0 X0.000 Y0.000 W0.000").replace("Y", "W") for ln in text]
+    w_lines = [ln.replace("W0.000 W0.000", "Y0.000 W0.000") for ln in w_lines]
+    (shop / "cell_w.ngc").write_text("\n".join(w_lines) + "\n")
+    args = ("--thickness", "thickness_r1c1.csv", "--target", 2.0, "--allowance", 0.3)
+    r = _cli("waffle", "correct", "cell_r1c1.ngc", *COMMON, *args, "-o", "fin_y.ngc", cwd=shop)
+    assert r.exit_code == 0, r.output
+    r = _cli("waffle", "correct", "cell_w.ngc", *COMMON, *args, "--depth-axis", "W", "-o", "fin_w.ngc", cwd=shop)
+    assert r.exit_code == 0, r.output
+    out = (shop / "fin_w.ngc").read_text()
+    assert "Y" not in out.replace("Y0.000 W0.000", "W0.000")
+    # back on Y for the testbed
+    (shop / "fin_w_as_y.ngc").write_text(out.replace("Y0.000 W0.000", "Y0.000").replace("W", "Y"))
+    fin_y = sw.machine_program(shop / "fin_y.ngc", 1, 0, 0)
+    fin_w = sw.machine_program(shop / "fin_w_as_y.ngc", 1, 0, 0)
+    assert np.abs(fin_w - fin_y).max() < 0.001
+    assert abs(float(np.mean(fin_w)) - sw.T_REF) < 0.005
+
+
+def test_a_w_depth_axis_is_displaced_along_its_pieces():
+    """Each piece's W is the program's W there plus the correction at the piece's B and Z (a
+    correction linear in arc length and Z, which the interpolation reproduces exactly); a move
+    that does not name W gets W words; a program that never sets W is refused at the move."""
+    from ncadapt import InputError, nc
+
+    b = np.array([0, 90, 0, 90.0])
+    z = np.array([0, 0, 50, 50.0])
+
+    def k_at(bb, zz):
+        return 0.01 + 0.0002 * bb * np.pi * 100 / 360 + 0.0004 * zz
+
+    f = pw.DepthField(b, z, k_at(b, z), diameter=100, depth_axis="W", axial_axis="Z", rotary_axis="B")
+    src = "G21 G90 G0 X0 Y0 Z0 B0 W5\nG1 Z40 B80 W4 F100\nG1 Z10\nM2\n"
+    out = nc.parse(src).correct(f, max_segment=5).text.splitlines()
+    pos = {"Z": 0.0, "B": 0.0, "W": 5.0}
+    checked = 0
+    for ln in out[1:-1]:
+        for word in ln.split():
+            if word[0] in pos:
+                pos[word[0]] = float(word[1:])
+        zz, bb = pos["Z"], pos["B"]
+        # the program's W: from 5 to 4 along the first move (B 0 to 80), then 4
+        w_prog = 5 - bb / 80 if ln.startswith(("G1 Z", "Z")) and bb > 0 and "B" in ln else 4.0
+        assert pos["W"] == pytest.approx(w_prog + k_at(bb, zz), abs=6e-5), ln
+        checked += 1
+    assert checked == 14
+    with pytest.raises(InputError, match=r":2:1: the field displaces W here, but the program has not set W"):
+        nc.parse("G21 G90 G0 X0 Y0 Z0 B0\nG1 Z40 B80 F100\nM2\n").correct(f, max_segment=5)
+    # a zero correction along W changes nothing
+    zero = pw.DepthField(b, z, 0 * b, diameter=100, depth_axis="W", axial_axis="Z", rotary_axis="B")
+    assert nc.parse(src).correct(zero, max_segment=5).text == src

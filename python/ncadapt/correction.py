@@ -112,6 +112,19 @@ def _piece_records(r: dict) -> dict:
     }
 
 
+def _split_uvw(disp: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """A field that uses the axes may displace U, V and W too: (n, 9) displacements in the order
+    XYZABCUVW, the rotary ones zero. Returns the X Y Z part and the U V W part (None when zero)."""
+    if disp.shape == pts.shape:
+        return disp, None
+    if disp.shape != (len(pts), 9):
+        raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape} or {(len(pts), 9)}")
+    if np.any(disp[:, 3:6] != 0):
+        raise ValueError("a field displaces X Y Z U V W; its A, B and C columns must be zero")
+    uvw = np.ascontiguousarray(disp[:, 6:9])
+    return np.ascontiguousarray(disp[:, :3]), (uvw if np.any(uvw != 0) else None)
+
+
 def _axes_at(pts: np.ndarray, rec: np.ndarray, r: dict) -> np.ndarray:
     """All nine axes (XYZABCUVW) at sampled points: XYZ as sampled, the others interpolated
     between the block's start and end by the point's fraction along it (as the sampler and the
@@ -397,11 +410,13 @@ def _correct(
         pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
         recs_i = np.frombuffer(rec, dtype="<u4")
         lines = r["line"][recs_i]
+        uvw = None
         try:
             if not len(pts):
                 disp = np.zeros((0, 3))
             elif getattr(field, "uses_axes", False):
                 disp = np.ascontiguousarray(field(pts, _axes_at(pts, recs_i, r)), dtype=np.float64)
+                disp, uvw = _split_uvw(disp, pts)
             else:
                 disp = np.ascontiguousarray(field(pts), dtype=np.float64)
         except _OutsideError as e:
@@ -419,9 +434,12 @@ def _correct(
         if not np.isfinite(disp).all():
             bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
             raise RefusedError(f"{name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
+        if uvw is not None and not np.isfinite(uvw).all():
+            bad = int(np.flatnonzero(~np.isfinite(uvw).all(axis=1))[0])
+            raise RefusedError(f"{name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
         approach.add(r, recs_i, pts, disp)
         refused |= approach.found is not None
-        norms = np.sqrt(np.einsum("ij,ij->i", disp, disp))
+        norms = np.sqrt(np.einsum("ij,ij->i", disp, disp) + (0.0 if uvw is None else np.einsum("ij,ij->i", uvw, uvw)))
         n_pts += len(norms)
         total += float(norms.sum())
         # the ten largest displacements seen (a piece whose largest is below the tenth adds none)
@@ -437,7 +455,7 @@ def _correct(
         if refused:
             run.discard()  # the output is no longer wanted; the checks still see every piece
         else:
-            write(_engine(lambda d=disp: run.emit(d), name))
+            write(_engine(lambda d=disp, u=uvw: run.emit(d, u), name))
     uns = tuple(Unsupported(*u) for u in run.unsupported())
     if uns and not keep_unsupported:
         raise _unsupported_error(name, uns)

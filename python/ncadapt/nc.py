@@ -315,7 +315,8 @@ class Program:
             The displacement to add at each point, usually an :mod:`ncadapt.fields` field. A field
             with ``grid_lines`` makes moves split where they cross its cell lines; one with
             ``uses_axes = True`` is called ``field(points, axes)`` with axes (n, 9) XYZABCUVW at
-            every point (for corrections that depend on a rotary axis).
+            every point (for corrections that depend on a rotary axis); it may return (n, 9)
+            displacements in that order to move U, V and W too (A, B, C zero).
         chord_tol, max_segment : float, mm
             Sampling of arcs and long moves.
         limit : float, mm

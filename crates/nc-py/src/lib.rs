@@ -223,6 +223,8 @@ struct Job {
     piece: Piece,
     samples: Samples,
     disp: Vec<f64>,
+    /// U V W displacements, 3 per sample, or empty.
+    uvw: Vec<f64>,
 }
 
 /// What the emitting thread gives back: the output bytes and the buffers to reuse.
@@ -330,7 +332,13 @@ impl Corrector {
                     s
                 });
                 let mut em = Emitter::resume(&p.src, &p.lexed, &p.interp, st);
-                let r = em.lines(0..p.lexed.lines.len(), &job.samples, &job.disp, &mut out);
+                let r = em.lines_uvw(
+                    0..p.lexed.lines.len(),
+                    &job.samples,
+                    &job.disp,
+                    &job.uvw,
+                    &mut out,
+                );
                 state = Some(em.into_state());
                 let failed = r.is_err();
                 if done_tx
@@ -399,8 +407,15 @@ impl Corrector {
     }
 
     /// Hand the current piece with its displacements (C-contiguous float64, 3 per sample) to the
-    /// emitting thread; returns the output of the piece handed before (empty for the first).
-    fn emit<'py>(&mut self, py: Python<'py>, disp: PyBuffer<f64>) -> PyResult<Bound<'py, PyBytes>> {
+    /// emitting thread, with those of U, V and W (3 per sample) when the field moves them;
+    /// returns the output of the piece handed before (empty for the first).
+    #[pyo3(signature = (disp, uvw=None))]
+    fn emit<'py>(
+        &mut self,
+        py: Python<'py>,
+        disp: PyBuffer<f64>,
+        uvw: Option<PyBuffer<f64>>,
+    ) -> PyResult<Bound<'py, PyBytes>> {
         let (piece, samples) = self
             .current
             .take()
@@ -413,6 +428,20 @@ impl Corrector {
                 samples.xyz.len()
             )));
         }
+        let uvw = match &uvw {
+            Some(b) => {
+                let u = f64_slice(b)?;
+                if u.len() != samples.xyz.len() {
+                    return Err(PyValueError::new_err(format!(
+                        "U V W displacements have {} values, expected {}",
+                        u.len(),
+                        samples.xyz.len()
+                    )));
+                }
+                u.to_vec()
+            }
+            None => Vec::new(),
+        };
         let mut buf = self.spare.pop().map(|(_, v)| v).unwrap_or_default();
         buf.clear();
         buf.extend_from_slice(d);
@@ -425,6 +454,7 @@ impl Corrector {
             piece,
             samples,
             disp: buf,
+            uvw,
         })
         .map_err(|_| PyValueError::new_err("the emitting thread has stopped"))?;
         self.in_flight = true;

@@ -353,10 +353,26 @@ impl<'a> Emitter<'a> {
         disp: &[f64],
         out: &mut Vec<u8>,
     ) -> Result<(), NcError> {
-        if disp.len() != samples.xyz.len() {
+        self.lines_uvw(range, samples, disp, &[], out)
+    }
+
+    /// [`Emitter::lines`] with a displacement of the U, V and W axes too: `uvw` holds three
+    /// values per sample (U V W, mm), or nothing. A block whose U V W displacement is not zero is
+    /// written piece by piece, each piece carrying its U V W (named in the block or not); the
+    /// axes it displaces must be known at its start and end.
+    pub fn lines_uvw(
+        &mut self,
+        range: std::ops::Range<usize>,
+        samples: &Samples,
+        disp: &[f64],
+        uvw: &[f64],
+        out: &mut Vec<u8>,
+    ) -> Result<(), NcError> {
+        if disp.len() != samples.xyz.len() || !(uvw.is_empty() || uvw.len() == disp.len()) {
             return Err(NcError::Usage(format!(
-                "displacements have {} values, expected {} (3 per sample)",
+                "displacements have {} and {} values, expected {} (3 per sample)",
                 disp.len(),
+                uvw.len(),
                 samples.xyz.len()
             )));
         }
@@ -379,7 +395,19 @@ impl<'a> Emitter<'a> {
                     )));
                 }
                 let (f, c) = samples.of(ri);
+                let uvw = if uvw.is_empty() {
+                    uvw
+                } else {
+                    &uvw[3 * f..3 * (f + c)]
+                };
                 if self.it.records[ri].cycle != 0 {
+                    if uvw.iter().any(|&v| v != 0.0) {
+                        return Err(NcError::Interpret {
+                            line: li + 1,
+                            col: 1,
+                            message: "the field displaces U, V or W at a canned cycle's hole; a cycle's holes move in X, Y and Z only: write the holes as moves".into(),
+                        });
+                    }
                     self.cycle_block(li, ri, samples, disp)?;
                 } else if c > 0 {
                     self.corrected(
@@ -388,7 +416,8 @@ impl<'a> Emitter<'a> {
                         &samples.xyz[3 * f..3 * (f + c)],
                         &samples.t[f..f + c],
                         &disp[3 * f..3 * (f + c)],
-                    );
+                        uvw,
+                    )?;
                 } else {
                     self.uncorrected(li, ri);
                 }
@@ -566,11 +595,40 @@ impl<'a> Emitter<'a> {
     }
 
     /// Write a sampled block with its displacements.
-    fn corrected(&mut self, li: usize, ri: usize, xyz: &[f64], ts: &[f64], disp: &[f64]) {
+    fn corrected(
+        &mut self,
+        li: usize,
+        ri: usize,
+        xyz: &[f64],
+        ts: &[f64],
+        disp: &[f64],
+        uvw: &[f64],
+    ) -> Result<(), NcError> {
         let (it, lx) = (self.it, self.lx);
         let rec = &it.records[ri];
         let start = start_of(it, ri);
         let n = ts.len();
+        // the U V W axes the field displaces in this block (bits of AXES)
+        let mut moved: u16 = 0;
+        for d in uvw.chunks_exact(3) {
+            for k in 0..3 {
+                if d[k] != 0.0 {
+                    moved |= 1 << (6 + k);
+                }
+            }
+        }
+        if let Some(a) = (6..NAXES)
+            .find(|&a| moved & (1 << a) != 0 && !(start[a].is_finite() && rec.end[a].is_finite()))
+        {
+            return Err(NcError::Interpret {
+                line: rec.line as usize + 1,
+                col: 1,
+                message: format!(
+                    "the field displaces {} here, but the program has not set {} before this block: set it (e.g. G0 {}0) before the first move",
+                    AXES[a] as char, AXES[a] as char, AXES[a] as char
+                ),
+            });
+        }
         let words = lx.line_words(li);
         let epos0 = self.st.epos;
         let explicit = words.iter().any(is_motion_g);
@@ -585,7 +643,7 @@ impl<'a> Emitter<'a> {
             for a in 0..3 {
                 p[a] = xyz[3 * k + a] + disp[3 * k + a];
             }
-            let mut named = rec.named >> 3;
+            let mut named = (rec.named | moved) >> 3;
             while named != 0 {
                 let a = 3 + named.trailing_zeros() as usize;
                 p[a] = if t == 1.0 {
@@ -593,6 +651,9 @@ impl<'a> Emitter<'a> {
                 } else {
                     start[a] + t * (rec.end[a] - start[a])
                 };
+                if moved & (1 << a) != 0 {
+                    p[a] += uvw[3 * k + a - 6];
+                }
                 named &= named - 1;
             }
             p
@@ -622,7 +683,7 @@ impl<'a> Emitter<'a> {
                         <= tol2
                 })
             };
-        let keep_arc = rec.motion.is_arc() && (uniform && on_path || helix);
+        let keep_arc = rec.motion.is_arc() && moved == 0 && (uniform && on_path || helix);
         // a straight move whose corrected pieces all lie on one line, within half a unit of the
         // last written digit (the rounding every written number has), is written as one move; when
         // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
@@ -637,27 +698,28 @@ impl<'a> Emitter<'a> {
             ]
         };
         let straight = !rec.motion.is_arc()
-            && (n == 1 || {
-                let e = xyz_at(n - 1);
-                let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
-                (0..n - 1).all(|k| {
-                    let p = xyz_at(k);
-                    if only_xyz {
-                        dist2_to_segment(&p, &a, &e) <= half_mm * half_mm
-                    } else {
-                        dist2_at_fraction(&p, &a, &e, ts[k]) <= half_mm * half_mm
-                    }
-                })
-            });
+            && (n == 1
+                || moved == 0 && {
+                    let e = xyz_at(n - 1);
+                    let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
+                    (0..n - 1).all(|k| {
+                        let p = xyz_at(k);
+                        if only_xyz {
+                            dist2_to_segment(&p, &a, &e) <= half_mm * half_mm
+                        } else {
+                            dist2_at_fraction(&p, &a, &e, ts[k]) <= half_mm * half_mm
+                        }
+                    })
+                });
         if straight || keep_arc {
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
-            self.set_axes(li, rec, &target);
+            self.set_axes(li, rec, &target, moved);
             // an R-format arc names no centre: moved as a whole, its radius is the same
             if keep_arc && rec.arc_absolute && !words.iter().any(|w| w.letter == b'R') {
                 self.shift_centre(li, rec, if helix { ds } else { d0 });
             }
-            return;
+            return Ok(());
         }
         // split or linearised: the original line carries the first piece
         let linearise = rec.motion.is_arc();
@@ -680,7 +742,7 @@ impl<'a> Emitter<'a> {
             self.restore_modal(li, rec, explicit);
         }
         // a uniform straight move that starts off the corrected path needs one piece to reach it
-        let pieces = if !linearise && uniform && only_xyz {
+        let pieces = if !linearise && uniform && only_xyz && moved == 0 {
             n - 1..n
         } else {
             1..n
@@ -693,14 +755,14 @@ impl<'a> Emitter<'a> {
             self.remove_word(li, w);
         }
         let first = target_at(0, ts[0]);
-        self.set_axes(li, rec, &first);
+        self.set_axes(li, rec, &first, moved);
         let prefix: &[u8] = if self.lx.lines[li].block_delete {
             b"/"
         } else {
             b""
         };
         // XYZ and the other axes the block names, in the order of AXES
-        let axes = 0b111 | rec.named;
+        let axes = 0b111 | rec.named | moved;
         let half = self.fmt.half(rec.inch);
         for k in pieces {
             let t0 = self.st.tail.len();
@@ -713,10 +775,16 @@ impl<'a> Emitter<'a> {
                 // (the axis of `target_at(k, ts[k])`)
                 let pa = if a < 3 {
                     xyz[3 * k + a] + disp[3 * k + a]
-                } else if ts[k] == 1.0 {
-                    rec.end[a]
                 } else {
-                    start[a] + ts[k] * (rec.end[a] - start[a])
+                    (if ts[k] == 1.0 {
+                        rec.end[a]
+                    } else {
+                        start[a] + ts[k] * (rec.end[a] - start[a])
+                    }) + if moved & (1 << a) != 0 {
+                        uvw[3 * k + a - 6]
+                    } else {
+                        0.0
+                    }
                 };
                 let u = Self::unit(rec, a);
                 let want = if rec.incremental {
@@ -756,6 +824,7 @@ impl<'a> Emitter<'a> {
                 self.st.tail.truncate(t0);
             }
         }
+        Ok(())
     }
 
     /// A canned-cycle block: each hole moved by the displacement at its bottom (X, Y by its x
@@ -1079,7 +1148,9 @@ impl<'a> Emitter<'a> {
 
     /// Aim the block's axis words at `target` (mm), rewriting only what changes and adding the
     /// axis words it lacks.
-    fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES]) {
+    /// Write the block's axis words for `target`; axes of `also` (bits of AXES) are written
+    /// where they differ even when the block does not name them.
+    fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES], also: u16) {
         let lx = self.lx;
         let words = lx.line_words(li);
         let half = self.fmt.half(rec.inch);
@@ -1112,7 +1183,7 @@ impl<'a> Emitter<'a> {
         let at = self.insert_point(li);
         let t0 = self.st.arena.len();
         for a in 0..NAXES {
-            if seen[a] || (a >= 3 && rec.named & (1 << a) == 0) {
+            if seen[a] || (a >= 3 && (rec.named | also) & (1 << a) == 0) {
                 continue;
             }
             let u = Self::unit(rec, a);

@@ -144,10 +144,11 @@ def tilt(log, tool_radius, diameter, segment, z_tol, json_path):
 )
 @click.option(
     "--depth-axis",
-    type=click.Choice(["X", "Y", "Z"], case_sensitive=False),
+    type=click.Choice(["X", "Y", "Z", "U", "V", "W"], case_sensitive=False),
     default="Y",
     show_default=True,
-    help="The axis along the spindle.",
+    help="The axis along the spindle (U, V or W: a parallel axis such as a quill, which the program "
+    "must set before its first move).",
 )
 @click.option(
     "--axial-axis",
@@ -165,7 +166,7 @@ def tilt(log, tool_radius, diameter, segment, z_tol, json_path):
 )
 @click.option(
     "--into",
-    type=click.Choice(["+x", "-x", "+y", "-y", "+z", "-z"], case_sensitive=False),
+    type=click.Choice([s + a for a in "xyzuvw" for s in "+-"], case_sensitive=False),
     default=None,
     help="Direction of the depth axis in which the tool cuts deeper (thinner web), e.g. +y; "
     "default + along --depth-axis.",
@@ -371,7 +372,10 @@ def backlash(path, dt, json_path):
 
 
 class _Withdraw:
-    """A constant displacement along the depth axis (the semi-finishing allowance)."""
+    """A constant displacement along the depth axis (the semi-finishing allowance); `axis` is its
+    index in XYZABCUVW."""
+
+    uses_axes = True
 
     def __init__(self, axis: int, value: float):
         self.axis, self.value = axis, value
@@ -379,7 +383,7 @@ class _Withdraw:
     def __call__(self, points, axes=None):
         import numpy as np
 
-        d = np.zeros_like(np.asarray(points, float))
+        d = np.zeros((len(points), 3 if self.axis < 3 else 9))
         d[:, self.axis] = self.value
         return d
 
@@ -430,14 +434,15 @@ def _cells_shape(value: str) -> tuple[int, int]:
 )
 @click.option(
     "--depth-axis",
-    type=click.Choice(["X", "Y", "Z"], case_sensitive=False),
+    type=click.Choice(["X", "Y", "Z", "U", "V", "W"], case_sensitive=False),
     default="Y",
     show_default=True,
-    help="The axis along the spindle.",
+    help="The axis along the spindle (U, V or W: a parallel axis such as a quill, which the program "
+    "must set before its first move).",
 )
 @click.option(
     "--into",
-    type=click.Choice(["+x", "-x", "+y", "-y", "+z", "-z"], case_sensitive=False),
+    type=click.Choice([s + a for a in "xyzuvw" for s in "+-"], case_sensitive=False),
     default=None,
     help="Direction of the depth axis that cuts deeper; default + along --depth-axis.",
 )
@@ -509,7 +514,7 @@ def cells(folder, shape, target, band, prog_dir, allowance, depth_axis, into, ou
         with progress() as say:
             say(f"reading {src}")
             c = nc.read(src).correct_to(
-                written, _Withdraw("XYZ".index(depth_axis.upper()), -sign * allowance), limit=limit, progress=say
+                written, _Withdraw("XYZABCUVW".index(depth_axis.upper()), -sign * allowance), limit=limit, progress=say
             )
     done = [st for st in states if st.status == "finished"]
     out = [st for st in done if not st.in_band]

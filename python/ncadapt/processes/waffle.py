@@ -260,7 +260,7 @@ class DepthField:
 
         axes = "XYZABCUVW"
         for name, a, allowed in (
-            ("depth", depth_axis, "XYZ"),
+            ("depth", depth_axis, "XYZUVW"),
             ("axial", axial_axis, "XYZUVW"),
             ("rotary", rotary_axis, "ABC"),
         ):
@@ -268,7 +268,8 @@ class DepthField:
                 raise ValueError(f"the {name} axis must be one of {', '.join(allowed)}, got {a!r}")
         if outside not in ("error", "clamp", "extrapolate"):
             raise ValueError(f'outside must be "error", "clamp" or "extrapolate", got {outside!r}')
-        self.depth = "XYZ".index(depth_axis.upper())
+        # index in XYZABCUVW: a U, V or W depth axis is displaced by the engine as X, Y, Z are
+        self.depth = axes.index(depth_axis.upper())
         self.axial = axes.index(axial_axis.upper())
         self.rotary = axes.index(rotary_axis.upper())
         self.scale = math.pi * diameter / 360.0
@@ -345,7 +346,7 @@ class DepthField:
         points = np.asarray(points, float)
         if axes is None:
             raise ValueError("a DepthField needs the rotary axis: use it with Program.correct")
-        d = np.zeros_like(points)
+        d = np.zeros((len(points), 3 if self.depth < 3 else 9))
         if len(points):
             d[:, self.depth] = self.values(axes[:, self.rotary], axes[:, self.axial])
         return d
@@ -360,9 +361,12 @@ class Sum:
         self.parts = list(parts)
 
     def __call__(self, points, axes=None):
-        out = np.zeros_like(np.asarray(points, float))
-        for f in self.parts:
-            out += f(points, axes)
+        parts = [np.asarray(f(points, axes), float) for f in self.parts]
+        # X Y Z (n, 3), or X Y Z A B C U V W (n, 9) when a part displaces U, V or W
+        width = max([3] + [p.shape[1] for p in parts])
+        out = np.zeros((len(points), width))
+        for p in parts:
+            out[:, : p.shape[1]] += p
         return out
 
 
