@@ -611,8 +611,8 @@ impl<'a> Emitter<'a> {
         // the U V W axes the field displaces in this block (bits of AXES)
         let mut moved: u16 = 0;
         for d in uvw.chunks_exact(3) {
-            for k in 0..3 {
-                if d[k] != 0.0 {
+            for (k, v) in d.iter().enumerate() {
+                if *v != 0.0 {
                     moved |= 1 << (6 + k);
                 }
             }
