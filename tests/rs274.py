@@ -2,7 +2,10 @@
 
 ``rs274 -g IN OUT`` prints one canonical call per line, such as
 ``STRAIGHT_FEED(10.0000, 2.0000, 3.0000, 0.0000, 0.0000, 0.0000)``, with lengths in the units
-last set by ``USE_LENGTH_UNITS`` and 4 decimals. :func:`canonical` turns that into millimetres.
+last set by ``USE_LENGTH_UNITS`` and 4 decimals, in the program's coordinates; the offsets of the
+work system and of G92/G52 come as ``SET_G5X_OFFSET``/``SET_G92_OFFSET`` calls. :func:`canonical`
+turns that into millimetres on the machine (program coordinates plus both offsets, which rs274
+starts at zero).
 """
 
 from __future__ import annotations
@@ -59,6 +62,11 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     out.unlink(missing_ok=True)
     scale = 25.4  # rs274 without an ini file works in inches until the program says otherwise
     plane = "CANON_PLANE_XY"
+    g5x, g92 = np.zeros(6), np.zeros(6)
+
+    def lengths(v):
+        return np.array([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
+
     kinds, ends, arcs = [], [], []
     res = 0.0
     for line in text.splitlines():
@@ -70,21 +78,26 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             scale = 25.4 if "INCHES" in args else (10.0 if "CM" in args else 1.0)
         elif name == "SELECT_PLANE":
             plane = args.strip()
+        elif name == "SET_G5X_OFFSET":
+            g5x = lengths([float(a) for a in args.split(",")[1:7]])
+        elif name == "SET_G92_OFFSET":
+            g92 = lengths([float(a) for a in args.split(",")[:6]])
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
             v = [float(a) for a in args.split(",")]
-            ends.append([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
+            ends.append(list(lengths(v) + g5x + g92))
             kinds.append("traverse" if name == "STRAIGHT_TRAVERSE" else "feed")
             arcs.append(None)
             res = max(res, 0.00005 * scale)
         elif name == "ARC_FEED":
             v = [float(a) for a in args.split(",")]
             a1, a2, an = _PLANES[plane]
-            e = [0.0] * 6
+            e = np.zeros(6)
             e[a1], e[a2], e[an] = v[0] * scale, v[1] * scale, v[5] * scale
             e[3:6] = v[6:9]
-            ends.append(e)
+            off = g5x + g92
+            ends.append(list(e + off))
             kinds.append("arc")
-            arcs.append((int(v[4]), v[2] * scale, v[3] * scale, plane))
+            arcs.append((int(v[4]), v[2] * scale + off[a1], v[3] * scale + off[a2], plane))
             res = max(res, 0.00005 * scale)
     err = None
     if (

@@ -170,7 +170,7 @@ def test_outputs_figures_and_refusals_are_the_python_evaluations(tmp_path, monke
     "src",
     [
         # unknown positions (a warning) and an unsupported construct kept
-        "G21 G90 G0 X1 Y1\nG1 X5 Y5 F100\nG0 Z5\nG1 Z-1\nG92 X0\nG1 X4 Y4\nG92.1\nG0 X2 Y2\nG1 X6\nM30\n",
+        "G21 G90 G0 X1 Y1\nG1 X5 Y5 F100\nG0 Z5\nG1 Z-1\nG68 X0 Y0 R10\nG1 X4 Y4\nG69\nG0 X2 Y2\nG1 X6\nM30\n",
         # a later piece writes more decimals and keeps trailing zeros: the output is written in the
         # whole program's style, which the first piece does not show (a second pass)
         "G21 G90 G0 X1 Y1 Z5\nG1 Z-1 F100\nG1 X7 Y3\nG1 X2 Y9\n" + "G1 X3 Y3\n" * 20 + "G1 X4.12500 Y4.50000\nM30\n",

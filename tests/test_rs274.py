@@ -274,3 +274,65 @@ def test_arc_kept_within_the_chord_tolerance(tmp_path, arc, g, dev):
     # (rs274 prints 4 decimals: its centre and ends are rounded by 5e-5 mm)
     assert dev <= CHORD_TOL
     assert abs(np.abs(got - want).max() - dev) <= 1.5e-4
+
+
+#: G92, G52, G92.1/.2/.3 and G10 L20 after the first move (G92.1 first, so the G92/G52 register
+#: is known to be zero where the moves begin): rs274 prints each offset it sets
+OFFSETS = """G21 G90 G17 G92.1
+G0 X0 Y0 Z5
+G1 Z-1 F300
+X10 Y5
+G92 X0 Y0
+G1 X10 Y5
+G2 X20 Y5 I5 J0
+G52 X3 Y-2
+G1 X5 Y5
+G92.2
+G1 X30 Y10
+G92.3
+G1 X0 Y0
+G92.1
+G1 X40 Y10
+G10 L20 P0 X0 Y0
+G1 X5 Y5
+G91 G92 Z0
+G90 G1 Z-0.5
+G92.1
+G1 X1 Y1
+G92 X-5 Y-5 Z2
+G98 G81 X1 Y1 Z-2 R3
+X3 Y2
+G80
+G1 Z-1
+G90.1 G3 X3 Y2 I1 J-1
+M2
+"""
+
+
+@pytest.mark.parametrize("inch", [False, True])
+def test_offsets_are_followed_as_rs274(tmp_path, inch):
+    """Every move after G92, G52, G92.1/.2/.3 and G10 L20 is corrected where it is on the machine:
+    rs274's motion of the output (program coordinates plus the offsets it prints) follows the
+    input's displaced by a field of the machine position, and our reading of both programs ends
+    every block where rs274 does."""
+    src = OFFSETS.replace("G21", "G20") if inch else OFFSETS
+    out = _corrected_matches(tmp_path, src, _Tilt(0.003), name="o.ngc", limit=5.0)
+    assert "warning" not in " ".join(map(str, out.correction.notes)).lower()
+    a = canonical(tmp_path / "o.ngc")
+    # the field was evaluated on the machine: the arc of G92's frame is 10, 5 away from its numbers
+    assert a.arcs[a.kinds.index("arc")][1:3] == pytest.approx(
+        ((15 + 10) * (25.4 if inch else 1), 10 * (25.4 if inch else 1))
+    )
+    assert np.abs(out.correction.displacements[:, 2] - 0.003 * out.correction.points[:, 0]).max() < 1e-12
+
+
+def test_offsets_the_program_does_not_tell_leave_moves_uncorrected(tmp_path):
+    """G52 or G92.1 after the first move without a G92.1 before it: the G92/G52 register's value
+    where the moves began is not known (LinuxCNC keeps it from program to program), nor where the
+    moves after them are: they are copied unchanged with the warning; G10 L2 sets an origin in
+    machine coordinates, the same."""
+    for code in ("G52 X3", "G92.1", "G10 L2 P1 X3"):
+        src = f"G21 G90 G0 X0 Y0 Z5\nG1 Z-1 F300\nX10\n{code}\nG1 X5 Y5\nM2\n"
+        out = nc.parse(src).correct(fields.Shift((0, 0, 0.05)))
+        assert out.text.splitlines()[4] == "G1 X5 Y5", code
+        assert any("not corrected because the position is unknown" in w for w in out.correction.warnings), code

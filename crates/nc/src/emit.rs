@@ -310,6 +310,9 @@ pub struct Emitter<'a> {
     fmt: Format,
     eol: &'static [u8],
     st: EmitState,
+    /// The offsets of the program's coordinates in the block being written ([`Interp::frames`]):
+    /// an absolute number `v` is the position `v·unit + off`.
+    off: [f64; NAXES],
 }
 
 impl<'a> Emitter<'a> {
@@ -326,6 +329,7 @@ impl<'a> Emitter<'a> {
             fmt: Format::new(lx.style),
             eol: if lx.crlf { b"\r\n" } else { b"\n" },
             st,
+            off: [0.0; NAXES],
         }
     }
 
@@ -395,6 +399,7 @@ impl<'a> Emitter<'a> {
                     )));
                 }
                 let (f, c) = samples.of(ri);
+                self.off = self.it.frames[self.it.records[ri].frame as usize];
                 let uvw = if uvw.is_empty() {
                     uvw
                 } else {
@@ -423,6 +428,13 @@ impl<'a> Emitter<'a> {
                 }
             } else if words.iter().any(is_motion_g) {
                 self.st.out_motion = None;
+            } else if let Ok(k) = self
+                .it
+                .frame_lines
+                .binary_search_by_key(&(li as u32), |&(l, ..)| l - self.it.line_base as u32)
+            {
+                let (_, frame, inch) = self.it.frame_lines[k];
+                self.position_offset(li, frame, inch)?;
             }
             // copy the line with its edits, then any added lines
             let (ls, le, lee) = (
@@ -790,7 +802,7 @@ impl<'a> Emitter<'a> {
                 let want = if rec.incremental {
                     (pa - self.st.epos[a]) / u
                 } else {
-                    pa / u
+                    (pa - self.off[a]) / u
                 };
                 let differs = if rec.incremental {
                     want.abs() >= half
@@ -807,7 +819,7 @@ impl<'a> Emitter<'a> {
                     self.st.epos[a] = if rec.incremental {
                         self.st.epos[a] + v * u
                     } else {
-                        v * u
+                        v * u + self.off[a]
                     };
                 }
             }
@@ -861,7 +873,9 @@ impl<'a> Emitter<'a> {
         if cy.sets_level {
             self.st.cyc_level = self.st.epos[2];
         }
-        let level = self.st.cyc_level / u;
+        // worked out in the program's coordinates (the offsets of G92 & co. taken off)
+        let off = self.off;
+        let level = (self.st.cyc_level - off[2]) / u;
         let mut holes: Vec<Hole> = Vec::with_capacity(cy.repeats as usize);
         for ri in first..=last {
             let r = &it.records[ri];
@@ -875,16 +889,16 @@ impl<'a> Emitter<'a> {
                 [0.0; 3]
             };
             holes.push(Hole {
-                x: (r.end[0] + d[0]) / u,
-                y: (r.end[1] + d[1]) / u,
-                r: (cy.r + d[2]) / u,
-                bottom: (r.end[2] + d[2]) / u,
+                x: (r.end[0] + d[0] - off[0]) / u,
+                y: (r.end[1] + d[1] - off[1]) / u,
+                r: (cy.r + d[2] - off[2]) / u,
+                bottom: (r.end[2] + d[2] - off[2]) / u,
             });
         }
         let cur = [
-            self.st.epos[0] / u,
-            self.st.epos[1] / u,
-            self.st.epos[2] / u,
+            (self.st.epos[0] - off[0]) / u,
+            (self.st.epos[1] - off[1]) / u,
+            (self.st.epos[2] - off[2]) / u,
         ];
         let name = |c: i32| format!("G{}", c / 10);
         let err = |msg: String| NcError::Interpret {
@@ -1010,8 +1024,8 @@ impl<'a> Emitter<'a> {
                 name(cy.code)
             )));
         }
-        for (e, v) in self.st.epos.iter_mut().zip(end) {
-            *e = v * u;
+        for ((e, v), o) in self.st.epos.iter_mut().zip(end).zip(off) {
+            *e = v * u + o;
         }
         self.st.out_motion = None;
         Ok(())
@@ -1107,7 +1121,7 @@ impl<'a> Emitter<'a> {
                         .extend_from_slice(motion_text(m, padded).as_bytes());
                     let mut any = false;
                     for a in 0..3 {
-                        let now = self.st.epos[a] / u;
+                        let now = (self.st.epos[a] - self.off[a]) / u;
                         if (p[a] - now).abs() < half && (any || a < 2) {
                             continue;
                         }
@@ -1119,7 +1133,7 @@ impl<'a> Emitter<'a> {
                         self.st.epos[a] = if incremental {
                             self.st.epos[a] + v * u
                         } else {
-                            v * u
+                            v * u + self.off[a]
                         };
                         any = true;
                     }
@@ -1162,20 +1176,20 @@ impl<'a> Emitter<'a> {
                 let want = if rec.incremental {
                     (target[a] - self.st.epos[a]) / u
                 } else {
-                    target[a] / u
+                    (target[a] - self.off[a]) / u
                 };
                 if (want - w.value).abs() < half {
                     self.st.epos[a] = if rec.incremental {
                         self.st.epos[a] + w.value * u
                     } else {
-                        w.value * u
+                        w.value * u + self.off[a]
                     };
                 } else {
                     let v = self.edit_number(w.num_start, w.end, want, rec.inch);
                     self.st.epos[a] = if rec.incremental {
                         self.st.epos[a] + v * u
                     } else {
-                        v * u
+                        v * u + self.off[a]
                     };
                 }
             }
@@ -1195,13 +1209,13 @@ impl<'a> Emitter<'a> {
                 let want = if rec.incremental {
                     delta
                 } else {
-                    target[a] / u
+                    (target[a] - self.off[a]) / u
                 };
                 let v = self.fmt.number(want, rec.inch, &mut self.st.arena);
                 self.st.epos[a] = if rec.incremental {
                     self.st.epos[a] + v * u
                 } else {
-                    v * u
+                    v * u + self.off[a]
                 };
             }
         }
@@ -1217,6 +1231,44 @@ impl<'a> Emitter<'a> {
         }
     }
 
+    /// A G92 or G10 L20 line: the offsets it sets are the position of the tool less its words, and
+    /// the corrected program has the tool elsewhere; its words are rewritten so that it sets the
+    /// offsets of `frame`, those the program's later numbers are read in.
+    fn position_offset(&mut self, li: usize, frame: u32, inch: bool) -> Result<(), NcError> {
+        let off = self.it.frames[frame as usize];
+        let half = self.fmt.half(inch);
+        for w in self.lx.line_words(li) {
+            let Some(a) = axis_index(w.letter) else {
+                continue;
+            };
+            let u = if (3..6).contains(&a) {
+                1.0
+            } else if inch {
+                MM_PER_INCH
+            } else {
+                1.0
+            };
+            if !off[a].is_finite() {
+                continue;
+            }
+            let want = (self.st.epos[a] - off[a]) / u;
+            if !want.is_finite() {
+                return Err(NcError::Interpret {
+                    line: li + 1,
+                    col: (w.start - self.lx.lines[li].start) as usize + 1,
+                    message: format!(
+                        "the offset this sets depends on where the tool is, and the corrected program's {} is not known here",
+                        AXES[a] as char
+                    ),
+                });
+            }
+            if (want - w.value).abs() >= half {
+                self.edit_number(w.num_start, w.end, want, inch);
+            }
+        }
+        Ok(())
+    }
+
     /// Shift an absolute (G90.1) arc centre by the block's uniform displacement.
     fn shift_centre(&mut self, li: usize, rec: &Record, d: [f64; 3]) {
         let [a1, a2, _] = PLANE_AXES[rec.plane as usize];
@@ -1224,7 +1276,7 @@ impl<'a> Emitter<'a> {
         let half = self.fmt.half(rec.inch);
         for (ci, a) in [(0usize, a1), (1usize, a2)] {
             let u = if rec.inch { MM_PER_INCH } else { 1.0 };
-            let want = (rec.center[ci] + d[a]) / u;
+            let want = (rec.center[ci] + d[a] - self.off[a]) / u;
             let lx = self.lx;
             if let Some(w) = lx.line_words(li).iter().find(|w| w.letter == letter(a)) {
                 if (want - w.value).abs() >= half {

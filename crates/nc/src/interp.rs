@@ -64,6 +64,8 @@ pub struct Record {
     /// A move of a canned cycle: 0 = not one, [`CYCLE_MOVE`], or [`CYCLE_BOTTOM`] for the feed to
     /// the bottom of a hole (the hole's sample point; its displacement moves the whole hole).
     pub cycle: u8,
+    /// Index into [`Interp::frames`]: the offsets of the program's coordinates in this block.
+    pub frame: u32,
 }
 
 /// [`Record::cycle`] of a move of a canned cycle.
@@ -267,6 +269,16 @@ pub struct Interp {
     pub line_base: usize,
     /// The canned-cycle blocks whose motion is traced, in line order.
     pub cycles: Vec<Cycle>,
+    /// Offsets of the program's coordinates (mm; degrees for A, B, C) from the frame positions
+    /// are kept in — the program's coordinates where its moves began, which a field is measured
+    /// in: a number written `v` (absolute) is the position `v·unit + offset`. Set by G92, G52,
+    /// G92.1/.2/.3 and G10 L2/L20 on the system in force; NaN where the program does not tell.
+    /// The first is the offsets at the start of the run.
+    pub frames: Vec<[f64; NAXES]>,
+    /// Lines of G92 and G10 L20 after the first move, with the frame they set: their offsets
+    /// depend on where the tool is, which the correction moves, so the emitter rewrites their
+    /// words to set the same offsets in the corrected program. (line, frame, inch)
+    pub frame_lines: Vec<(u32, u32, bool)>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -323,6 +335,13 @@ struct State {
     /// The work coordinate system in force (G54 = 540, ...), and the one the first move was in.
     wcs: i32,
     wcs_moves: Option<i32>,
+    /// The offsets in force ([`Interp::frames`]), the offsets the G92/G52 register at zero would
+    /// give (G92.1, G92.2) and the ones G92.3 restores; NaN where unknown.
+    off: [f64; NAXES],
+    off_base: [f64; NAXES],
+    off_saved: [f64; NAXES],
+    /// Index of `off` in the current run's frames.
+    frame: u32,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -424,6 +443,10 @@ impl Interpreter {
                 cyc: CycleModal::default(),
                 wcs: 540,
                 wcs_moves: None,
+                off: [0.0; NAXES],
+                off_base: [f64::NAN; NAXES],
+                off_saved: [f64::NAN; NAXES],
+                frame: 0,
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -450,10 +473,13 @@ impl Interpreter {
             origin: self.st.pos,
             line_base,
             cycles: Vec::new(),
+            frames: vec![self.st.off],
+            frame_lines: Vec::new(),
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
         };
+        self.st.frame = 0;
         let r = if out.summary.end_line.is_some() {
             Ok(())
         } else {
@@ -713,6 +739,8 @@ impl Interpreter {
             let mut g53 = false;
             let mut nonmodal_axis_user: Option<(i32, usize)> = None;
             let mut home: Option<(i32, usize)> = None;
+            // G92, G52, G92.1/.2/.3, G10 L2/L20 on the system in force: the offsets they set
+            let mut frame_code: Option<(i32, usize)> = None;
             let mut unit_change = None;
             let mut untraced: Option<usize> = None;
             for &(c, gc) in &gs[..ng] {
@@ -813,23 +841,20 @@ impl Interpreter {
                             st.active.diameter = Some((li as u32, idx));
                         }
                     }
-                    920 | 520 => {
-                        let idx = push_unsupported(
-                            out,
-                            li,
-                            gc,
-                            &format!("coordinate shift {}", g_name(c)),
-                        );
-                        if st.active.shift.is_none() {
-                            st.active.shift = Some((li as u32, idx));
-                        }
-                        nonmodal_axis_user = Some((c, idx));
+                    920 | 520 | 921 | 922 | 923 => frame_code = Some((c, gc)),
+                    // G10 L2/L20 on the work system in force (P0 or its number), without a rotation
+                    100 if matches!(l_word, Some(l) if l == 2.0 || l == 20.0)
+                        && r.is_none()
+                        && p.is_some_and(|v| v == 0.0 || wcs_number(st.wcs) == Some(v)) =>
+                    {
+                        frame_code = Some((if l_word == Some(2.0) { 1002 } else { 1020 }, gc));
                     }
-                    // G92.1 / G92.2 clear or suspend G92 offsets: the frame becomes the plain work offset
-                    921 | 922 => st.active.shift = None,
-                    923 => {
-                        let idx = push_unsupported(out, li, gc, "coordinate shift G92.3");
-                        st.active.shift = Some((li as u32, idx));
+                    // on another system: the moves in it would be refused (one system per field)
+                    100 if matches!(l_word, Some(l) if l == 2.0 || l == 20.0)
+                        && r.is_none()
+                        && p.is_some_and(|v| v.fract() == 0.0 && (1.0..=9.0).contains(&v)) =>
+                    {
+                        frame_code = Some((1000, gc));
                     }
                     100 => {
                         let l = l_word.unwrap_or(0.0).round() as i32;
@@ -916,6 +941,7 @@ impl Interpreter {
                 && (named != 0 || motion_word.is_some())
                 && home.is_none()
                 && nonmodal_axis_user.is_none()
+                && frame_code.is_none()
                 && !g53
             {
                 st.wcs_moves = Some(st.wcs);
@@ -1012,6 +1038,21 @@ impl Interpreter {
             }
             let any_axis = named != 0 || full_circle || standing;
 
+            // offsets: the program's coordinates move, the machine does not
+            if let Some((c, gc)) = frame_code {
+                if c == 920 && named == 0 {
+                    return Err(ierr(li, gc, "G92 with no axis words"));
+                }
+                frame(out, st, c, &axis, unit);
+                if matches!(c, 920 | 1020) && st.wcs_moves.is_some() {
+                    out.frame_lines.push((li as u32, st.frame, st.inch));
+                }
+                if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                    out.summary.end_line = Some(li as u32);
+                    break;
+                }
+                continue;
+            }
             // non-modal codes that take the axis words
             if let Some((_c, idx)) = nonmodal_axis_user {
                 if any_axis || matches!(_c, 280 | 300 | 281 | 301) {
@@ -1035,7 +1076,7 @@ impl Interpreter {
                         ),
                     ));
                 }
-                st.pos = target(&st.pos, &axis, st.incremental, unit);
+                st.pos = target(&st.pos, &axis, st.incremental, unit, &st.off);
                 push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                 for k in 0..NAXES {
                     if named == 0 || named & (1 << k) != 0 {
@@ -1069,7 +1110,7 @@ impl Interpreter {
             }
 
             // the target of the axis words
-            let mut end = target(&st.pos, &axis, st.incremental && !g53, unit);
+            let mut end = target(&st.pos, &axis, st.incremental && !g53, unit, &st.off);
 
             if g53 {
                 out.notes.push(Note {
@@ -1179,7 +1220,11 @@ impl Interpreter {
                             }
                             let scale = unit;
                             if st.arc_absolute {
-                                center = [o1.unwrap_or(0.0) * scale, o2.unwrap_or(0.0) * scale];
+                                let [a1, a2, _] = PLANE_AXES[st.plane as usize];
+                                center = [
+                                    o1.unwrap_or(0.0) * scale + st.off[a1],
+                                    o2.unwrap_or(0.0) * scale + st.off[a2],
+                                ];
                             } else {
                                 center = [
                                     s[0] + o1.unwrap_or(0.0) * scale,
@@ -1425,19 +1470,146 @@ fn target(
     axis: &[Option<f64>; NAXES],
     incremental: bool,
     unit: f64,
+    off: &[f64; NAXES],
 ) -> [f64; NAXES] {
     let mut end = *pos;
     for (k, (e, w)) in end.iter_mut().zip(axis).enumerate() {
         if let Some(v) = w {
-            let scale = if (3..6).contains(&k) { 1.0 } else { unit };
             *e = if incremental {
-                pos[k] + v * scale
+                pos[k] + v * axis_unit(k, unit)
             } else {
-                v * scale
+                v * axis_unit(k, unit) + off[k]
             };
         }
     }
     end
+}
+
+/// Millimetres (or degrees) per program unit on axis k (A, B, C are in degrees in either unit).
+#[inline]
+fn axis_unit(k: usize, unit: f64) -> f64 {
+    if (3..6).contains(&k) {
+        1.0
+    } else {
+        unit
+    }
+}
+
+/// The number G10 gives the work system `wcs` (G54 = 1 … G59.3 = 9).
+fn wcs_number(wcs: i32) -> Option<f64> {
+    [540, 550, 560, 570, 580, 590, 591, 592, 593]
+        .iter()
+        .position(|&c| c == wcs)
+        .map(|i| (i + 1) as f64)
+}
+
+/// Apply an offset code (`c`: 920 G92, 520 G52, 921/922/923 G92.1/.2/.3, 1002/1020 G10 L2/L20
+/// on the system in force, 1000 G10 on another system) with its axis words, as LinuxCNC: G92 makes
+/// the current position read as the words, G52 sets the G92/G52 register to them (the axes it
+/// names), G92.1 and G92.2 zero the register (G92.1 its saved copy too), G92.3 restores the saved
+/// copy (G92 and G52 save), G10 L20 moves the system's origin so the position reads as the words, G10
+/// L2 sets the origin in machine coordinates (unknown here).
+///
+/// Positions are kept in the frame of the program's coordinates where its moves began (a field
+/// is measured there). Before the first move an offset only says where that frame is: the
+/// position reads as G92 or G10 L20 give it, and what the register holds is noted for G52 and
+/// G92.1 later. After it, each code changes `st.off` (program = frame − off), NaN where the
+/// program does not tell (the register's value at the first move, a machine origin).
+fn frame(out: &mut Interp, st: &mut State, c: i32, axis: &[Option<f64>; NAXES], unit: f64) {
+    let fixed = st.wcs_moves.is_some();
+    let mut off = st.off;
+    let named = |k: usize| axis[k].map(|v| v * axis_unit(k, unit));
+    match c {
+        // the position reads as the words
+        920 | 1020 => {
+            for k in 0..NAXES {
+                if let Some(v) = named(k) {
+                    if fixed {
+                        let d = st.pos[k] - v - off[k];
+                        off[k] = st.pos[k] - v;
+                        if c == 1020 {
+                            // the system's origin moved: every offset of the register moves with it
+                            st.off_base[k] += d;
+                            st.off_saved[k] += d;
+                        }
+                    } else {
+                        st.pos[k] = v;
+                        if c == 920 {
+                            // the register now holds what makes the position read v: unknown
+                            st.off_base[k] = f64::NAN;
+                        }
+                    }
+                }
+            }
+            if c == 920 {
+                st.off_saved = off;
+            }
+        }
+        520 => {
+            for k in 0..NAXES {
+                if let Some(v) = named(k) {
+                    if fixed {
+                        off[k] = st.off_base[k] + v;
+                    } else {
+                        // the program's coordinates move by the change of the register
+                        st.pos[k] -= v + st.off_base[k];
+                        st.off_base[k] = -v;
+                    }
+                }
+            }
+            // the register is saved as G92 saves it
+            st.off_saved = off;
+        }
+        921 | 922 => {
+            if fixed {
+                off = st.off_base;
+            } else {
+                for k in 0..NAXES {
+                    st.pos[k] -= st.off_base[k];
+                }
+                st.off_base = [0.0; NAXES];
+            }
+            if c == 921 {
+                st.off_saved = st.off_base;
+            }
+        }
+        923 => {
+            if fixed {
+                off = st.off_saved;
+            } else {
+                st.pos = [f64::NAN; NAXES];
+                st.off_base = [f64::NAN; NAXES];
+            }
+        }
+        1002 => {
+            for k in 0..NAXES {
+                if axis[k].is_some() {
+                    if fixed {
+                        off[k] = f64::NAN;
+                        st.off_base[k] = f64::NAN;
+                        st.off_saved[k] = f64::NAN;
+                    } else {
+                        st.pos[k] = f64::NAN;
+                    }
+                }
+            }
+        }
+        _ => {}
+    }
+    set_offsets(out, st, off);
+}
+
+/// Set the offsets in force, starting a new frame of the run when they change.
+fn set_offsets(out: &mut Interp, st: &mut State, off: [f64; NAXES]) {
+    let same = off
+        .iter()
+        .zip(&st.off)
+        .all(|(a, b)| a.to_bits() == b.to_bits());
+    if !same {
+        st.off = off;
+        out.frames.push(off);
+        st.frame = (out.frames.len() - 1) as u32;
+    }
 }
 
 /// Why the engine does not follow a canned cycle, or None when it does.
@@ -1486,7 +1658,7 @@ fn canned(
     let repeats_one = w.l.is_none_or(|l| l == 1.0);
     let unknown_after = |out: &mut Interp, st: &mut State, idx: usize| {
         out.unsupported[idx].blocks += 1;
-        let hole = target(&st.pos, w.axis, st.incremental, unit);
+        let hole = target(&st.pos, w.axis, st.incremental, unit, &st.off);
         let xy_known = st.plane == 0 && (repeats_one || !st.incremental);
         for (k, (q, h)) in st.pos.iter_mut().zip(hole).take(3).enumerate() {
             *q = if k < 2 && xy_known { h } else { f64::NAN };
@@ -1607,8 +1779,14 @@ fn canned(
     if sets_level {
         st.cyc.level = Some(st.pos[2]);
     }
-    let cur = [st.pos[0] / unit, st.pos[1] / unit, st.pos[2] / unit];
-    let level = st.cyc.level.unwrap_or(st.pos[2]) / unit;
+    // the cycle is worked out in the program's coordinates (the offsets of G92 & co. taken off)
+    let off = st.off;
+    let cur = [
+        (st.pos[0] - off[0]) / unit,
+        (st.pos[1] - off[1]) / unit,
+        (st.pos[2] - off[2]) / unit,
+    ];
+    let level = (st.cyc.level.unwrap_or(st.pos[2]) - off[2]) / unit;
     let (r, cc, mut aa, mut bb, inc) = if st.incremental {
         let r = r_raw + level;
         (
@@ -1676,24 +1854,24 @@ fn canned(
     }
     for s in &steps {
         if let CycleStep::Move(m, p, bottom) = *s {
-            for (q, v) in st.pos.iter_mut().zip(p) {
-                *q = v * unit;
+            for ((q, v), o) in st.pos.iter_mut().zip(p).zip(off) {
+                *q = v * unit + o;
             }
             push_record(out, st, li, m, supported && bottom, 0b111, [0.0; 2], 1);
             out.records.last_mut().unwrap().cycle = if bottom { CYCLE_BOTTOM } else { CYCLE_MOVE };
             out.summary.counts[m as usize] += 1;
         }
     }
-    for (q, v) in st.pos.iter_mut().zip(end) {
-        *q = v * unit;
+    for ((q, v), o) in st.pos.iter_mut().zip(end).zip(off) {
+        *q = v * unit + o;
     }
     out.cycles.push(Cycle {
         line: li as u32,
         code: c,
         g98,
         sets_level,
-        r: r * unit,
-        bottom: cc * unit,
+        r: r * unit + off[2],
+        bottom: cc * unit + off[2],
         q,
         p,
         repeats,
@@ -1726,6 +1904,7 @@ fn push_record(
         center,
         turns,
         cycle: 0,
+        frame: st.frame,
     });
 }
 
