@@ -1515,6 +1515,7 @@ fn wcs_number(wcs: i32) -> Option<f64> {
 /// position reads as G92 or G10 L20 give it, and what the register holds is noted for G52 and
 /// G92.1 later. After it, each code changes `st.off` (program = frame − off), NaN where the
 /// program does not tell (the register's value at the first move, a machine origin).
+#[allow(clippy::needless_range_loop)] // (each axis indexes several arrays)
 fn frame(out: &mut Interp, st: &mut State, c: i32, axis: &[Option<f64>; NAXES], unit: f64) {
     let fixed = st.wcs_moves.is_some();
     let mut off = st.off;
