@@ -613,14 +613,14 @@ def run(entry: Entry, work: Path) -> Result:
 def _run(entry: Entry, work: Path, r: Result) -> None:
     work.mkdir(parents=True, exist_ok=True)
     try:
-        dialects.resolve(entry.path)  # as `ncadapt correct` does first (--dialect auto)
+        dialect = dialects.resolve(entry.path).name  # as `ncadapt correct` does first (--dialect auto)
     except InputError as e:
         d = dialects.detect(entry.path.read_bytes()[: dialects.HEAD_BYTES], entry.file)
         r.outcome = f"refused: line {e.line}: {dialects.NAMES[d.name]} program ({d.text}), syntax not read"
         r.reason, r.refusal_line = f"{dialects.NAMES[d.name]} program, syntax not read", e.line
         return
     try:
-        prog = nc.read(entry.path)
+        prog = nc.read(entry.path, dialect=dialect)
         uns = prog.unsupported
     except InputError as e:
         r.outcome = f"refused: line {e.line}: {e.message}"

@@ -421,3 +421,130 @@ def test_g98_after_g99_at_the_r_plane(tmp_path):
     # a field that keeps the order of the two R planes: a cycle block as ever
     out = prog.correct(_field_of(lambda x, y: (0.0, 0.0, 0.001 * x)))
     _feeds_displaced(_canon(tmp_path, out.data, "k.ngc"), inp, lambda x, y: (0.0, 0.0, 0.001 * x), "kept")
+
+
+# ------------------------------------------------------------- cycles kept with --keep-unsupported
+# A second work coordinate system after moves in the first is a construct the engine does not
+# correct (a field is in one system's coordinates): the blocks in it are copied with
+# keep_unsupported, canned cycles too.
+_IN_G55 = """G21 G90 G17
+G0 X0 Y0 Z10
+G1 Z5 F100
+G55
+G0 X0 Y0 Z10
+G99 G81 X10 Y5 Z-2 R2 F100
+X20
+G80
+G54
+G0 Z20
+M2
+"""
+
+
+@pytest.mark.parametrize("expand", [False, True], ids=["cycles", "expanded"])
+def test_a_cycle_under_an_unsupported_construct_is_copied(tmp_path, expand):
+    """With keep_unsupported, a cycle in G55 is copied byte for byte (not rewritten, not
+    expanded), and rs274 runs its holes as in the input; the cut before it is corrected."""
+    prog = nc.parse(_IN_G55)
+    assert [u.construct for u in prog.unsupported] == [
+        "work coordinate system G55 after moves in G54 (a field is in one system's coordinates)"
+    ]
+    out = prog.correct(fields.Shift((0.0, 0.0, 0.05)), keep_unsupported=True, expand_cycles=expand)
+    src, got = _IN_G55.splitlines(), out.text.splitlines()
+    assert got[2] == "G1 Z5.05 F100"
+    assert got[:2] + got[3:] == src[:2] + src[3:], out.text
+    inp, cout = _canon(tmp_path, _IN_G55, "in.ngc"), _canon(tmp_path, out.data, "out.ngc")
+    feeds = [e[:3].round(4).tolist() for k, e in zip(inp.kinds, inp.ends) if k == "feed"]
+    assert feeds == [[0.0, 0.0, 5.0], [10.0, 5.0, -2.0], [20.0, 5.0, -2.0]]
+    want = inp.ends.copy()
+    want[1, 2] += 0.05
+    _same_motion(cout, Canon(inp.kinds, want, [], 0, None), "kept")
+
+
+# G7 (lathe diameter mode) is a construct the engine does not follow either, and it leaves the
+# position as it is: a cycle block under it is kept within a cycle the engine corrects.
+_G7_MID_RUN = """G21 G90 G17
+G0 X0 Y0 Z10
+G99 G81 X5 Y5 Z-2 R2 F100
+G7
+X20
+Y8 Z-3
+G8
+G80
+G0 Z20
+M2
+"""
+
+
+def test_a_kept_cycle_block_keeps_the_holes_of_the_program(tmp_path):
+    """A sticky cycle block copied after a corrected one of the same cycle: the R and Z the
+    corrected block wrote would drill its hole at the corrected depth, so the program's are written
+    into it; rs274 drills the copied holes where the input does and the first one displaced. With
+    --expand-cycles the copied block would no longer be in a cycle: refused at its line."""
+    prog = nc.parse(_G7_MID_RUN)
+    shift = (0.0, 0.0, 0.05)
+    out = prog.correct(fields.Shift(shift), keep_unsupported=True)
+    inp, cout = _canon(tmp_path, _G7_MID_RUN, "in.ngc"), _canon(tmp_path, out.data, "out.ngc")
+    fin = [i for i, k in enumerate(inp.kinds) if k == "feed"]
+    fout = [i for i, k in enumerate(cout.kinds) if k == "feed"]
+    assert len(fin) == len(fout) == 3
+    np.testing.assert_allclose(cout.ends[fout[0], :3], inp.ends[fin[0], :3] + shift, atol=TOL)
+    np.testing.assert_allclose(cout.ends[fout[1:], :3], inp.ends[fin[1:], :3], atol=TOL)
+    with pytest.raises(InputError, match="continues a cycle whose earlier blocks --expand-cycles wrote") as e:
+        prog.correct(fields.Shift(shift), keep_unsupported=True, expand_cycles=True)
+    assert e.value.line == 5
+
+
+# ---------------------------------------------------------------- the retract mode nobody states
+_UNSTATED = """G21 G90 G17
+G0 X0. Y0. Z10.
+G81 X5. Y5. Z-2. R2. F100.
+X10.
+G80
+G0 Z20.
+G1 X20. F100.
+M2
+"""
+
+
+def test_unstated_retract_mode_in_linuxcnc_is_rs274s(tmp_path):
+    """LinuxCNC: a program without G98/G99 runs in rs274's mode (G99, retract to R); the expanded
+    output makes rs274's motion of the input whose holes the test displaced."""
+    d = (0.0, 0.0, 0.05)
+    displaced = _UNSTATED.replace("Z-2.", "Z-1.95").replace("R2.", "R2.05").replace("X10.", "X10. Z-1.95 R2.05")
+    want = _canon(tmp_path, displaced, "displaced.ngc")
+    assert want.ends[4, 2] == pytest.approx(2.05)  # G99: back to the R plane, not to Z10
+    out = nc.parse(_UNSTATED).correct(fields.Shift(d), expand_cycles=True)
+    got = _canon(tmp_path, out.data, "out.ngc")
+    n = len(want.kinds) - 2  # up to the G0 Z20 (the G1 after it is corrected too)
+    _same_motion(Canon(got.kinds[:n], got.ends[:n], [], 0, None), Canon(want.kinds[:n], want.ends[:n], [], 0, None), "")
+
+
+def test_unstated_retract_mode_on_fanuc_is_the_controls(tmp_path):
+    """Fanuc/Haas: the mode a program starts in is the control's (G98 at power-on, or what the last
+    program left): --expand-cycles refuses at the first cycle, naming the fix; kept as cycle
+    blocks the control decides, and the height after the cycles is unknown until Z is set."""
+    prog = nc.parse(_UNSTATED, dialect="fanuc")
+    with pytest.raises(InputError, match="state G98 or G99") as e:
+        prog.correct(fields.Shift((0, 0, 0.05)), expand_cycles=True)
+    assert e.value.line == 3
+    out = prog.correct(fields.Shift((0, 0, 0.05)))
+    assert out.text.splitlines()[2:4] == ["G81 X5. Y5. Z-1.95 R2.05 F100.", "X10."]
+    assert any("canned cycle G81 with neither G98 nor G99" in m for _, m in prog.notes)
+    stated = nc.parse(_UNSTATED.replace("G81", "G98 G81"), dialect="fanuc")
+    exp = stated.correct(fields.Shift((0, 0, 0.05)), expand_cycles=True)
+    got = _canon(tmp_path, exp.data, "out.ngc")
+    want = _canon(
+        tmp_path, _UNSTATED.replace("G81", "G98 G81").replace("Z-2.", "Z-1.95").replace("R2.", "R2.05"), "w.ngc"
+    )
+    n = len(want.kinds) - 2
+    _same_motion(Canon(got.kinds[:n], got.ends[:n], [], 0, None), Canon(want.kinds[:n], want.ends[:n], [], 0, None), "")
+    assert want.ends[4, 2] == pytest.approx(10.0)  # G98: back to the initial level
+
+
+def test_cycle_moves_are_bounded():
+    """L repeats and G73/G83 pecks make moves; more than a block's bound is refused at the line."""
+    for bad in ("G83 X1 Y1 Z-1000 R1 Q0.0001 F100", "G81 X1 Y1 Z-1 R1 L999999 F100"):
+        with pytest.raises(InputError, match="more than the 1000000 allowed for one block") as e:
+            nc.parse(f"G21 G90 G0 X0 Y0 Z10\n{bad}\n")
+        assert e.value.line == 2

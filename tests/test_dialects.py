@@ -72,7 +72,7 @@ def test_unread_dialects_are_refused_at_their_line(tmp_path):
 def test_cli_reports_the_dialect_and_refuses_with_nothing_written(tmp_path):
     r = CliRunner()
     prog = tmp_path / "p.nc"
-    prog.write_text("%\nO1001\nG21 G90 G0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X10\nM30\n%\n")
+    prog.write_text("%\nO1001\nG21 G90 G0 X0 Y0 Z5.\nG1 Z-1. F100\nG1 X10.\nM30\n%\n")
     res = r.invoke(main, ["correct", str(prog), "--shift", "0,0,0.01", "-o", str(tmp_path / "o.nc"), "--json", "-"])
     assert res.exit_code == 0, res.output
     payload = json.loads(res.stdout)
@@ -134,3 +134,54 @@ def test_grbl_settings_are_refused_at_their_line():
     assert all("grbl setting" in u.construct for u in prog.unsupported)
     with pytest.raises(RefusedError):
         prog.correct(fields.Shift((0, 0, 0.01)))
+
+
+# A Fanuc-family control reads a length written without a decimal point in least input increments
+# (IS-B: X10 is 0.010 mm, 0.0010 inch) unless parameter 3401#0 (DPI) makes it units: Fanuc's
+# "decimal point programming" (addresses X Y Z U V W A B C I J K Q R F; Mitsubishi's Fanuc-style
+# M700V manual, 5.3 "Decimal point input", states the same rule and addresses). LinuxCNC reads
+# X10 as 10 (rs274 below).
+FANUC_DECIMALS = [
+    # (program body, refused at (line, col) or None)
+    ("G21 G90 G0 X0 Y0 Z5.\nG1 Z-1. F100\nG1 X10 Y0\n", (5, 4)),
+    ("G21 G90 G0 X0 Y0 Z5.\nG1 Z-1. F100\nG1 X10. Y0\nG3 X0 Y0 I-5 J0\n", (6, 10)),
+    ("G20 G90 G0 X0 Y0 Z5.\nG98 G81 X1. Y1. Z-1. R1 F10\n", (4, 22)),
+    # zero is zero either way; F S T M P L N D H are not lengths counted in increments
+    ("G21 G90 G0 X0 Y0 Z5.\nN10 G1 Z-1. F100 S1200 M3\nG4 P500\nG1 X10. Y0 Z0\n", None),
+]
+
+
+@pytest.mark.parametrize("body,at", FANUC_DECIMALS)
+def test_fanuc_lengths_without_a_decimal_point_are_refused(tmp_path, body, at):
+    prog = tmp_path / "p.nc"
+    prog.write_text("%\nO1001\n" + body + "M30\n%\n")
+    out = tmp_path / "o.nc"
+    res = CliRunner().invoke(main, ["correct", str(prog), "--shift", "0,0,0.01", "-o", str(out)])
+    if at is None:
+        assert res.exit_code == 0, res.output
+        return
+    assert res.exit_code == 2 and not out.exists(), res.output
+    assert f"{prog}:{at[0]}:{at[1]}: error: " in res.stderr and "has no decimal point" in res.stderr, res.stderr
+    assert "write the point" in res.stderr
+    for given in ("fanuc", "auto"):
+        res = CliRunner().invoke(main, ["inspect", str(prog), "--dialect", given])
+        assert res.exit_code == 2, res.output
+    # the same text as LinuxCNC's RS274NGC is read in units
+    res = CliRunner().invoke(main, ["correct", str(prog), "--shift", "0,0,0", "--dialect", "linuxcnc", "-o", str(out)])
+    assert res.exit_code == 0 and out.read_bytes() == prog.read_bytes(), res.output
+    with pytest.raises(InputError, match="has no decimal point"):
+        nc.read(prog, dialect="fanuc")
+
+
+def test_linuxcnc_reads_a_number_without_a_point_in_units(tmp_path):
+    """rs274's own reading: X10 moves to X10 mm."""
+    from conftest import needs_rs274  # noqa: F401
+    from rs274 import RS274, canonical
+
+    if RS274 is None:
+        pytest.skip("LinuxCNC's rs274 is not installed")
+    p = tmp_path / "p.ngc"
+    p.write_text("G21 G90 G0 X0 Y0 Z5\nG1 X10 F100\nM2\n")
+    c = canonical(p)
+    assert c.error is None and c.ends[-1, 0] == pytest.approx(10.0)
+    assert nc.read(p).blocks.end[-1, 0] == pytest.approx(10.0)

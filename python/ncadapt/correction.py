@@ -290,6 +290,7 @@ def _correct_native(
     gx,
     gy,
     expand_cycles=False,
+    dialect="linuxcnc",
 ) -> Correction | None:
     """The correction run by the engine alone (reading, field, figures, emitting and writing to
     ``out_file`` in threads without the GIL), for the fields of :func:`_native_field`. None when a
@@ -319,6 +320,7 @@ def _correct_native(
             shift_norm,
             lambda a, b: say(f"correcting lines {a + 1:,}-{b:,}"),
             bool(expand_cycles),
+            dialect,
         ),
         name,
     )
@@ -348,6 +350,7 @@ def _correct(
     keep_points=True,
     out_file=None,
     expand_cycles=False,
+    dialect="linuxcnc",
 ) -> Correction:
     """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
 
@@ -355,7 +358,8 @@ def _correct(
     before the caller's output counts as written: a refusal raises after the last piece, and the
     callers discard what ``write`` received. With ``out_file`` (the open file ``write`` ends in,
     nothing written yet) a field the engine evaluates itself (:func:`_native_field`) is applied
-    by the engine alone, writing to the file directly.
+    by the engine alone, writing to the file directly. ``dialect`` (``linuxcnc``, ``fanuc``,
+    ``grbl``, ``marlin``) is the controller the program is written for.
     """
     say = progress or (lambda msg: None)
     check_sampling(chord_tol, max_segment)
@@ -381,12 +385,22 @@ def _correct(
             gx=gx,
             gy=gy,
             expand_cycles=expand_cycles,
+            dialect=dialect,
         )
         if c is not None:
             return c
     run = _engine(
         lambda: _NativeCorrector(
-            source, float(chord_tol), float(max_segment), bool(rapids), True, gx, gy, _PIECE_BYTES, bool(expand_cycles)
+            source,
+            float(chord_tol),
+            float(max_segment),
+            bool(rapids),
+            True,
+            gx,
+            gy,
+            _PIECE_BYTES,
+            bool(expand_cycles),
+            dialect,
         ),
         name,
     )

@@ -54,6 +54,7 @@ __all__ = [
     "correct_file",
     "inspect_file",
     "MOTIONS",
+    "DIALECTS",
 ]
 
 #: Names of the motion codes in :attr:`Toolpath.motion`.
@@ -123,42 +124,64 @@ class Blocks:
         return len(self.line)
 
 
-def parse(text: str | bytes, name: str | None = None) -> Program:
-    """Read a program from a string or bytes; ``name`` is used in error messages."""
+#: The dialects the engine reads (``dialect=`` of :func:`read`, :func:`parse`,
+#: :func:`correct_file`, :func:`inspect_file`): where they differ, blocks are read as that
+#: controller reads them (see :mod:`ncadapt.dialects`).
+DIALECTS = ("linuxcnc", "fanuc", "grbl", "marlin")
+
+
+def _check_dialect(dialect: str) -> str:
+    if dialect not in DIALECTS:
+        raise ValueError(f'Parameter "dialect" must be one of {", ".join(DIALECTS)}; got {dialect!r}')
+    return dialect
+
+
+def parse(text: str | bytes, name: str | None = None, dialect: str = "linuxcnc") -> Program:
+    """Read a program from a string or bytes; ``name`` is used in error messages, ``dialect``
+    (one of :data:`DIALECTS`) is the controller it is written for."""
     data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else bytes(text)
-    return Program(data, name=name or "<string>")
+    return Program(data, name=name or "<string>", dialect=dialect)
 
 
 def correct_file(
-    path: str | os.PathLike, output: str | os.PathLike, field: Callable[[np.ndarray], np.ndarray], **options
+    path: str | os.PathLike,
+    output: str | os.PathLike,
+    field: Callable[[np.ndarray], np.ndarray],
+    *,
+    dialect: str = "linuxcnc",
+    **options,
 ) -> Correction:
     """Correct the program in file ``path`` and write it to ``output``, reading and writing it
     piece by piece: memory stays bounded whatever the program's length.
 
-    Takes the options of :meth:`Program.correct`. The output is written atomically: when a check
+    Takes the options of :meth:`Program.correct`, and the program's ``dialect`` (one of
+    :data:`DIALECTS`; ``ncadapt.dialects.resolve`` detects it). The output is written atomically: when a check
     refuses (an unsupported construct, a displacement over the limit, a point outside the field),
     nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
     """
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
     with atomic_open(out) as f, _BackgroundWriter(f) as w:
-        return _correct(str(p), str(p), w.write, field, keep_points=False, out_file=f, **options)
+        return _correct(
+            str(p), str(p), w.write, field, keep_points=False, out_file=f, dialect=_check_dialect(dialect), **options
+        )
 
 
-def inspect_file(path: str | os.PathLike) -> dict:
+def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
     piece: memory stays bounded whatever the program's length."""
-    return _inspect(str(path), str(path))
+    return _inspect(str(path), str(path), _check_dialect(dialect))
 
 
-def read(path: str | os.PathLike) -> Program:
-    """Read a program file. Raises :class:`InputError` naming ``path:line:col`` on bad input."""
+def read(path: str | os.PathLike, dialect: str = "linuxcnc") -> Program:
+    """Read a program file written for ``dialect`` (one of :data:`DIALECTS`). Raises
+    :class:`InputError` naming ``path:line:col`` on bad input."""
     p = Path(path)
     try:
         data = p.read_bytes()
     except OSError as e:
         raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
-    return Program(data, path=p)
+    return Program(data, path=p, dialect=dialect)
 
 
 class Program:
@@ -167,8 +190,18 @@ class Program:
     Create one with :func:`read` or :func:`parse`.
     """
 
-    def __init__(self, data: bytes, path: Path | None = None, name: str | None = None, *, lazy: bool = False):
+    def __init__(
+        self,
+        data: bytes,
+        path: Path | None = None,
+        name: str | None = None,
+        *,
+        lazy: bool = False,
+        dialect: str = "linuxcnc",
+    ):
         self._data = data
+        #: The controller the program is written for (one of :data:`DIALECTS`).
+        self.dialect = _check_dialect(dialect)
         self.path = Path(path) if path is not None else None
         self.name = str(path) if path is not None else (name or "<program>")
         self.correction: Correction | None = None
@@ -182,7 +215,7 @@ class Program:
         """The native program, parsed on first use."""
         if self._native is None:
             try:
-                self._native = _Native.parse(self._data)
+                self._native = _Native.parse(self._data, self.dialect)
             except EngineError as e:
                 raise _engine_error(e, self.name) from None
         return self._native
@@ -291,7 +324,7 @@ class Program:
 
     def inspect(self) -> dict:
         """Units, planes, motion counts, extents and unsupported constructs, as plain values."""
-        return _inspect(self._data, self.name)
+        return _inspect(self._data, self.name, self.dialect)
 
     # ----------------------------------------------------------------------------- correction
     def correct(
@@ -356,9 +389,10 @@ class Program:
             progress=progress,
             keep_points=True,
             expand_cycles=expand_cycles,
+            dialect=self.dialect,
         )
         # the corrected program is parsed only if it is used as a program again
-        result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True)
+        result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True, dialect=self.dialect)
         result.correction = c
         return result
 
@@ -374,7 +408,9 @@ class Program:
         _refuse_overwrite(p, self.path)
         self._refuse_unsupported(options.get("keep_unsupported", False))
         with atomic_open(p) as f, _BackgroundWriter(f) as w:
-            return _correct(self._data, self.name, w.write, field, keep_points=False, out_file=f, **options)
+            return _correct(
+                self._data, self.name, w.write, field, keep_points=False, out_file=f, dialect=self.dialect, **options
+            )
 
     def _refuse_unsupported(self, keep_unsupported) -> None:
         uns = self.unsupported
@@ -401,10 +437,12 @@ def _refuse_overwrite(output: Path, source: Path | None) -> None:
         raise InputError("refusing to overwrite the input program; choose another output", str(output))
 
 
-def _inspect(source, name) -> dict:
+def _inspect(source, name, dialect="linuxcnc") -> dict:
     """Units, planes, motion counts, extents, unsupported constructs and notes, piece by piece."""
     run = _engine(
-        lambda: _NativeCorrector(source, constants.CHORD_TOL, constants.MAX_SEGMENT, True, False, [], [], _PIECE_BYTES),
+        lambda: _NativeCorrector(
+            source, constants.CHORD_TOL, constants.MAX_SEGMENT, True, False, [], [], _PIECE_BYTES, False, dialect
+        ),
         name,
     )
     lo = {k: np.full(3, np.inf) for k in ("all", "feed")}

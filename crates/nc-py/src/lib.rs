@@ -4,7 +4,7 @@
 
 use nc::emit::{EmitState, EmitStats, Emitter};
 use nc::field::{Field, Grid, Outside};
-use nc::interp::{Interp, NAXES};
+use nc::interp::{Dialect, Interp, NAXES};
 use nc::pipeline::{self, Options, Outcome};
 use nc::sample::{SampleOpts, Samples};
 use nc::stream::{scan_style, Piece, Reader, Stream};
@@ -134,12 +134,15 @@ struct Program {
 
 #[pymethods]
 impl Program {
+    /// `dialect`: linuxcnc, fanuc, grbl or marlin.
     #[staticmethod]
-    fn parse(py: Python<'_>, data: &[u8]) -> PyResult<Self> {
+    #[pyo3(signature = (data, dialect="linuxcnc"))]
+    fn parse(py: Python<'_>, data: &[u8], dialect: &str) -> PyResult<Self> {
+        let dialect = Dialect::from_name(dialect).map_err(to_py)?;
         // a borrowed slice, copied once (a Vec<u8> argument would be extracted byte by byte)
         let data = data.to_vec();
         let inner = py
-            .allow_threads(|| nc::Program::parse(data))
+            .allow_threads(|| nc::Program::parse_as(data, dialect))
             .map_err(to_py)?;
         Ok(Program { inner })
     }
@@ -281,9 +284,10 @@ struct Corrector {
 
 #[pymethods]
 impl Corrector {
-    /// `source`: the program's bytes, or the path of its file (str).
+    /// `source`: the program's bytes, or the path of its file (str); `dialect`: linuxcnc,
+    /// fanuc, grbl or marlin.
     #[new]
-    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false))]
+    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false, dialect="linuxcnc"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -296,7 +300,9 @@ impl Corrector {
         grid_y: Vec<f64>,
         piece_bytes: usize,
         expand_cycles: bool,
+        dialect: &str,
     ) -> PyResult<Self> {
+        let dialect = Dialect::from_name(dialect).map_err(to_py)?;
         let src = if let Ok(b) = source.downcast::<PyBytes>() {
             Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
         } else {
@@ -307,7 +313,7 @@ impl Corrector {
         let stream = py
             .allow_threads(|| -> Result<Stream, NcError> {
                 let (style, crlf) = scan_style(src.open()?, piece_bytes)?;
-                Ok(Stream::new(src.open()?, piece_bytes, style, crlf))
+                Ok(Stream::new(src.open()?, piece_bytes, style, crlf).with_dialect(dialect))
             })
             .map_err(to_py)?;
         let opts = SampleOpts {
@@ -613,7 +619,7 @@ fn output_file(_fd: i32) -> PyResult<Option<std::fs::File>> {
 /// GIL. Returns the figures as a dict, or None when a check refuses the program (the caller runs
 /// the Python evaluation to report it). `progress(first, end)` is called for each piece.
 #[pyfunction]
-#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false))]
+#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false, dialect="linuxcnc"))]
 #[allow(clippy::too_many_arguments)]
 fn correct_native<'py>(
     py: Python<'py>,
@@ -632,7 +638,9 @@ fn correct_native<'py>(
     shift_norm: Option<f64>,
     progress: Option<PyObject>,
     expand_cycles: bool,
+    dialect: &str,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let dialect = Dialect::from_name(dialect).map_err(to_py)?;
     let src = if let Ok(b) = source.downcast::<PyBytes>() {
         Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
     } else {
@@ -660,6 +668,7 @@ fn correct_native<'py>(
         clearance,
         shift_norm,
         expand_cycles,
+        dialect,
     };
     // between pieces: the progress display, and Python's signal handlers (SIGTERM, Ctrl-C), which
     // run only when the main thread asks for them; an exception they raise stops the run

@@ -62,6 +62,7 @@ fn main() {
         clearance: None,
         shift_norm: None,
         expand_cycles: false,
+        dialect: nc::interp::Dialect::LinuxCnc,
     };
     let runs: usize = std::env::var("RUNS")
         .ok()

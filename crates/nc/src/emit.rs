@@ -278,6 +278,9 @@ pub struct EmitState {
     cyc_level: f64,
     cyc_r: Option<f64>,
     cyc_z: Option<f64>,
+    /// A block of the current cycle run was written as moves: the output's motion mode and
+    /// sticky words are no longer the cycle's.
+    cyc_expanded: bool,
     steps: Vec<CycleStep>,
 }
 
@@ -297,6 +300,7 @@ impl EmitState {
             cyc_level: f64::NAN,
             cyc_r: None,
             cyc_z: None,
+            cyc_expanded: false,
             steps: Vec::new(),
         }
     }
@@ -413,7 +417,15 @@ impl<'a> Emitter<'a> {
                             message: "the field displaces U, V or W at a canned cycle's hole; a cycle's holes move in X, Y and Z only: write the holes as moves".into(),
                         });
                     }
-                    self.cycle_block(li, ri, samples, disp)?;
+                    // a cycle the engine treats has its holes' bottoms supported; one under an
+                    // unsupported construct (kept with --keep-unsupported) is copied
+                    let line_no = self.it.records[ri].line;
+                    let copy = !self.it.records[samples.rec0..=ri]
+                        .iter()
+                        .rev()
+                        .take_while(|r| r.line == line_no)
+                        .any(|r| r.cycle == CYCLE_BOTTOM && r.supported);
+                    self.cycle_block(li, ri, samples, disp, copy)?;
                 } else if c > 0 {
                     self.corrected(
                         li,
@@ -842,13 +854,17 @@ impl<'a> Emitter<'a> {
     /// A canned-cycle block: each hole moved by the displacement at its bottom (X, Y by its x
     /// and y, Z and R by its z). Kept a cycle block, its X Y Z R words rewritten (and written
     /// where the output's sticky value differs), or written as the moves LinuxCNC makes of it
-    /// (`expand_cycles`).
+    /// (`expand_cycles`). With `copy` (a block under an unsupported construct, kept with
+    /// `--keep-unsupported`) the block is copied: its words as written, and only the sticky X Y
+    /// Z R it relies on written where the output's differ from the program's, so that it drills
+    /// the holes it drills in the program; the position after it follows the copied block.
     fn cycle_block(
         &mut self,
         li: usize,
         last: usize,
         samples: &Samples,
         disp: &[f64],
+        copy: bool,
     ) -> Result<(), NcError> {
         let it = self.it;
         let line_no = it.records[last].line;
@@ -909,18 +925,48 @@ impl<'a> Emitter<'a> {
         if holes.is_empty() {
             return Err(err("a canned cycle without holes".into()));
         }
+        if copy && self.st.expand_cycles && !cy.sets_level && self.st.cyc_expanded {
+            return Err(err(format!(
+                "canned cycle {} is kept as written (an unsupported construct is in force) but continues a cycle whose earlier blocks --expand-cycles wrote as moves, so the output would not be in that cycle any more; correct it without --expand-cycles",
+                name(cy.code)
+            )));
+        }
         if !(cur.iter().all(|v| v.is_finite()) && level.is_finite()) {
+            if copy {
+                // (the program's position is known here: a cycle from an unknown one is refused)
+                for (k, e) in self.st.epos.iter_mut().enumerate().take(3) {
+                    *e = it.records[last].end[k];
+                }
+                self.st.out_motion = None;
+                return Ok(());
+            }
             return Err(err(format!(
                 "canned cycle {}: the corrected program's position before it is unknown",
                 name(cy.code)
             )));
         }
-        if self.st.expand_cycles {
+        if copy {
+            self.st.cyc_expanded = false;
+        } else if self.st.expand_cycles {
+            if cy.retract_unknown {
+                return Err(err(format!(
+                    "canned cycle {}: neither G98 nor G99 is stated before it, and the control's mode decides how the tool retracts (Fanuc/Haas controls start in G98 at power-on, but a reset may keep the mode of the last program); --expand-cycles writes the retract moves, so state G98 or G99 before the cycle (without --expand-cycles the cycle blocks stay and the control decides)",
+                    name(cy.code)
+                )));
+            }
+            self.st.cyc_expanded = true;
             return self.expand_cycle(li, &cy, &holes, cur, level, inch, incremental);
         }
         // the numbers the block must have
         let h0 = holes[0];
-        let (want, implied_xy) = if incremental {
+        let (want, implied_xy) = if copy {
+            // the program's own numbers; in G91 X and Y are steps from wherever the tool is
+            if incremental {
+                ([0.0, 0.0, cy.z_word, cy.r_word], [0.0, 0.0])
+            } else {
+                ([h0.x, h0.y, cy.z_word, cy.r_word], [cur[0], cur[1]])
+            }
+        } else if incremental {
             let mut prev = [cur[0], cur[1]];
             let step = [h0.x - prev[0], h0.y - prev[1]];
             for h in &holes {
@@ -955,7 +1001,7 @@ impl<'a> Emitter<'a> {
         let words = self.lx.line_words(li);
         for (i, letter) in [b'X', b'Y', b'Z', b'R'].into_iter().enumerate() {
             written[i] = if let Some(w) = words.iter().find(|w| w.letter == letter) {
-                if (want[i] - w.value).abs() >= half {
+                if !copy && (want[i] - w.value).abs() >= half {
                     self.edit_number(w.num_start, w.end, want[i], inch)
                 } else {
                     w.value
@@ -1018,7 +1064,7 @@ impl<'a> Emitter<'a> {
             &mut steps,
         );
         self.st.steps = steps;
-        if approach_changes(&cy, choices, level, out_holes[0].r) {
+        if !copy && approach_changes(&cy, choices, level, out_holes[0].r) {
             return Err(err(format!(
                 "canned cycle {}: the correction moves the R plane past the tool's height, so LinuxCNC would travel to the hole at that height instead of the G98 retract level (or the other way round); use --expand-cycles (it writes the programmed approach)",
                 name(cy.code)

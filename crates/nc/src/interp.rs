@@ -15,6 +15,61 @@ pub const AXES: [u8; NAXES] = *b"XYZABCUVW";
 /// Millimetres per inch.
 pub const MM_PER_INCH: f64 = 25.4;
 
+/// The controller a program is written for, where it changes how a block is read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Dialect {
+    /// LinuxCNC's RS274NGC, as `rs274` reads it.
+    #[default]
+    LinuxCnc,
+    /// Fanuc-family controls and Haas: a number without a decimal point counts least input
+    /// increments on length and angle words (`X10` is 0.010 mm), unless a machine parameter
+    /// (Fanuc 3401#0 DPI) says otherwise; the G98/G99 mode a program starts in is the control's.
+    Fanuc,
+    /// grbl (no canned cycles of its own).
+    Grbl,
+    /// Marlin (3D printer G-code; no canned cycles).
+    Marlin,
+}
+
+impl Dialect {
+    /// The dialect of a name (`linuxcnc`, `fanuc`, `grbl`, `marlin`), as `--dialect` gives it.
+    pub fn from_name(name: &str) -> Result<Self, NcError> {
+        Ok(match name {
+            "linuxcnc" => Dialect::LinuxCnc,
+            "fanuc" => Dialect::Fanuc,
+            "grbl" => Dialect::Grbl,
+            "marlin" => Dialect::Marlin,
+            _ => {
+                return Err(NcError::Usage(format!(
+                    "the engine reads the dialects linuxcnc, fanuc, grbl and marlin; got {name:?}"
+                )))
+            }
+        })
+    }
+
+    /// Whether a number without a decimal point on a length or angle word is ambiguous (counted
+    /// in least input increments, or in units, as a machine parameter says).
+    pub fn point_matters(self) -> bool {
+        self == Dialect::Fanuc
+    }
+
+    /// The canned-cycle retract mode (true: G98) a program that states neither G98 nor G99 runs
+    /// in, when the dialect makes it certain: LinuxCNC's `rs274` reads G99.
+    pub fn default_retract(self) -> Option<bool> {
+        match self {
+            Dialect::LinuxCnc => Some(false),
+            _ => None,
+        }
+    }
+}
+
+/// Words whose value is a length or an angle counted in least input increments on a Fanuc-family
+/// control when written without a decimal point: the axes, the arc centre and radius, and a
+/// canned cycle's R plane (Fanuc's "decimal point programming" addresses, F excepted: a feed
+/// does not change the path). In a canned-cycle block Q (the peck depth) is one too and K is
+/// not (Fanuc's number of repeats); elsewhere Q is not (a lathe cycle's last block number).
+const INCREMENT_WORDS: &[u8] = b"XYZABCUVWIJKR";
+
 /// What a recorded block does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u8)]
@@ -94,6 +149,13 @@ pub struct Cycle {
     pub p: f64,
     /// Repeats (L).
     pub repeats: u32,
+    /// R and Z as in force for the block (program units; written or kept from the block before,
+    /// relative in G91), the input's numbers a copied block relies on.
+    pub r_word: f64,
+    pub z_word: f64,
+    /// Neither G98 nor G99 is stated before the block and the dialect does not make its initial
+    /// mode certain: the controller decides how the tool retracts (`g98` is then a guess).
+    pub retract_unknown: bool,
     /// LinuxCNC's two choices for the block, as the program's numbers make them: the tool rises
     /// to the R plane first (the initial level is below it), and it reaches the first hole at
     /// the height it is at (above the R plane) rather than at the retract level.
@@ -342,6 +404,7 @@ struct State {
     off_saved: [f64; NAXES],
     /// Index of `off` in the current run's frames.
     frame: u32,
+    dialect: Dialect,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -361,6 +424,9 @@ struct CycleModal {
     g98: Option<bool>,
     /// The program's cycles have been noted as read in rs274's default retract mode.
     noted_default: bool,
+    /// A cycle of the current run was read in a retract mode the program does not state and the
+    /// dialect does not make certain: the height after the run is unknown.
+    unknown_run: bool,
 }
 
 fn code(w: &Word) -> i32 {
@@ -397,9 +463,14 @@ const SPIRAL_REL_TOL: f64 = 0.001;
 /// Radii below this are a zero-radius arc (LinuxCNC's radius tolerance).
 const ARC_MIN_RADIUS_MM: f64 = 0.00127;
 
-/// Interpret a lexed program.
+/// Interpret a lexed program (LinuxCNC's RS274NGC).
 pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
-    let mut ip = Interpreter::new();
+    interpret_as(lx, Dialect::LinuxCnc)
+}
+
+/// Interpret a lexed program written for `dialect`.
+pub fn interpret_as(lx: &Lexed, dialect: Dialect) -> Result<Interp, NcError> {
+    let mut ip = Interpreter::with_dialect(dialect);
     let mut it = ip.run(lx, 0)?;
     it.unsupported = ip.unsupported;
     it.notes = ip.notes;
@@ -431,6 +502,11 @@ impl Default for Interpreter {
 impl Interpreter {
     /// The state at the start of a program (no motion mode, every position unknown).
     pub fn new() -> Self {
+        Self::with_dialect(Dialect::LinuxCnc)
+    }
+
+    /// The state at the start of a program written for `dialect`.
+    pub fn with_dialect(dialect: Dialect) -> Self {
         Interpreter {
             st: State {
                 pos: [f64::NAN; NAXES],
@@ -447,6 +523,7 @@ impl Interpreter {
                 off_base: [f64::NAN; NAXES],
                 off_saved: [f64::NAN; NAXES],
                 frame: 0,
+                dialect,
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -635,6 +712,37 @@ impl Interpreter {
                 }
             }
 
+            // on a Fanuc-family control a length or angle written without a decimal point counts
+            // least input increments unless a machine parameter says otherwise: which one, the
+            // program does not tell (zero is zero either way; G65's words are a macro's arguments)
+            if st.dialect.point_matters() && !gs[..ng].iter().any(|&(c, _)| c == 650) {
+                let cycle = gs[..ng].iter().any(|&(c, _)| cycle_code(c))
+                    || (matches!(st.mode, Mode::Canned(_))
+                        && !gs[..ng]
+                            .iter()
+                            .any(|&(c, _)| matches!(c, 0 | 10 | 20 | 30 | 800)));
+                if let Some(w) = words.iter().find(|w| {
+                    w.decimals < 0
+                        && w.value != 0.0
+                        && match w.letter {
+                            b'Q' => cycle,
+                            b'K' => !cycle,
+                            l => INCREMENT_WORDS.contains(&l),
+                        }
+                }) {
+                    let text = format!("{}{}", w.letter as char, w.value);
+                    return Err(ierr(
+                        li,
+                        col(w),
+                        format!(
+                            "{text} has no decimal point: a Fanuc/Haas control reads it in least input increments ({text} = {:.3} mm in a metric program, {:.4} inch in an inch one) unless parameter 3401#0 (DPI) is set, and the program does not say which; write the point ({text}.) if {text} means {} units",
+                            w.value * 0.001,
+                            w.value * 0.0001,
+                            w.value
+                        ),
+                    ));
+                }
+            }
             // two codes of one modal group in a block are an error, as in LinuxCNC
             for a in 0..ng {
                 for b in a + 1..ng {
@@ -960,6 +1068,10 @@ impl Interpreter {
                     // any other motion ends the cycles' initial level and sticky words
                     st.cyc.level = None;
                     st.cyc.last = 0;
+                    // after cycles in a retract mode the controller chose, the height is its
+                    if std::mem::take(&mut st.cyc.unknown_run) {
+                        st.pos[2] = f64::NAN;
+                    }
                 }
                 st.mode = m;
             }
@@ -1613,6 +1725,11 @@ fn set_offsets(out: &mut Interp, st: &mut State, off: [f64; NAXES]) {
     }
 }
 
+/// A canned-cycle G code (× 10): G73, G74, G76, G81–G89.
+fn cycle_code(c: i32) -> bool {
+    matches!(c, 730 | 740 | 760 | 810..=890) && c % 10 == 0
+}
+
 /// Why the engine does not follow a canned cycle, or None when it does.
 fn cycle_refused(c: i32) -> Option<String> {
     match c {
@@ -1813,9 +1930,28 @@ fn canned(
             format!("the R plane of {name} ({r}) is below its bottom Z ({cc})"),
         ));
     }
-    let g98 = match st.cyc.g98 {
-        Some(v) => v,
-        None => {
+    // a block's moves are bounded as a sampled block's pieces are: L repeats of a hole, and the
+    // pecks of G73/G83 in each
+    let pecks = if matches!(c, 730 | 830) {
+        ((r - cc) / q).ceil().max(0.0)
+    } else {
+        0.0
+    };
+    let moves = repeats as f64 * (4.0 + 3.0 * pecks);
+    if !(moves <= crate::sample::MAX_PIECES_PER_BLOCK) {
+        return Err(ierr(
+            li,
+            w.col,
+            format!(
+                "{name} with L{repeats} would make {moves:.3e} moves, more than the {:.0} allowed for one block; check its L, Q, R and Z words",
+                crate::sample::MAX_PIECES_PER_BLOCK
+            ),
+        ));
+    }
+    let retract_unknown = st.cyc.g98.is_none() && st.dialect.default_retract().is_none();
+    let g98 = match st.cyc.g98.or(st.dialect.default_retract()) {
+        Some(v) if st.cyc.g98.is_some() => v,
+        Some(v) => {
             if !st.cyc.noted_default {
                 st.cyc.noted_default = true;
                 out.notes.push(Note {
@@ -1823,6 +1959,17 @@ fn canned(
                     message: format!("canned cycle {name} with neither G98 nor G99 set: read as G99 (retract to the R plane), rs274's default; a controller that starts in G98 retracts to the initial level instead"),
                 });
             }
+            v
+        }
+        None => {
+            if !st.cyc.noted_default {
+                st.cyc.noted_default = true;
+                out.notes.push(Note {
+                    line: li as u32,
+                    message: format!("canned cycle {name} with neither G98 nor G99 set: the control's mode decides how the tool retracts (kept as cycle blocks; the height after the cycles is unknown until a move sets Z)"),
+                });
+            }
+            st.cyc.unknown_run = true;
             false
         }
     };
@@ -1876,6 +2023,9 @@ fn canned(
         q,
         p,
         repeats,
+        r_word: r_raw,
+        z_word: z_raw,
+        retract_unknown,
         choices,
     });
     Ok(())
@@ -2041,5 +2191,85 @@ mod tests {
             let src = format!("G21 G90 G0 X0 Y0 Z10\n{bad}");
             assert!(interpret(&lex(src.as_bytes()).unwrap()).is_err(), "{bad}");
         }
+    }
+
+    /// Fanuc/Haas: a length or angle without a decimal point is refused at its word (least input
+    /// increments or units: a machine parameter decides); zero, and F S T M P L N D H, are not.
+    #[test]
+    fn fanuc_numbers_without_a_point() {
+        let fanuc = |s: &str| interpret_as(&lex(s.as_bytes()).unwrap(), Dialect::Fanuc);
+        for ok in [
+            "G0 X0 Y0 Z0 A0\nG1 X10.5 Y.5 Z-1. F100 S1200 T1 M3\nG4 P500\nG43 H1\nN10 G1 X1.\n",
+            "G0 X0 Y0 Z10.\nG98 G81 X1. Y2. Z-3. R2. F100 L2\nG80\n",
+            "G0 X0 Y0 Z10.\nG65 P9010 A1 B2\n",
+            // a lathe cycle's block numbers
+            "G0 X1. Z0.1\nG71 P10 Q20 U0.01 W0.005 D0.05 F0.01\n",
+        ] {
+            assert!(fanuc(ok).is_ok(), "{ok}");
+        }
+        for (bad, at) in [
+            ("G0 X0 Y0 Z10\n", (1, 10)),
+            ("G0 X0 Y0 Z1.\nG1 X-5 F100\n", (2, 4)),
+            ("G0 X0 Y0 Z1.\nG2 X2. Y0 I1 J0\n", (2, 11)),
+            ("G0 X0 Y0 Z1.\nG2 X2. Y0 R1\n", (2, 11)),
+            ("G0 X0 Y0 Z10.\nG98 G83 X1. Y2. Z-3. R2. Q1 F100\n", (2, 26)),
+            ("G0 X0 Y0 Z1. A90\n", (1, 14)),
+            (
+                "G0 X0 Y0 Z10.\nG98 G83 X1. Y2. Z-3. R2. Q1. F100\nX2 Y3.\n",
+                (3, 1),
+            ),
+            ("G0 X0 Y0 Z1.\nG3 X2. Y0 Z-1. I1. K1\n", (2, 20)),
+        ] {
+            match fanuc(bad) {
+                Err(NcError::Interpret { line, col, message }) => {
+                    assert_eq!((line, col), at, "{bad}");
+                    assert!(message.contains("no decimal point"), "{message}");
+                }
+                r => panic!("{bad}: {r:?}"),
+            }
+            // LinuxCNC reads them as units
+            assert!(interpret(&lex(bad.as_bytes()).unwrap()).is_ok(), "{bad}");
+        }
+    }
+
+    /// A cycle block's moves are bounded like a sampled block's pieces.
+    #[test]
+    fn cycle_moves_bounded() {
+        for bad in [
+            "G83 X1 Y1 Z-1000 R1 Q0.0001 F100\n",
+            "G83 X1 Y1 Z-10 R1 Q0.1 L10000 F100\n",
+        ] {
+            let src = format!("G21 G90 G0 X0 Y0 Z10\n{bad}");
+            match interpret(&lex(src.as_bytes()).unwrap()) {
+                Err(NcError::Interpret { line, message, .. }) => {
+                    assert_eq!(line, 2);
+                    assert!(message.contains("more than the 1000000"), "{message}");
+                }
+                r => panic!("{bad}: {:?}", r.map(|i| i.records.len())),
+            }
+        }
+        let ok = "G21 G90 G0 X0 Y0 Z10\nG81 X1 Y1 Z-1 R1 L1000 F100\n";
+        assert_eq!(
+            interpret(&lex(ok.as_bytes()).unwrap()).unwrap().cycles[0].repeats,
+            1000
+        );
+    }
+
+    /// The retract mode of a cycle the program does not state: rs274's G99 for LinuxCNC; for
+    /// Fanuc the control's, so the height after the cycles is unknown.
+    #[test]
+    fn unstated_retract_mode() {
+        let src = "G21 G90 G0 X0 Y0 Z10.\nG81 X1. Y1. Z-1. R1. F100.\nX2.\nG80\nG1 X3. F100.\n";
+        let lx = lex(src.as_bytes()).unwrap();
+        let it = interpret(&lx).unwrap();
+        assert!(!it.cycles[0].retract_unknown && !it.cycles[0].g98);
+        assert_eq!(it.records.last().unwrap().end[2], 1.0);
+        let it = interpret_as(&lx, Dialect::Fanuc).unwrap();
+        assert!(it.cycles.iter().all(|c| c.retract_unknown));
+        assert!(it.records.last().unwrap().end[2].is_nan());
+        let stated = src.replace("G81", "G98 G81");
+        let it = interpret_as(&lex(stated.as_bytes()).unwrap(), Dialect::Fanuc).unwrap();
+        assert!(it.cycles.iter().all(|c| !c.retract_unknown && c.g98));
+        assert_eq!(it.records.last().unwrap().end[2], 10.0);
     }
 }

@@ -27,10 +27,15 @@ pub struct Program {
 }
 
 impl Program {
-    /// Lex and interpret `src`.
+    /// Lex and interpret `src` (LinuxCNC's RS274NGC).
     pub fn parse(src: Vec<u8>) -> Result<Self, NcError> {
+        Self::parse_as(src, interp::Dialect::LinuxCnc)
+    }
+
+    /// Lex and interpret `src`, a program written for `dialect`.
+    pub fn parse_as(src: Vec<u8>, dialect: interp::Dialect) -> Result<Self, NcError> {
         let lexed = lex::lex(&src)?;
-        let interp = interp::interpret(&lexed)?;
+        let interp = interp::interpret_as(&lexed, dialect)?;
         Ok(Program { src, lexed, interp })
     }
 

@@ -38,6 +38,8 @@ pub struct Options {
     pub shift_norm: Option<f64>,
     /// Write canned cycles as G0/G1 moves.
     pub expand_cycles: bool,
+    /// The controller the program is written for.
+    pub dialect: crate::interp::Dialect,
 }
 
 /// Figures of a finished correction.
@@ -177,6 +179,7 @@ fn read_pieces(
     reader: Reader,
     piece_bytes: usize,
     style: Option<(NumberStyle, bool)>,
+    dialect: crate::interp::Dialect,
     tx: std::sync::mpsc::SyncSender<Result<Piece, NcError>>,
 ) -> Option<ReadEnd> {
     let mut stream = Stream::new(
@@ -184,7 +187,8 @@ fn read_pieces(
         piece_bytes,
         style.map_or(NumberStyle::default(), |s| s.0),
         style.is_some_and(|s| s.1),
-    );
+    )
+    .with_dialect(dialect);
     let mut assumed = style;
     let mut whole = NumberStyle::default();
     let mut counts = [0usize; 4];
@@ -302,7 +306,9 @@ fn pass(
         let piece_bytes = opts.piece_bytes;
         let (write_tx, write_rx) = sync_channel::<Vec<u8>>(2);
         let (written_tx, written_rx) = channel::<Vec<u8>>();
-        let reading = scope.spawn(move || read_pieces(reader, piece_bytes, style, piece_tx));
+        let dialect = opts.dialect;
+        let reading =
+            scope.spawn(move || read_pieces(reader, piece_bytes, style, dialect, piece_tx));
         let (expand, arc_tol) = (opts.expand_cycles, opts.sample.chord_tol);
         let emitting = scope
             .spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx, expand, arc_tol));

@@ -8,7 +8,7 @@
 use std::io::Read;
 
 use crate::error::NcError;
-use crate::interp::{Interp, Interpreter};
+use crate::interp::{Dialect, Interp, Interpreter};
 use crate::lex::{lex_at, Lexed, NumberStyle};
 
 /// Where a stream reads its program from.
@@ -113,6 +113,12 @@ impl Stream {
             crlf,
             interp: Interpreter::new(),
         }
+    }
+
+    /// The stream of a program written for `dialect` (LinuxCNC's RS274NGC by default).
+    pub fn with_dialect(mut self, dialect: Dialect) -> Self {
+        self.interp = Interpreter::with_dialect(dialect);
+        self
     }
 
     /// Lines read so far.

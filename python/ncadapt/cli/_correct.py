@@ -142,6 +142,7 @@ def correct(
             clearance=clearance,
             progress=say,
             expand_cycles=expand_cycles,
+            dialect=d.name,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")

@@ -19,7 +19,7 @@ def inspect(program, dialect, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
     d = dialects.resolve(program, dialect)
-    info = nc.inspect_file(program)
+    info = nc.inspect_file(program, d.name)
     info["dialect"] = d.as_dict()
     m = info["motions"]
     summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
