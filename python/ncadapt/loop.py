@@ -42,8 +42,11 @@ class Security:
     certificate (DER) and private key (PEM) per side, and a user name and password. The client also
     names the controller's certificate (``peer_cert``: a controller presenting another one is
     refused); the controller accepts ``user`` with ``password`` only and, with ``trust`` (a folder
-    of DER or PEM certificates), only the client certificates in it or issued by one in it. None
-    instead of a Security is NoSecurity (``--insecure``)."""
+    of DER or PEM certificates), only the client certificates in it or issued by one in it. On the
+    client, ``trust`` checks the controller's certificate the same way (with or instead of
+    ``peer_cert``). ``crl`` (a file or a folder of certificate revocation lists, PEM or DER, with
+    ``trust``): a peer certificate revoked by a list of its issuer is refused
+    (:func:`revocation_lists`). None instead of a Security is NoSecurity (``--insecure``)."""
 
     cert: str
     key: str
@@ -51,6 +54,7 @@ class Security:
     password: str
     peer_cert: str | None = None
     trust: str | None = None
+    crl: str | None = None
 
 
 async def make_certificates(folder, host: str = "127.0.0.1") -> dict:
@@ -99,13 +103,125 @@ def trusted_certificates(folder) -> list:
     return files
 
 
-async def trust_validator(folder, on_refused=None):
+# the suffixes of revocation lists read from a --crl folder
+CRL_SUFFIXES = (".crl", ".pem", ".der")
+
+
+def _load_crl(path):
+    from cryptography import x509
+
+    data = path.read_bytes()
+    if data.lstrip().startswith(b"-----BEGIN"):
+        return x509.load_pem_x509_crl(data)
+    return x509.load_der_x509_crl(data)
+
+
+def revocation_lists(location, trust, now=None) -> list:
+    """The certificate revocation lists of ``location`` (a CRL file, or a folder of ``*.crl``,
+    ``*.pem``, ``*.der``; each PEM or DER), checked for use: each must be readable, signed by a
+    certificate of the ``trust`` folder whose subject is the list's issuer (its signature verified
+    with that certificate's key), already issued (``last_update`` ≤ now) and not expired (its
+    ``next_update`` — when its issuer publishes the next one — not past). Returns the lists
+    ``[(path, CertificateRevocationList)]``; anything else is :class:`ncadapt.errors.InputError`
+    located at the file (a list that cannot be trusted would let a revoked certificate in).
+
+    asyncua's own TrustStore matches revoked serial numbers of any list against any certificate,
+    whoever issued either, and never looks at the dates: these checks are ncadapt's."""
+    from datetime import UTC, datetime
+    from pathlib import Path
+
+    from cryptography import x509
+
+    from .errors import InputError
+
+    now = datetime.now(UTC) if now is None else now
+    location = Path(location)
+    if location.is_dir():
+        files = sorted(p for p in location.iterdir() if p.is_file() and p.suffix.lower() in CRL_SUFFIXES)
+        if not files:
+            raise InputError(
+                f"no revocation list ({', '.join('*' + x for x in CRL_SUFFIXES)}) in the folder", str(location)
+            )
+    else:
+        files = [location]
+    issuers = []
+    for p in trusted_certificates(trust):
+        data = p.read_bytes()
+        issuers.append(
+            x509.load_pem_x509_certificate(data) if p.suffix.lower() == ".pem" else x509.load_der_x509_certificate(data)
+        )
+    out = []
+    for p in files:
+        try:
+            crl = _load_crl(p)
+        except (ValueError, OSError) as e:
+            raise InputError(f"not a certificate revocation list (PEM or DER): {e}", str(p)) from None
+        signers = [c for c in issuers if c.subject == crl.issuer]
+        if not signers:
+            raise InputError(
+                f"the revocation list is issued by {crl.issuer.rfc4514_string()!r}, which is not in the trust "
+                f"folder {trust}: its signature cannot be checked",
+                str(p),
+            )
+        if not any(_signed_by(crl, c) for c in signers):
+            raise InputError(
+                f"the revocation list's signature does not verify with {crl.issuer.rfc4514_string()!r} of the "
+                "trust folder: refused",
+                str(p),
+            )
+        if crl.last_update_utc > now:
+            raise InputError(
+                f"the revocation list is issued in the future ({crl.last_update_utc:%Y-%m-%d %H:%M} UTC)", str(p)
+            )
+        if crl.next_update_utc is None or crl.next_update_utc < now:
+            when = (
+                "has no next update date"
+                if crl.next_update_utc is None
+                else f"expired on {crl.next_update_utc:%Y-%m-%d %H:%M} UTC"
+            )
+            raise InputError(
+                f"the revocation list {when}: get the current one from its issuer {crl.issuer.rfc4514_string()!r}",
+                str(p),
+            )
+        out.append((str(p), crl))
+    return out
+
+
+def _signed_by(crl, cert) -> bool:
+    try:
+        return bool(crl.is_signature_valid(cert.public_key()))
+    except (TypeError, ValueError):
+        return False
+
+
+def revoked(cert, crls, now=None) -> str | None:
+    """Why ``cert`` may not be used under the lists ``crls`` (:func:`revocation_lists`): the
+    status name ``BadCertificateRevoked`` when a list of its issuer names its serial number,
+    ``BadCertificateRevocationUnknown`` when a list of its issuer has expired since it was read;
+    None when it may."""
+    from datetime import UTC, datetime
+
+    now = datetime.now(UTC) if now is None else now
+    for _, crl in crls:
+        if crl.issuer != cert.issuer:
+            continue
+        if crl.next_update_utc is not None and crl.next_update_utc < now:
+            return "BadCertificateRevocationUnknown"
+        if crl.get_revoked_certificate_by_serial_number(cert.serial_number) is not None:
+            return "BadCertificateRevoked"
+    return None
+
+
+async def trust_validator(folder, on_refused=None, crl=None, *, peer: str = "client"):
     """asyncua's certificate validator for the controller: a client's certificate must be valid now,
     name the client's application URI, allow the client's key and extended key usages, and be in
     the trust folder or issued by a certificate in it (``TRUSTED_VALIDATION``); anything else ends
     the session request with BadCertificateUntrusted (or the check it failed), and
     ``on_refused(certificate, status)`` is told (the certificate as :func:`describe_certificate`
-    gives it, the status code's name)."""
+    gives it, the status code's name). With ``crl`` (:func:`revocation_lists`, read and checked
+    here) a certificate revoked by its issuer's list is refused with BadCertificateRevoked.
+    ``peer``: "client" (the controller checks its clients) or "server" (the client checks the
+    controller: server key usage)."""
     from pathlib import Path
 
     from asyncua import ua
@@ -114,18 +230,21 @@ async def trust_validator(folder, on_refused=None):
     from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 
     trusted_certificates(folder)
-    store = TrustStore([Path(folder)], [])
+    crls = [] if crl is None else revocation_lists(crl, folder)
+    store = TrustStore([Path(folder)], [])  # revocation is checked below, by issuer
     await store.load()
-    options = CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
-    validator = CertificateValidator(options, store)
-    if on_refused is None:
-        return validator
+    role = CertificateValidatorOptions.PEER_CLIENT if peer == "client" else CertificateValidatorOptions.PEER_SERVER
+    validator = CertificateValidator(CertificateValidatorOptions.TRUSTED_VALIDATION | role, store)
 
     async def validate(cert, description):
         try:
             await validator(cert, description)
+            why = revoked(cert, crls)
+            if why is not None:
+                raise ServiceError(getattr(ua.StatusCodes, why))
         except ServiceError as e:
-            on_refused(describe_certificate(cert), ua.StatusCode(e.code).name)
+            if on_refused is not None:
+                on_refused(describe_certificate(cert), ua.StatusCode(e.code).name)
             raise
 
     return validate
@@ -324,7 +443,7 @@ async def serve_machine(
         await server.load_certificate(security.cert)
         await server.load_private_key(security.key)
         if security.trust is not None:
-            server.set_certificate_validator(await trust_validator(security.trust, on_refused))
+            server.set_certificate_validator(await trust_validator(security.trust, on_refused, security.crl))
     idx = await server.register_namespace(NAMESPACE)
     obj = await server.nodes.objects.add_object(idx, "Controller")
     thick = await obj.add_variable(idx, "Thickness", math.nan)
@@ -387,6 +506,15 @@ class ServerUntrusted(Exception):
     refuses it (it could be another machine, or a man in the middle)."""
 
 
+class ServerRefused(ServerUntrusted):
+    """The controller's certificate is not trusted by the client's trust folder, or is revoked:
+    the client refuses the session (``status``: the OPC UA status code's name)."""
+
+    def __init__(self, message: str, status: str):
+        super().__init__(message)
+        self.status = status
+
+
 class ConnectionRefused(Exception):
     """The controller refused the session: no endpoint with the client's security, or the user
     name, password or certificate rejected."""
@@ -400,8 +528,15 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
 
     deadline = time.monotonic() + max(0.0, float(timeout))
     delay = 0.1
+    refusal: list = []
+    validator = None
+    if security is not None and security.trust is not None:
+        validator = await trust_validator(
+            security.trust, lambda cert, status: refusal.append((cert, status)), security.crl, peer="server"
+        )
     while True:
         client = Client(url=url, timeout=request_timeout)
+        client.certificate_validator = validator
         if security is not None:
             from asyncua import ua
             from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
@@ -426,6 +561,15 @@ async def connect(url: str, timeout: float = 30.0, *, request_timeout: float = 4
         except ua_error() as e:
             with contextlib.suppress(Exception):
                 await client.disconnect()
+            if refusal:
+                cert, status = refusal[-1]
+                raise ServerRefused(
+                    f"the controller presents the certificate {cert}, refused by the trust folder "
+                    f"{security.trust}"
+                    + (f" and the revocation lists {security.crl}" if security.crl else "")  # type: ignore[union-attr]
+                    + f": {status}",
+                    status,
+                ) from None
             raise ConnectionRefused(str(e).strip() or type(e).__name__) from None
         except (TimeoutError, OSError):
             with contextlib.suppress(Exception):

@@ -394,7 +394,8 @@ def analyze(
     "--tolerance",
     type=FiniteRange(0, constants.COORD_MAX, min_open=True),
     help="Profile tolerance ±T, mm: the share of points inside it before and predicted after (measured − "
-    "systematic), in the summary, the JSON and the report's tolerance-banded maps.",
+    "systematic), in the summary, the JSON and the report's tolerance-banded maps (with --nominal: by face "
+    "as well).",
 )
 @click.option(
     "--section",
@@ -403,7 +404,8 @@ def analyze(
     callback=_section_value,
     metavar="AXIS=POS",
     help="A section of the report along the line AXIS = POS mm of the part's plane (x=40, y=30 for a part "
-    "measured from +z): nominal, measured, systematic and compensated profiles. Repeat for several.",
+    "measured from +z): nominal, measured, systematic and compensated profiles. With --nominal: the plane "
+    "x, y or z = POS of the CAD frame cut through the compensated faces. Repeat for several.",
 )
 @_align_options
 @click.option(
@@ -501,11 +503,11 @@ def compensate(
                 )
         if part_path is not None and cad.FORMATS.get(part_path.suffix.lower()) != "step":
             raise click.UsageError(f"--part {part_path}: the part is written as STEP (.step or .stp)")
-        for name, given in (("--tolerance", tolerance), ("--section", section_lines)):
-            if given:
+        for axis, at in section_lines:
+            if axis not in ("x", "y", "z"):
                 raise click.UsageError(
-                    f"{name} is not available with --nominal yet (the CAD report draws each face in its own "
-                    "(u, v)); run analyze or compensate without --nominal for the tolerance bands and sections"
+                    f"--section {axis}={at:g}: with --nominal a section is the plane x=…, y=… or z=… of the CAD "
+                    "frame (mm)"
                 )
     if section_lines and report_path is None:
         raise click.UsageError("--section draws in the report: give --report")
@@ -541,6 +543,8 @@ def compensate(
             points_out=points_out,
             json_path=json_path,
             report_path=report_path,
+            tolerance=tolerance,
+            section_lines=section_lines,
         )
     with progress() as say:
         say(f"reading {measurements}")
@@ -592,16 +596,8 @@ def compensate(
         _write_points(points_out, meas, d, c.points_compensated)
     payload = {"input": str(measurements), **a.as_dict(), **sysd}
     if tolerance is not None:
-        tol = {
-            "value": tolerance,
-            "before": rep.tolerance_shares(meas.deviation, tolerance),
-            "predicted": rep.tolerance_shares(meas.deviation - c.gain * d.systematic, tolerance),
-        }
-        payload["tolerance"] = tol
-        summary(
-            f"tolerance ±{tolerance:g} mm: {100 * tol['before']['inside']:.1f} % of the points inside before, "
-            f"{100 * tol['predicted']['inside']:.1f} % predicted after (measured − systematic)"
-        )
+        payload["tolerance"] = _tolerance_of(meas.deviation, meas.deviation - c.gain * d.systematic, tolerance)
+        _tolerance_said(payload["tolerance"], tolerance)
     if ext.max_distance > 0:
         payload["extrapolation"] = ext.as_dict()
         echo_err(
@@ -635,6 +631,24 @@ def compensate(
                 sections=secs,
             ),
         )
+
+
+def _tolerance_of(before, predicted, tolerance) -> dict:
+    """The ``tolerance`` JSON object: the shares of the points inside ±T before and predicted after."""
+    from ..report import freeform as rep
+
+    return {
+        "value": tolerance,
+        "before": rep.tolerance_shares(before, tolerance),
+        "predicted": rep.tolerance_shares(predicted, tolerance),
+    }
+
+
+def _tolerance_said(tol, tolerance) -> None:
+    summary(
+        f"tolerance ±{tolerance:g} mm: {100 * tol['before']['inside']:.1f} % of the points inside before, "
+        f"{100 * tol['predicted']['inside']:.1f} % predicted after (measured − systematic)"
+    )
 
 
 def _print_decomposition(a, d) -> None:
@@ -690,11 +704,14 @@ def _compensate_cad(
     points_out,
     json_path,
     report_path,
+    tolerance=None,
+    section_lines=(),
 ):
     """``compensate --nominal``: each measured face compensated in its own (u, v) and put in the part."""
     from .. import cad, measure
     from .. import nc as ncmod
     from ..processes import freeform as pf
+    from ..report import cad_sections
 
     with progress() as say:
         say(f"reading {measurements} and projecting onto {nominal}")
@@ -719,6 +736,7 @@ def _compensate_cad(
             proj, **options, **kw, previous=None if prev is None else {g.face: g.at for g in prev.grids}, gain=gain
         )
         d = pf.part_decomposition(pc, meas, **kw)
+        secs = [cad_sections.cad_section(pc, meas.nominal, axis, at) for axis, at in section_lines]
         corr = None
         if program is not None:
             say(f"correcting {program}")
@@ -768,6 +786,16 @@ def _compensate_cad(
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
         "correction": _cad_correction_of(pc, nominal, prev, previous),
     }
+    predicted = meas.deviation - pf.part_moved(pc, len(meas))
+    if tolerance is not None:
+        payload["tolerance"] = _tolerance_of(meas.deviation, predicted, tolerance)
+        for f, fd in zip(pc.faces, payload["by_face"]):
+            fd["tolerance"] = _tolerance_of(meas.deviation[f.points], predicted[f.points], tolerance)
+            summary(
+                f"face {f.face}: tolerance ±{tolerance:g} mm: {100 * fd['tolerance']['before']['inside']:.1f} % of its "
+                f"points inside before, {100 * fd['tolerance']['predicted']['inside']:.1f} % predicted after"
+            )
+        _tolerance_said(payload["tolerance"], tolerance)
     if corr is not None:
         payload["program"] = {"input": str(program), "output": str(output), **corr.as_dict()}
     if json_path:
@@ -795,6 +823,10 @@ def _compensate_cad(
                     )
                     if v
                 },
+                tolerance=tolerance,
+                sections=secs,
+                faces=[(f.face, f.points) for f in pc.faces],
+                predicted=predicted,
             ),
         )
 

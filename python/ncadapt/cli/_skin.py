@@ -295,22 +295,31 @@ PASSWORD_ENV = "NCADAPT_OPCUA_PASSWORD"
 _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
-def _security(insecure, cert, key, user, peer_cert=None, *, client: bool):
+def _security(insecure, cert, key, user, peer_cert=None, *, client: bool, trust=None, crl=None):
     """The exchange's security from the options: Basic256Sha256 SignAndEncrypt with certificates
-    and a user, or NoSecurity with --insecure (exactly one)."""
+    and a user, or NoSecurity with --insecure (exactly one). The trust folder and the revocation
+    lists are read and checked here (exit 2 before anything is served or connected)."""
     from .. import loop as lp
 
     given = [
         n
-        for n, v in (("--cert", cert), ("--key", key), ("--user", user))
+        for n, v in (("--cert", cert), ("--key", key), ("--user", user), ("--trust", trust), ("--crl", crl))
         + ((("--server-cert", peer_cert),) if client else ())
         if v is not None
     ]
     if insecure:
         if given:
-            raise click.UsageError(f"--insecure and {', '.join(given)} exclude each other")
+            raise click.UsageError(
+                f"--insecure and {', '.join(given)} exclude each other (NoSecurity has no certificates)"
+            )
         return None
-    needed = ["--cert", "--key", "--user"] + (["--server-cert"] if client else [])
+    if crl is not None and trust is None:
+        raise click.UsageError(
+            "--crl needs --trust: the folder holding the certificate of each list's issuer (its signature is checked)"
+        )
+    needed = ["--cert", "--key", "--user"]
+    if client and peer_cert is None and trust is None:
+        needed.append("--server-cert (or --trust)")
     missing = [n for n in needed if n not in given]
     if missing:
         raise click.UsageError(
@@ -323,7 +332,19 @@ def _security(insecure, cert, key, user, peer_cert=None, *, client: bool):
     password = os.environ.get(PASSWORD_ENV)
     if not password:
         raise click.UsageError(f"the password for --user {user!r} goes in the environment variable {PASSWORD_ENV}")
-    return lp.Security(str(cert), str(key), user, password, str(peer_cert) if peer_cert else None)
+    if trust is not None:
+        lp.trusted_certificates(trust)
+        if crl is not None:
+            lp.revocation_lists(crl, trust)
+    return lp.Security(
+        str(cert),
+        str(key),
+        user,
+        password,
+        str(peer_cert) if peer_cert else None,
+        str(trust) if trust is not None else None,
+        str(crl) if crl is not None else None,
+    )
 
 
 def _security_options(client: bool):
@@ -337,9 +358,39 @@ def _security_options(client: bool):
             click.option("--user", help=f"User name of the session (password in {PASSWORD_ENV})."),
         ]
         if client:
+            opts += [
+                click.option(
+                    "--server-cert",
+                    "peer_cert",
+                    type=_FILE,
+                    help="The controller's certificate (DER): a controller presenting another one is refused.",
+                ),
+                click.option(
+                    "--trust",
+                    type=click.Path(exists=True, file_okay=False, path_type=Path),
+                    help="Folder of certificates (DER or PEM): the controller's certificate must be in it or issued "
+                    "by one in it (with or instead of --server-cert).",
+                ),
+            ]
+        else:
             opts.append(
-                click.option("--server-cert", "peer_cert", type=_FILE, help="The controller's certificate (DER).")
+                click.option(
+                    "--trust",
+                    type=click.Path(exists=True, file_okay=False, path_type=Path),
+                    help="Folder of the client certificates (DER or PEM) the controller accepts; a client whose "
+                    "certificate is not in it (nor issued by one in it) is refused. Without it, any client "
+                    "certificate with the right user and password is accepted.",
+                )
             )
+        opts.append(
+            click.option(
+                "--crl",
+                type=click.Path(exists=True, path_type=Path),
+                help="Certificate revocation lists (a file, or a folder of *.crl, *.pem, *.der; PEM or DER), with "
+                "--trust: a peer certificate its issuer revoked is refused. Each list must be signed by a "
+                "certificate of --trust and not expired (else exit 2 at start).",
+            )
+        )
         for o in reversed(opts):
             f = o(f)
         return f
@@ -482,6 +533,8 @@ def loop_cmd(
     key,
     user,
     peer_cert,
+    trust,
+    crl,
     json_path,
 ):
     """Run a compensator in the loop: gauge readings in, W1 offsets out — replayed from a CSV, or
@@ -500,9 +553,13 @@ def loop_cmd(
         method = ps.default_method(gauge)
     if (replay_path is None) != (output is None):
         raise click.UsageError("--replay and -o go together")
-    if url is None and (pockets is not None or insecure or cert or key or user or peer_cert):
-        raise click.UsageError("--pockets, --insecure, --cert, --key, --user and --server-cert go with --opcua")
-    security = _security(insecure, cert, key, user, peer_cert, client=True) if url is not None else None
+    if url is None and (pockets is not None or insecure or cert or key or user or peer_cert or trust or crl):
+        raise click.UsageError(
+            "--pockets, --insecure, --cert, --key, --user, --server-cert, --trust and --crl go with --opcua"
+        )
+    security = (
+        _security(insecure, cert, key, user, peer_cert, client=True, trust=trust, crl=crl) if url is not None else None
+    )
     if w1_max is not None and not w1_max < target:
         raise click.BadParameter(
             f"{w1_max:g} mm is not below --target {target:g} mm: a W1 of the target "
@@ -561,9 +618,17 @@ def loop_cmd(
             )
         except ps.LoopStopped as e:
             stopped, where, steps = e, url, info.get("steps", 0)
+        except lp.ServerRefused as e:
+            raise InputError(f"{e} (--trust, --crl)", url) from None
         except lp.ServerUntrusted as e:
             raise InputError(f"{e} (--server-cert)", url) from None
         except lp.ConnectionRefused as e:
+            if "BadCertificateRevoked" in str(e):
+                raise InputError(
+                    f"the controller refused the session: this client's certificate ({cert}) is revoked by its "
+                    "issuer's revocation list (skin serve --crl)",
+                    url,
+                ) from None
             if "BadCertificateUntrusted" in str(e):
                 raise InputError(
                     f"the controller refused the session: it does not trust this client's certificate "
@@ -662,32 +727,19 @@ def loop_cmd(
     help="Seconds to wait for the client's Ack before holding W1 and stopping (the watchdog).",
 )
 @_security_options(client=False)
-@click.option(
-    "--trust",
-    type=click.Path(exists=True, file_okay=False, path_type=Path),
-    help="Folder of the client certificates (DER or PEM) the controller accepts; a client whose "
-    "certificate is not in it (nor issued by one in it) is refused. Without it, any client "
-    "certificate with the right user and password is accepted.",
-)
 @json_option
 @handle_errors
-def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, user, trust, json_path):
+def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, user, trust, crl, json_path):
     """Play the controller of the testbed on OPC UA: publish its gauge readings, apply the W1
     offsets a client writes (try `skin loop --opcua` against it before a real controller), and
     report the errors at the 13 checkpoints of each pocket when both pockets are finished."""
     import asyncio
-    import dataclasses
     import threading
 
     from .. import loop as lp
     from ..sim import skin as sk
 
-    security = _security(insecure, cert, key, user, client=False)
-    if trust is not None:
-        if security is None:
-            raise click.UsageError("--trust and --insecure exclude each other (NoSecurity has no certificates)")
-        lp.trusted_certificates(trust)
-        security = dataclasses.replace(security, trust=str(trust))
+    security = _security(insecure, cert, key, user, client=False, trust=trust, crl=crl)
     check_outputs({}, {"--json": json_path})
     _quiet_asyncua()
     ms = sk.machines(noise=noise, latency_ms=latency_ms, seed=seed)
@@ -695,7 +747,12 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, u
     status: dict = {}
 
     def refused(cert, status):
-        click.echo(f"{endpoint}: refused a client certificate {cert}: {status} (not in --trust {trust})", err=True)
+        why = {
+            "BadCertificateRevoked": f"revoked by its issuer's list in --crl {crl}",
+            "BadCertificateRevocationUnknown": f"a revocation list of its issuer in --crl {crl} has expired since start",
+            "BadCertificateUntrusted": f"not in --trust {trust}",
+        }.get(status, f"checked against --trust {trust}")
+        click.echo(f"{endpoint}: refused a client certificate {cert}: {status} ({why})", err=True)
 
     async def main():
         task = asyncio.create_task(
@@ -717,7 +774,8 @@ def serve(endpoint, noise, latency_ms, seed, ack_timeout, insecure, cert, key, u
                 f"serving the skin testbed at {endpoint} (seed {seed}): target thickness {sk.T_TARGET} mm, "
                 f"depth {sk.A_G} mm, {len(ms)} pockets, "
                 + ("NoSecurity" if security is None else "Basic256Sha256 SignAndEncrypt")
-                + (f", client certificates trusted from {trust}" if trust is not None else ""),
+                + (f", client certificates trusted from {trust}" if trust is not None else "")
+                + (f", revocation lists from {crl}" if crl is not None else ""),
                 err=True,
             )
         await task

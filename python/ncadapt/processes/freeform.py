@@ -784,6 +784,16 @@ def part_decomposition(pc: PartCompensation, meas: Measurements, **moran_options
     return Decomposition(s, r, first.method, params, nz, auto)
 
 
+def part_moved(pc: PartCompensation, n: int) -> np.ndarray:
+    """(n,) mm: what this round's correction removes at each measured point — its face's effective
+    gain times the systematic part there (the systematic part itself in a first round); the
+    deviation predicted after the correction is the measured one minus this."""
+    out = np.zeros(n)
+    for f in pc.faces:
+        out[f.points] = f.gain * f.decomposition.systematic
+    return out
+
+
 def face_layout(pc: PartCompensation, n: int, gap: float = 5.0) -> np.ndarray:
     """(n, 2) mm: each point's face (u, v) scaled to mm (``coords``), the faces side by side
     along u, ``gap`` mm apart (for plots)."""

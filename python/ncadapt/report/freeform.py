@@ -389,6 +389,8 @@ def render(
     tolerance=None,
     sections=(),
     callouts: int = CALLOUTS,
+    faces=None,
+    predicted=None,
 ) -> str:
     """The report as HTML text.
 
@@ -397,8 +399,11 @@ def render(
     ``compensation``: the :class:`~ncadapt.processes.freeform.Compensation` (the correction map);
     ``points`` (n, 3): the nominal points in machine coordinates, mm (the 3-D view; default ``xy``
     at height 0); ``tolerance``: the profile tolerance ±T, mm (banded maps and the share of points
-    inside); ``sections``: :class:`Section` s; ``callouts``: how many of the largest |deviations|
-    are numbered on the maps and listed.
+    inside); ``sections``: :class:`Section` s or :class:`~ncadapt.report.cad_sections.CadSection` s;
+    ``callouts``: how many of the largest |deviations| are numbered on the maps and listed;
+    ``faces``: [(face id, indices of its points)] of a CAD nominal (the tolerance table by face);
+    ``predicted`` (n,): the deviations predicted after the correction, mm (default: ``deviation``
+    minus the compensation's gain × the systematic part).
     """
     xy = np.asarray(xy, float)[:, :2]
     deviation = np.asarray(deviation, float)
@@ -421,8 +426,11 @@ def render(
         parts.append(("The correction to be cut", _correction_section(compensation, xy, names, extrapolation)))
     if tolerance is not None:
         # what the program moves: this round's gain on the systematic part (1 in a first round)
-        moved = sysv * (getattr(compensation, "gain", 1.0) if compensation is not None else 1.0)
-        parts.append(("Tolerance", _tolerance_section(xy, deviation, moved, after, tolerance, names, marked)))
+        if predicted is None:
+            predicted = deviation - sysv * (getattr(compensation, "gain", 1.0) if compensation is not None else 1.0)
+        parts.append(
+            ("Tolerance", _tolerance_section(xy, deviation, predicted, after, tolerance, names, marked, faces))
+        )
     parts.append(
         (
             "Deviations",
@@ -441,7 +449,12 @@ def render(
         )
     )
     for sec in sections:
-        parts.append((f"Section {sec.axis} = {sec.at:g} mm", _section_block(sec, deviation)))
+        if isinstance(sec, Section):
+            parts.append((f"Section {sec.axis} = {sec.at:g} mm", _section_block(sec, deviation)))
+        else:
+            from . import cad_sections
+
+            parts.append((f"Section {sec.axis} = {sec.at:g} mm", cad_sections.block(sec, deviation)))
     view_points = np.column_stack([xy, np.zeros(len(xy))]) if points is None else np.asarray(points, float)
     parts.append(("3-D view", surface_view(view_points, series)))
     edges = histogram_edges([v for _, v in series])
@@ -541,26 +554,33 @@ def _correction_section(compensation, xy, names, extrapolation) -> str:
     )
 
 
-def _tolerance_section(xy, deviation, sysv, after, tolerance, names, marked) -> str:
+def _tolerance_section(xy, deviation, predicted, after, tolerance, names, marked, faces=None) -> str:
     panels = [("measured", deviation)]
     if after is not None:
         panels.append(("after", after))
     else:
-        panels.append(("predicted after (measured − systematic)", deviation - sysv))
+        panels.append(("predicted after (measured − systematic)", predicted))
+    groups = (
+        [("", slice(None))]
+        if not faces
+        else [("all faces, ", slice(None))] + [(f"face {fid}, ", idx) for fid, idx in faces]
+    )
     rows = []
-    for name, v in panels:
-        s = tolerance_shares(v, tolerance)
-        rows.append(
-            (
-                name,
-                s["points"],
-                f"{100 * s['inside']:.1f}",
-                f"{100 * (1 - s['inside']):.1f}",
-                f"{100 * s['above']:.1f}",
-                f"{100 * s['below']:.1f}",
-                f"{np.abs(v).max() * UM:.1f}",
+    for label, idx in groups:
+        for name, v in panels:
+            w = np.asarray(v, float)[idx]
+            s = tolerance_shares(w, tolerance)
+            rows.append(
+                (
+                    label + name,
+                    s["points"],
+                    f"{100 * s['inside']:.1f}",
+                    f"{100 * (1 - s['inside']):.1f}",
+                    f"{100 * s['above']:.1f}",
+                    f"{100 * s['below']:.1f}",
+                    f"{np.abs(w).max() * UM:.1f}",
+                )
             )
-        )
     t = tolerance * UM
     head = ["", "points", "in tolerance, %", "out, %", f"above +{t:g} µm, %", f"below −{t:g} µm, %", "max |·|, µm"]
     return (
