@@ -185,3 +185,33 @@ def test_linuxcnc_reads_a_number_without_a_point_in_units(tmp_path):
     c = canonical(p)
     assert c.error is None and c.ends[-1, 0] == pytest.approx(10.0)
     assert nc.read(p).blocks.end[-1, 0] == pytest.approx(10.0)
+
+
+FANUC_G80 = (
+    "G21 G90 G17\nG0 X0. Y0. Z10.\nG1 Z5. F100.\nG98 G81 X5. Y5. Z-2. R1. F100.\nX10.\nG80\nX1. Y1.\nG0 Z20.\nM30\n"
+)
+
+
+def test_fanuc_g80_leaves_the_motion_before_the_cycle():
+    """On a Fanuc control canned cycles are a modal group of their own (09): G80 cancels them and
+    the G0/G1/G2/G3 in force before them moves the next axis words (here G1, a feed), where
+    LinuxCNC — one group for both, G80 leaving no motion — refuses the same block as rs274 does."""
+    prog = nc.parse(FANUC_G80, dialect="fanuc")
+    after = prog.blocks.motion[prog.blocks.line == 7]
+    assert list(after) == [nc.MOTIONS.index("feed")]
+    with pytest.raises(RefusedError, match="unsupported"):
+        nc.parse(FANUC_G80).correct(fields.Shift((0, 0, 0.05)))
+    assert any("no motion mode" in u.construct for u in nc.parse(FANUC_G80).unsupported)
+
+
+def test_fanuc_cycles_expanded_keep_the_program_s_motion_after_g80():
+    """Written as moves, a cycle leaves the output in G0; the block after G80 relies on the
+    program's G1, so the output writes G1 into it. Kept a cycle block, nothing needs adding."""
+    prog = nc.parse(FANUC_G80, dialect="fanuc")
+    kept = prog.correct(fields.Shift((0, 0, 0.05))).text.splitlines()
+    assert kept[6] == "X1. Y1."
+    expanded = prog.correct(fields.Shift((0, 0, 0.05)), expand_cycles=True).text.splitlines()
+    assert "G1 X1. Y1." in expanded
+    # read back as Fanuc, the output moves as the program does, 0.05 mm higher where it cuts
+    back = nc.parse("\n".join(expanded) + "\n", dialect="fanuc")
+    assert back.blocks.motion[back.blocks.line == expanded.index("G1 X1. Y1.") + 1][0] == nc.MOTIONS.index("feed")

@@ -7,8 +7,8 @@
 
 use crate::error::NcError;
 use crate::interp::{
-    axis_index, cycle_steps, peck_clearance, CycleStep, Hole, Interp, Motion, Record, AXES,
-    CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
+    axis_index, cycle_steps, peck_clearance, CycleStep, Dialect, Hole, Interp, Motion, Record,
+    AXES, CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
 };
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
@@ -247,6 +247,12 @@ fn is_motion_g(w: &Word) -> bool {
         }
 }
 
+/// G0, G1, G2 or G3: the motion codes of a Fanuc control's group 01, which its canned cycles
+/// (group 09) and G80 leave as they are.
+fn is_g01(w: &Word) -> bool {
+    w.letter == b'G' && matches!(round(w.value * 10.0) as i32, 0 | 10 | 20 | 30)
+}
+
 #[inline]
 fn is_stop_m(w: &Word) -> bool {
     w.letter == b'M' && matches!(round(w.value) as i32, 0 | 1 | 2 | 30 | 60)
@@ -438,7 +444,7 @@ impl<'a> Emitter<'a> {
                 } else {
                     self.uncorrected(li, ri);
                 }
-            } else if words.iter().any(is_motion_g) {
+            } else if words.iter().any(|w| self.sets_motion(w)) {
                 self.st.out_motion = None;
             } else if let Ok(k) = self
                 .it
@@ -567,6 +573,16 @@ impl<'a> Emitter<'a> {
         }
     }
 
+    /// A word that sets the modal motion the next blocks move in: a motion code, or on a Fanuc
+    /// control only G0 G1 G2 G3 (its canned cycles and G80 are a group of their own).
+    fn sets_motion(&self, w: &Word) -> bool {
+        if self.it.dialect == Dialect::Fanuc {
+            is_g01(w)
+        } else {
+            is_motion_g(w)
+        }
+    }
+
     /// Insert the program's own motion word when the output's modal motion differs from it.
     fn restore_modal(&mut self, li: usize, rec: &Record, explicit: bool) {
         if explicit {
@@ -588,7 +604,7 @@ impl<'a> Emitter<'a> {
         let rec = &it.records[ri];
         let start = start_of(it, ri);
         let words = lx.line_words(li);
-        let explicit = words.iter().any(is_motion_g);
+        let explicit = words.iter().any(|w| self.sets_motion(w));
         if rec.motion != Motion::Other {
             self.restore_modal(li, rec, explicit);
         } else if explicit {
@@ -655,7 +671,7 @@ impl<'a> Emitter<'a> {
         }
         let words = lx.line_words(li);
         let epos0 = self.st.epos;
-        let explicit = words.iter().any(is_motion_g);
+        let explicit = words.iter().any(|w| self.sets_motion(w));
         let d0 = [disp[0], disp[1], disp[2]];
         let uniform = disp
             .chunks_exact(3)
@@ -937,7 +953,10 @@ impl<'a> Emitter<'a> {
                 for (k, e) in self.st.epos.iter_mut().enumerate().take(3) {
                     *e = it.records[last].end[k];
                 }
-                self.st.out_motion = None;
+                // a cycle block sets the modal motion, except on a Fanuc control (group 09)
+                if self.it.dialect != Dialect::Fanuc {
+                    self.st.out_motion = None;
+                }
                 return Ok(());
             }
             return Err(err(format!(
@@ -1073,7 +1092,10 @@ impl<'a> Emitter<'a> {
         for ((e, v), o) in self.st.epos.iter_mut().zip(end).zip(off) {
             *e = v * u + o;
         }
-        self.st.out_motion = None;
+        // a cycle block sets the modal motion, except on a Fanuc control (group 09)
+        if self.it.dialect != Dialect::Fanuc {
+            self.st.out_motion = None;
+        }
         Ok(())
     }
 
@@ -1192,7 +1214,16 @@ impl<'a> Emitter<'a> {
             self.st.tail_ends.push(self.st.tail.len());
         }
         self.st.steps = steps;
-        self.st.out_motion = None;
+        // the moves written set the output's modal motion; on a Fanuc control the program's
+        // stays the group 01 motion before the cycle, which the next block may rely on
+        self.st.out_motion = if self.it.dialect == Dialect::Fanuc {
+            self.st.steps.iter().rev().find_map(|s| match s {
+                CycleStep::Move(m, ..) => Some(*m),
+                _ => None,
+            })
+        } else {
+            None
+        };
         Ok(())
     }
 

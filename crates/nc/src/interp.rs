@@ -23,7 +23,9 @@ pub enum Dialect {
     LinuxCnc,
     /// Fanuc-family controls and Haas: a number without a decimal point counts least input
     /// increments on length and angle words (`X10` is 0.010 mm), unless a machine parameter
-    /// (Fanuc 3401#0 DPI) says otherwise; the G98/G99 mode a program starts in is the control's.
+    /// (Fanuc 3401#0 DPI) says otherwise; the G98/G99 mode a program starts in is the control's;
+    /// canned cycles are a modal group of their own (09), so G80 leaves the G0/G1/G2/G3 that was
+    /// in force before them.
     Fanuc,
     /// grbl (no canned cycles of its own).
     Grbl,
@@ -341,6 +343,8 @@ pub struct Interp {
     /// depend on where the tool is, which the correction moves, so the emitter rewrites their
     /// words to set the same offsets in the corrected program. (line, frame, inch)
     pub frame_lines: Vec<(u32, u32, bool)>,
+    /// The dialect the program was read in.
+    pub dialect: Dialect,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -405,6 +409,8 @@ struct State {
     /// Index of `off` in the current run's frames.
     frame: u32,
     dialect: Dialect,
+    /// The last of G0, G1, G2, G3 (Fanuc's group 01, which a canned cycle leaves as it is).
+    g01: Option<Motion>,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -524,6 +530,7 @@ impl Interpreter {
                 off_saved: [f64::NAN; NAXES],
                 frame: 0,
                 dialect,
+                g01: None,
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -552,6 +559,7 @@ impl Interpreter {
             cycles: Vec::new(),
             frames: vec![self.st.off],
             frame_lines: Vec::new(),
+            dialect: self.st.dialect,
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
@@ -1074,6 +1082,15 @@ impl Interpreter {
                     }
                 }
                 st.mode = m;
+                match m {
+                    Mode::Motion(mo) => st.g01 = Some(mo),
+                    // on a Fanuc control G80 cancels the cycles' group 09 only: the motion of group
+                    // 01 in force before them is again
+                    Mode::None if st.dialect == Dialect::Fanuc => {
+                        st.mode = st.g01.map_or(Mode::None, Mode::Motion);
+                    }
+                    _ => {}
+                }
             }
             // words no code of the block uses are an error, as in LinuxCNC (its check_other_codes):
             // on a Fanuc control R, I, K on a G1 round or chamfer the corner, which a split move
