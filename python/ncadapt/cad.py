@@ -3,6 +3,10 @@
 The surface goes to OpenCASCADE exactly as :meth:`ncadapt.surfaces.Surface.bspline` gives it
 (knots, multiplicities, poles, degree 3 × 3), as one face; the writers are OpenCASCADE's own
 (``STEPControl_Writer``, AP214, and ``IGESControl_Writer``), in millimetres.
+
+A CAD part is read back by OpenCASCADE's own readers (:func:`read_part`: a STEP file through the
+XCAF reader, which also gives the faces' names; an IGES file by ids only), and its faces are
+projected onto, evaluated and rebuilt here.
 """
 
 from __future__ import annotations

@@ -259,7 +259,7 @@ def read_qif_actuals(path, units: str | None = None) -> Actuals:
         lines.append(el.sourceline or 0)
     if paired:
         el, nid = paired[0]
-        nom = nominals[nid]
+        nom = nominals[str(nid)]
         if not alone:
             fail(
                 f"every measured point has a nominal Location (this one: PointFeatureNominal {nid} at line "
