@@ -180,3 +180,31 @@ def test_a_step_without_face_names(tmp_path):
     a = _csv(tmp_path / "a.csv", pts)
     r = CliRunner().invoke(main, ["analyze", str(a), "--nominal", str(step), "--face", "top"])
     assert r.exit_code == 2 and "names none of its faces: choose them by id, 1 to 6" in r.output, r.output
+
+
+def test_face_ids_are_those_of_opencascades_plain_step_reader(named_block):
+    # the ids stay those of STEPControl_Reader (the reader before names were read), face for face
+    from pathlib import Path
+
+    from OCP.STEPControl import STEPControl_Reader
+
+    demo = Path(cad.__file__).parent / "data" / "demo_part.step"
+    for path in (named_block, demo):
+        r = STEPControl_Reader()
+        r.ReadFile(str(path))
+        r.TransferRoots()
+        plain = cad.faces(r.OneShape())
+        part = cad.read_part(path)
+        assert len(plain) == len(part.faces)
+        for a, b in zip(plain, part.faces):
+            assert _centre(a) == pytest.approx(_centre(b), abs=1e-9)
+            assert a.Orientation() == b.Orientation()
+
+
+def test_a_step_file_the_xcaf_reader_fails_on_is_read_without_names(named_block, monkeypatch):
+    def fails(shape, doc):
+        raise RuntimeError("the XCAF reader failed")
+
+    monkeypatch.setattr(cad, "_step_names", fails)  # the forked reader inherits it
+    part = cad.read_part(named_block)
+    assert part.names == (None,) * 6 and len(part.faces) == 6

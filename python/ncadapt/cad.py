@@ -228,10 +228,11 @@ def _step_names(shape, doc) -> list[str | None]:
     return out
 
 
-def _read_child(path: str, kind: str, out: str, msg: str) -> None:
+def _read_child(path: str, kind: str, out: str, msg: str, names: bool = True) -> None:
     """In a child process: read the file with OpenCASCADE and write its shape as a BRep file and
     its faces' names (JSON, beside it; see :func:`_step_names`), or a message; a crash of the
-    translator on a malformed file ends only the child."""
+    translator on a malformed file ends only the child. ``names`` False: a STEP file through the
+    plain reader (``STEPControl_Reader``), its faces unnamed."""
     import json
 
     from OCP.BRepTools import BRepTools
@@ -239,7 +240,7 @@ def _read_child(path: str, kind: str, out: str, msg: str) -> None:
 
     try:
         with _quiet():
-            if kind == "step":
+            if kind == "step" and names:
                 from OCP.Interface import Interface_Static
                 from OCP.STEPCAFControl import STEPCAFControl_Reader
                 from OCP.TCollection import TCollection_ExtendedString
@@ -259,19 +260,20 @@ def _read_child(path: str, kind: str, out: str, msg: str) -> None:
                 shape = r.Reader().OneShape()
             else:
                 from OCP.IGESControl import IGESControl_Reader
+                from OCP.STEPControl import STEPControl_Reader
 
-                r = IGESControl_Reader()
+                r = STEPControl_Reader() if kind == "step" else IGESControl_Reader()
                 if r.ReadFile(path) != IFSelect_RetDone:
-                    Path(msg).write_text("not a readable IGES file (OpenCASCADE could not read it)")
+                    Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE could not read it)")
                     return
                 r.TransferRoots()
                 shape = r.OneShape()
             if shape is None or shape.IsNull() or not faces(shape):
                 Path(msg).write_text("no face in the file")
                 return
-            names = _step_names(shape, doc) if kind == "step" else [None] * len(faces(shape))
+            named = _step_names(shape, doc) if kind == "step" and names else [None] * len(faces(shape))
             BRepTools.Write_s(shape, out)
-            Path(out + ".names.json").write_text(json.dumps(names))
+            Path(out + ".names.json").write_text(json.dumps(named))
     except Exception as e:  # noqa: BLE001 - OpenCASCADE's own failures: the file is not readable
         Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE: {type(e).__name__})")
 
@@ -351,7 +353,8 @@ def read_part(path: str | os.PathLike) -> Part:
     """The shape of a STEP (``.step``/``.stp``) or IGES file, read by OpenCASCADE, with its faces and
     their names (STEP: the XCAF reader, ``STEPCAFControl_Reader`` with names and sub-shape names on;
     each face labelled with a ``TDataStd_Name``, the ``ADVANCED_FACE`` name string); an unreadable
-    file or one without a face is an :class:`InputError` naming it.
+    file or one without a face is an :class:`InputError` naming it. A STEP file the XCAF reader
+    cannot read is read again by the plain ``STEPControl_Reader`` (the same faces, unnamed).
 
     The translator runs in a child process (forked): on some malformed files it crashes the
     process, which then ends the child only and becomes an input error here. The shape comes back
@@ -375,13 +378,20 @@ def read_part(path: str | os.PathLike) -> Part:
         raise InputError(f"cannot read: {e.strerror}", str(p)) from None
     with tempfile.TemporaryDirectory(prefix="ncadapt-cad-") as d:
         out, msg = Path(d) / "shape.brep", Path(d) / "message.txt"
-        proc = multiprocessing.get_context("fork").Process(target=_read_child, args=(str(p), kind, str(out), str(msg)))
-        proc.start()
-        proc.join(READ_TIMEOUT)
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
-            raise InputError(f"OpenCASCADE did not finish reading the file in {READ_TIMEOUT:g} s", str(p))
+        for names in (True, False):  # the names are the XCAF reader's; should it fail, the plain reader
+            proc = multiprocessing.get_context("fork").Process(
+                target=_read_child, args=(str(p), kind, str(out), str(msg), names)
+            )
+            proc.start()
+            proc.join(READ_TIMEOUT)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+                raise InputError(f"OpenCASCADE did not finish reading the file in {READ_TIMEOUT:g} s", str(p))
+            if proc.exitcode == 0 and not msg.exists() or kind != "step":
+                break
+            msg.unlink(missing_ok=True)
+            out.unlink(missing_ok=True)
         if proc.exitcode != 0:
             raise InputError(f"not a readable {kind.upper()} file (OpenCASCADE's translator crashed on it)", str(p))
         if msg.exists():

@@ -295,7 +295,7 @@ def analyze(
     if proj is not None:
         summary(
             "faces: "
-            + "; ".join(f"{_face_said(f['id'], f['name'])} {f['n_points']:,} points" for f in proj.faces_used())
+            + "; ".join(f"{_face_said(f['id'], f['name'])} ({f['n_points']:,} points)" for f in proj.faces_used())
         )
     _print_analysis(a)
     if json_path:
