@@ -3,12 +3,17 @@
 The surface goes to OpenCASCADE exactly as :meth:`ncadapt.surfaces.Surface.bspline` gives it
 (knots, multiplicities, poles, degree 3 × 3), as one face; the writers are OpenCASCADE's own
 (``STEPControl_Writer``, AP214, and ``IGESControl_Writer``), in millimetres.
+
+A CAD part is read back by OpenCASCADE's own readers (:func:`read_part`: a STEP file through the
+XCAF reader, which also gives the faces' names; an IGES file by ids only), and its faces are
+projected onto, evaluated and rebuilt here.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -192,39 +197,169 @@ def read_surface_points(path: str | os.PathLike, u, v) -> np.ndarray:
 READ_TIMEOUT = 300.0
 
 
-def _read_child(path: str, kind: str, out: str, msg: str) -> None:
-    """In a child process: read the file with OpenCASCADE and write its shape as a BRep file (or
-    a message); a crash of the translator on a malformed file ends only the child."""
+def _step_names(shape, doc) -> list[str | None]:
+    """The name of each face of ``shape`` (None for an unnamed one) from the XCAF document the STEP
+    reader filled: the ``TDataStd_Name`` of the sub-shape labels of the shape tool (the STEP
+    ``ADVANCED_FACE`` name strings), matched to the faces by their shared topology (``IsPartner``)."""
+    from OCP.TDataStd import TDataStd_Name
+    from OCP.TDF import TDF_ChildIterator
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.XCAFDoc import XCAFDoc_DocumentTool, XCAFDoc_ShapeTool
+
+    tool = XCAFDoc_DocumentTool.ShapeTool_s(doc.Main())
+    fs = faces(shape)
+    out: list[str | None] = [None] * len(fs)
+    it = TDF_ChildIterator(tool.Label(), True)
+    while it.More():
+        label = it.Value()
+        it.Next()
+        if not XCAFDoc_ShapeTool.IsSubShape_s(label):
+            continue
+        sub = XCAFDoc_ShapeTool.GetShape_s(label)
+        attr = TDataStd_Name()
+        if sub.ShapeType() != TopAbs_FACE or not label.FindAttribute(TDataStd_Name.GetID_s(), attr):
+            continue
+        name = attr.Get().ToExtString().strip()
+        if not name:
+            continue
+        for k, f in enumerate(fs):
+            if out[k] is None and f.IsPartner(sub):
+                out[k] = name
+    return out
+
+
+def _read_child(path: str, kind: str, out: str, msg: str, names: bool = True) -> None:
+    """In a child process: read the file with OpenCASCADE and write its shape as a BRep file and
+    its faces' names (JSON, beside it; see :func:`_step_names`), or a message; a crash of the
+    translator on a malformed file ends only the child. ``names`` False: a STEP file through the
+    plain reader (``STEPControl_Reader``), its faces unnamed."""
+    import json
+
     from OCP.BRepTools import BRepTools
     from OCP.IFSelect import IFSelect_RetDone
 
-    if kind == "step":
-        from OCP.STEPControl import STEPControl_Reader as Reader
-    else:
-        from OCP.IGESControl import IGESControl_Reader as Reader
     try:
         with _quiet():
-            r = Reader()
-            if r.ReadFile(path) != IFSelect_RetDone:
-                Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE could not read it)")
-                return
-            r.TransferRoots()
-            shape = r.OneShape()
+            if kind == "step" and names:
+                from OCP.Interface import Interface_Static
+                from OCP.STEPCAFControl import STEPCAFControl_Reader
+                from OCP.TCollection import TCollection_ExtendedString
+                from OCP.TDocStd import TDocStd_Document
+
+                r = STEPCAFControl_Reader()
+                # the names of sub-shapes (faces) too; set after the reader exists, which resets it
+                Interface_Static.SetIVal_s("read.stepcaf.subshapes.name", 1)
+                r.SetNameMode(True)
+                for mode in (r.SetColorMode, r.SetLayerMode, r.SetPropsMode, r.SetGDTMode, r.SetMatMode):
+                    mode(False)
+                if r.ReadFile(path) != IFSelect_RetDone:
+                    Path(msg).write_text("not a readable STEP file (OpenCASCADE could not read it)")
+                    return
+                doc = TDocStd_Document(TCollection_ExtendedString("XmlXCAF"))
+                r.Transfer(doc)
+                shape = r.Reader().OneShape()
+            else:
+                from OCP.IGESControl import IGESControl_Reader
+                from OCP.STEPControl import STEPControl_Reader
+
+                r = STEPControl_Reader() if kind == "step" else IGESControl_Reader()
+                if r.ReadFile(path) != IFSelect_RetDone:
+                    Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE could not read it)")
+                    return
+                r.TransferRoots()
+                shape = r.OneShape()
             if shape is None or shape.IsNull() or not faces(shape):
                 Path(msg).write_text("no face in the file")
                 return
+            named = _step_names(shape, doc) if kind == "step" and names else [None] * len(faces(shape))
             BRepTools.Write_s(shape, out)
+            Path(out + ".names.json").write_text(json.dumps(named))
     except Exception as e:  # noqa: BLE001 - OpenCASCADE's own failures: the file is not readable
         Path(msg).write_text(f"not a readable {kind.upper()} file (OpenCASCADE: {type(e).__name__})")
 
 
-def read_shape(path: str | os.PathLike):
-    """The shape of a STEP (``.step``/``.stp``) or IGES file, read by OpenCASCADE; an unreadable
-    file or one without a face is an :class:`InputError` naming it.
+@dataclass(frozen=True)
+class Part:
+    """A CAD part read by :func:`read_part`: its OpenCASCADE ``shape``, its ``faces`` in
+    OpenCASCADE's exploration order (face id k is ``faces[k - 1]``), their ``names`` (the STEP file's
+    face names, None for an unnamed face and for every face of an IGES file) and the file
+    (``source``)."""
+
+    shape: object
+    faces: tuple
+    names: tuple[str | None, ...]
+    source: str
+
+    def name_of(self, face_id: int) -> str | None:
+        """The name of face ``face_id`` (1-based), None when it has none."""
+        return self.names[face_id - 1]
+
+    def select(self, wanted, option: str = "--face") -> list[int]:
+        """The 1-based ids of the faces ``wanted`` names (all, in order, for None or empty): each an
+        id (an int, or a string of digits) or a face name of the file (exact, case-sensitive).
+        Refused (:class:`InputError` naming the file and listing the names): an id out of range, a
+        name no face has or several faces have, digits that are one face's id and another's name."""
+        if not wanted:
+            return list(range(1, len(self.faces) + 1))
+        out: list[int] = []
+        for w in wanted:
+            k = self._one(w, option)
+            if k not in out:
+                out.append(k)
+        return out
+
+    def _one(self, w, option: str) -> int:
+        n = len(self.faces)
+        text = str(w).strip()
+        named = [k for k, name in enumerate(self.names, 1) if name == text]
+        if isinstance(w, int) or text.isdigit():
+            k = int(text)
+            if not 1 <= k <= n:
+                raise InputError(f"{option} {k}: the CAD file has faces 1 to {n}", self.source)
+            if named and named != [k]:
+                raise InputError(
+                    f"{option} {k}: face {k} by its id, but {self._said(named)} by its name; rename the face in the "
+                    "CAD model",
+                    self.source,
+                )
+            return k
+        if len(named) == 1:
+            return named[0]
+        if named:
+            raise InputError(
+                f"{option} {text!r}: the name is given to {self._said(named)}; choose one by its id. "
+                + self.available(),
+                self.source,
+            )
+        raise InputError(f"{option} {text!r}: no face has that name. " + self.available(), self.source)
+
+    @staticmethod
+    def _said(ids) -> str:
+        return f"face {ids[0]}" if len(ids) == 1 else "faces " + ", ".join(map(str, ids))
+
+    def available(self) -> str:
+        """A sentence listing the face names with their ids (or saying the file names none)."""
+        by: dict[str, list[int]] = {}
+        for k, name in enumerate(self.names, 1):
+            if name is not None:
+                by.setdefault(name, []).append(k)
+        if not by:
+            return f"The CAD file names none of its faces: choose them by id, 1 to {len(self.faces)}."
+        listed = "; ".join(f"{name!r} ({self._said(ids)})" for name, ids in by.items())
+        return f"The faces named in the CAD file: {listed} (ids 1 to {len(self.faces)})."
+
+
+def read_part(path: str | os.PathLike) -> Part:
+    """The shape of a STEP (``.step``/``.stp``) or IGES file, read by OpenCASCADE, with its faces and
+    their names (STEP: the XCAF reader, ``STEPCAFControl_Reader`` with names and sub-shape names on;
+    each face labelled with a ``TDataStd_Name``, the ``ADVANCED_FACE`` name string); an unreadable
+    file or one without a face is an :class:`InputError` naming it. A STEP file the XCAF reader
+    cannot read is read again by the plain ``STEPControl_Reader`` (the same faces, unnamed).
 
     The translator runs in a child process (forked): on some malformed files it crashes the
     process, which then ends the child only and becomes an input error here. The shape comes back
-    as an OpenCASCADE BRep file, which is read back exactly."""
+    as an OpenCASCADE BRep file, which is read back exactly (the faces in the same order)."""
+    import json
     import multiprocessing
     import tempfile
 
@@ -243,13 +378,20 @@ def read_shape(path: str | os.PathLike):
         raise InputError(f"cannot read: {e.strerror}", str(p)) from None
     with tempfile.TemporaryDirectory(prefix="ncadapt-cad-") as d:
         out, msg = Path(d) / "shape.brep", Path(d) / "message.txt"
-        proc = multiprocessing.get_context("fork").Process(target=_read_child, args=(str(p), kind, str(out), str(msg)))
-        proc.start()
-        proc.join(READ_TIMEOUT)
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
-            raise InputError(f"OpenCASCADE did not finish reading the file in {READ_TIMEOUT:g} s", str(p))
+        for names in (True, False):  # the names are the XCAF reader's; should it fail, the plain reader
+            proc = multiprocessing.get_context("fork").Process(
+                target=_read_child, args=(str(p), kind, str(out), str(msg), names)
+            )
+            proc.start()
+            proc.join(READ_TIMEOUT)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+                raise InputError(f"OpenCASCADE did not finish reading the file in {READ_TIMEOUT:g} s", str(p))
+            if proc.exitcode == 0 and not msg.exists() or kind != "step":
+                break
+            msg.unlink(missing_ok=True)
+            out.unlink(missing_ok=True)
         if proc.exitcode != 0:
             raise InputError(f"not a readable {kind.upper()} file (OpenCASCADE's translator crashed on it)", str(p))
         if msg.exists():
@@ -257,7 +399,16 @@ def read_shape(path: str | os.PathLike):
         shape = TopoDS_Shape()
         if not out.exists() or not BRepTools.Read_s(shape, str(out), BRep_Builder()):
             raise InputError(f"not a readable {kind.upper()} file (no shape came back from OpenCASCADE)", str(p))
-    return shape
+        names = json.loads(Path(str(out) + ".names.json").read_text())
+    fs = tuple(faces(shape))
+    if len(names) != len(fs):
+        raise InputError(f"the {kind.upper()} file's faces changed on the way back from OpenCASCADE", str(p))
+    return Part(shape, fs, tuple(names), str(p))
+
+
+def read_shape(path: str | os.PathLike):
+    """The shape of a STEP or IGES file (:func:`read_part` without the faces' names)."""
+    return read_part(path).shape
 
 
 def faces(shape) -> list:

@@ -47,7 +47,7 @@ def run(
     *,
     output=None,
     tool_radius: float | None = None,
-    faces: list[int] | None = None,
+    faces: list[int | str] | None = None,
     max_distance: float = 1.0,
     align: str = "none",
     align_dof=None,
@@ -74,11 +74,12 @@ def run(
     Parameters
     ----------
     measurements : path
-        The measurement file (as ``ncadapt compensate``; with ``nominal``, actual points x, y, z mm).
+        The measurement file (as ``ncadapt compensate``; with ``nominal``, actual points only: CSV
+        x, y, z, DMIS ``FA`` points or QIF measured points, :func:`ncadapt.measure.read_actuals`).
     nominal : path, optional
-        The CAD model (STEP/IGES): each face compensated in its own (u, v); ``faces`` (1-based ids),
-        ``max_distance`` mm, ``align`` ("none", "bestfit", "datums"), ``align_dof``, ``datums`` as
-        :func:`ncadapt.measure.project_on_cad`. Without it the nominal is fitted through the measured
+        The CAD model (STEP/IGES): each face compensated in its own (u, v); ``faces`` (1-based ids
+        or the STEP file's face names), ``max_distance`` mm, ``align`` ("none", "bestfit", "datums"),
+        ``align_dof``, ``datums`` as :func:`ncadapt.measure.project_on_cad`. Without it the nominal is fitted through the measured
         nominal points over the frame of their normals (the frame is chosen here).
     program : path, optional
         An NC program corrected by −dF·n into ``output`` (required with it), the tool a ball end of

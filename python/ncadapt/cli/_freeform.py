@@ -166,15 +166,17 @@ def _cad_options(f):
         click.option(
             "--nominal",
             type=click.Path(exists=True, dir_okay=False, path_type=Path),
-            help="The CAD model (STEP or IGES) as the nominal: MEASUREMENTS are actual points (CSV x,y,z), each "
-            "projected onto the nearest selected face, the deviation along its outward normal.",
+            help="The CAD model (STEP or IGES) as the nominal: MEASUREMENTS are actual points only (CSV x,y,z; DMIS "
+            "FA(label)=FEAT/POINT outputs; QIF 3 PointFeatureActual), each projected onto the nearest selected face, "
+            "the deviation along its outward normal.",
         ),
         click.option(
             "--face",
             "face_ids",
-            type=click.IntRange(min=1),
+            metavar="ID|NAME",
             multiple=True,
-            help="A face of --nominal (1-based, OpenCASCADE's order; repeat for several; default: all).",
+            help="A face of --nominal: its id (1-based, OpenCASCADE's order) or its name in the STEP file "
+            "(ADVANCED_FACE name); repeat for several; default: all.",
         ),
         click.option(
             "--max-distance",
@@ -248,7 +250,8 @@ def analyze(
 ):
     """Deviations of MEASUREMENTS along the normals and Moran's I: is the error systematic?
 
-    MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3.
+    MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3; with
+    --nominal, actual points only (CSV x,y,z, DMIS FA points, QIF measured points).
     """
     from .. import measure
     from ..probing import companion_inputs
@@ -265,7 +268,7 @@ def analyze(
         say(f"reading {measurements}")
         if nominal is not None:
             say(f"projecting onto {nominal}")
-            meas = measure.against_cad(
+            proj = measure.project_on_cad(
                 measurements,
                 nominal,
                 faces=list(face_ids) or None,
@@ -276,7 +279,9 @@ def analyze(
                 align_dof=align_dof,
                 datums=datums,
             )
+            meas = proj.measurements
         else:
+            proj = None
             meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
         a = pf.analyze(
@@ -287,9 +292,16 @@ def analyze(
         )
     if meas.alignment is not None:
         _print_alignment(meas.alignment)
+    if proj is not None:
+        summary(
+            "faces: "
+            + "; ".join(f"{_face_said(f['id'], f['name'])} ({f['n_points']:,} points)" for f in proj.faces_used())
+        )
     _print_analysis(a)
     if json_path:
         extra = {"alignment": meas.alignment.as_dict()} if meas.alignment is not None else {}
+        if proj is not None:
+            extra["faces"] = proj.faces_used()
         write_json(json_path, {"input": str(measurements), **extra, **a.as_dict()})
     if report_path:
         from ..report import freeform as rep
@@ -755,7 +767,7 @@ def _compensate_cad(
     for f in pc.faces:
         fd = f.as_dict()
         summary(
-            f"face {f.face}: {fd['n_points']:,} points, systematic rms {fd['systematic']['rms']:.4f} mm, random std "
+            f"{_face_said(f.face, proj.name_of(f.face))}: {fd['n_points']:,} points, systematic rms {fd['systematic']['rms']:.4f} mm, random std "
             f"{fd['random']['std']:.4f} mm; measured hull {fd['cover']:.0%} of the face, the rest ({_border_said(f)}) "
             f"up to {fd['border']['max_abs_df']:.4f} mm"
         )
@@ -781,8 +793,8 @@ def _compensate_cad(
         "alignment": meas.alignment.as_dict(),
         **a.as_dict(),
         **d.as_dict(),
-        "faces": pc.ids,
-        "by_face": [f.as_dict() for f in pc.faces],
+        "faces": [{"id": i, "name": proj.name_of(i)} for i in pc.ids],
+        "by_face": [{"face": f.face, "name": proj.name_of(f.face)} | f.as_dict() for f in pc.faces],
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
         "correction": _cad_correction_of(pc, nominal, prev, previous),
     }
@@ -881,6 +893,11 @@ def _cad_correction_of(pc, nominal, prev, previous) -> dict:
         gains=gains,
     )
     return r.as_dict() | ({"previous": str(previous)} if prev is not None else {})
+
+
+def _face_said(face_id: int, name: str | None) -> str:
+    """``face 3`` or ``face 3 'top'`` (with the CAD file's name)."""
+    return f"face {face_id}" + (f" {name!r}" if name is not None else "")
 
 
 def _border_said(f) -> str:

@@ -17,8 +17,9 @@ Readers (:func:`read` picks one from the file's contents):
   ``mx my mz``;
 - QIF 3 results: point features with nominal ``Location``/``Normal`` and measured ``Location``.
 
-With a CAD nominal (:func:`against_cad`), actual points only (``x,y,z``) are projected onto the
-part's faces and the deviation is taken along the face's outward normal. Before that the points may
+With a CAD nominal (:func:`against_cad`), actual points only (:func:`read_actuals`: CSV ``x,y,z``,
+DMIS ``FA(label)=FEAT/POINT`` outputs without nominals, QIF 3 ``PointFeatureActual`` without nominal
+locations) are projected onto the part's faces and the deviation is taken along the face's outward normal. Before that the points may
 be aligned to the part (:class:`Alignment`): a least-squares best fit on the faces
 (:func:`align_to_cad`) or an RPS / 3-2-1 alignment on datum points (:func:`read_datums`,
 :func:`align_datums`).
@@ -29,13 +30,15 @@ mismatched nominal/measured sets are errors naming the file and line.
 
 from __future__ import annotations
 
+from ._actuals import Actuals, read_actuals, read_csv_actuals, read_dmis_actuals, read_qif_actuals
 from ._align import DOF, Alignment, Datum, align_datums, align_to_cad, read_datums, rotation_matrix
-from ._cad import CadProjection, against_cad, project_on_cad, read_actuals
+from ._cad import CadProjection, against_cad, project_on_cad
 from ._core import Measurements, from_arrays
 from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
 
 __all__ = [
     "DOF",
+    "Actuals",
     "Alignment",
     "CadProjection",
     "Datum",
@@ -47,6 +50,9 @@ __all__ = [
     "project_on_cad",
     "read",
     "read_actuals",
+    "read_csv_actuals",
+    "read_dmis_actuals",
+    "read_qif_actuals",
     "read_datums",
     "read_csv",
     "read_dmis",

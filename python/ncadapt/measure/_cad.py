@@ -9,48 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import csv_reader
 from ..errors import InputError
+from ._actuals import read_actuals
 from ._core import Measurements, from_arrays
-
-
-def read_actuals(path) -> tuple[np.ndarray, np.ndarray, tuple[str, ...] | None]:
-    """Actual points only: a CSV with a header naming ``x,y,z`` (optional ``id``), mm. Returns the
-    points (n, 3), their lines and their ids."""
-    src = str(Path(path))
-    rows = csv_reader(path)
-    try:
-        header = [h.strip().lower() for h in next(rows)]
-    except StopIteration:
-        raise InputError("empty file", src) from None
-    if not all(c in header for c in "xyz"):
-        raise InputError(f"header must name x,y,z (optional id); got {','.join(header)}", src, 1)
-    k = [header.index(c) for c in "xyz"]
-    pts, lines, ids = [], [], []
-    for row in rows:
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            raise InputError(f"{len(row)} fields, the header has {len(header)}", src, rows.line_num)
-        try:
-            pts.append([float(row[j]) for j in k])
-        except ValueError:
-            bad = next(row[j] for j in k if not _is_number(row[j]))
-            raise InputError(f"expected a number, got {bad.strip()!r}", src, rows.line_num) from None
-        lines.append(rows.line_num)
-        if "id" in header:
-            ids.append(row[header.index("id")].strip())
-    if not pts:
-        raise InputError("no points", src)
-    return np.asarray(pts), np.asarray(lines), tuple(ids) if ids else None
-
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True
 
 
 @dataclass(frozen=True)
@@ -58,7 +19,8 @@ class CadProjection:
     """Measured points on a CAD part: the measurements (nominal = the nearest face point), the
     face each point fell on (``face`` (n,) 1-based ids), its (u, v) parameters there (``uv`` (n, 2),
     the face's own units: mm, or rad for an angle) and the part (``shape``, its ``faces`` in
-    OpenCASCADE's order; ``chosen`` the ids the points were projected onto)."""
+    OpenCASCADE's order; ``chosen`` the ids the points were projected onto; ``names`` the CAD file's
+    names of all its faces, None for an unnamed one)."""
 
     measurements: Measurements
     face: np.ndarray
@@ -67,13 +29,24 @@ class CadProjection:
     faces: tuple
     chosen: tuple[int, ...]
     nominal: str
+    names: tuple[str | None, ...] = ()
+
+    def name_of(self, face_id: int) -> str | None:
+        """The CAD file's name of face ``face_id`` (1-based; None when it has none)."""
+        return self.names[face_id - 1] if self.names else None
+
+    def faces_used(self) -> list[dict]:
+        """The faces the points fell on, in id order: ``id``, ``name`` (None when the CAD file names
+        none) and ``n_points``."""
+        ids, counts = np.unique(self.face, return_counts=True)
+        return [{"id": int(i), "name": self.name_of(int(i)), "n_points": int(c)} for i, c in zip(ids, counts)]
 
 
 def project_on_cad(
     path,
     nominal,
     *,
-    faces: list[int] | None = None,
+    faces: list[int | str] | None = None,
     max_distance: float = 1.0,
     probe_radius: float = 0.0,
     units: str | None = None,
@@ -84,7 +57,6 @@ def project_on_cad(
     """:func:`against_cad` with the face and the (u, v) of each point and the part itself."""
     from .. import cad
     from ._align import MODES, align_datums, align_to_cad, identity, read_datums
-    from ._readers import UNITS_MM
 
     src = str(Path(path))
     if align not in MODES:
@@ -93,16 +65,11 @@ def project_on_cad(
         raise InputError("--align datums and a datums file go together", src)
     if align == "none" and align_dof is not None:
         raise InputError("--align-dof needs --align bestfit or datums", src)
-    m, lines, ids = read_actuals(path)
-    m = m * (UNITS_MM[units] if units else 1.0)
-    shape = cad.read_shape(nominal)
-    all_faces = cad.faces(shape)
-    if not all_faces:
-        raise InputError("no faces in the CAD file", str(nominal))
-    chosen = faces or list(range(1, len(all_faces) + 1))
-    bad = [f for f in chosen if not 1 <= f <= len(all_faces)]
-    if bad:
-        raise InputError(f"--face {bad[0]}: the CAD file has faces 1 to {len(all_faces)}", str(nominal))
+    actuals = read_actuals(path, units)
+    m, lines, ids = actuals.points, actuals.lines, actuals.ids
+    part = cad.read_part(nominal)
+    shape, all_faces = part.shape, list(part.faces)
+    chosen = part.select(faces)
     selected = [all_faces[f - 1] for f in chosen]
     alignment = None
     if align == "bestfit":
@@ -154,14 +121,14 @@ def project_on_cad(
     if alignment is None:
         alignment = identity(float(np.sqrt(np.mean(meas.deviation**2))))
     meas = dataclasses.replace(meas, alignment=alignment)
-    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal))
+    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal), part.names)
 
 
 def against_cad(
     path,
     nominal,
     *,
-    faces: list[int] | None = None,
+    faces: list[int | str] | None = None,
     max_distance: float = 1.0,
     probe_radius: float = 0.0,
     units: str | None = None,
@@ -170,11 +137,13 @@ def against_cad(
     datums=None,
 ) -> Measurements:
     """Actual points of ``path`` (see :func:`read_actuals`) against the faces of the STEP/IGES file
-    ``nominal`` (1-based ids, all by default): the nominal point is the nearest point of the nearest
+    ``nominal`` (``faces``: 1-based ids or the STEP file's face names, :meth:`ncadapt.cad.Part.select`;
+    all by default): the nominal point is the nearest point of the nearest
     face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
     ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
     ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
-    the actual points' length unit (mm by default).
+    the length unit of a file of actual points that declares none (mm by default; DMIS and QIF
+    files declare theirs, which must agree).
 
     ``align``: ``"none"`` (the measurement's frame is the CAD frame), ``"bestfit"``
     (:func:`align_to_cad` on the selected faces, over the degrees of freedom ``align_dof``) or

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -157,13 +158,9 @@ _DMIS_UNITS = re.compile(r"^\s*UNITS\s*/\s*(\w+)", re.I)
 _DMIS_LENGTH = {"MM": 1.0, "CM": 10.0, "METER": 1000.0, "INCH": 25.4, "FEET": 304.8}
 
 
-def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
-    """DMIS: nominal ``F(label)=FEAT/POINT,CART,x,y,z,i,j,k`` and actual ``FA(label)=…`` statements,
-    a trailing ``$`` continuing a statement. Every nominal needs its actual and vice versa.
-
-    Lengths are in the units of the last ``UNITS/MM|CM|METER|INCH|FEET,…`` statement before them
-    (MM before any, or ``units`` for a file without one: a file's own statement must agree with
-    ``units``). Polar points (``FEAT/POINT,POL``) are refused."""
+def dmis_statements(path) -> tuple[list[tuple[int, str]], str]:
+    """The statements of a DMIS file with the line each starts on (a trailing ``$`` continues a
+    statement on the next line), and the file's name for messages."""
     text, src = _text(path)
     statements: list[tuple[int, str]] = []
     buf, start = "", 0
@@ -178,20 +175,39 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
         buf = ""
     if buf:
         raise InputError("statement continued with $ at the end of the file", src, start)
+    return statements, src
+
+
+def dmis_units(statement: str, units: str | None, src: str, line: int) -> float | None:
+    """Millimetres per length unit of a DMIS ``UNITS/…`` statement (None for any other statement);
+    an unknown unit, or one that disagrees with ``units``, is an :class:`InputError`."""
+    u = _DMIS_UNITS.match(statement)
+    if not u:
+        return None
+    name = u.group(1).upper()
+    if name not in _DMIS_LENGTH:
+        raise InputError(f"UNITS/{name}: unknown length unit; expected one of {', '.join(_DMIS_LENGTH)}", src, line)
+    if units and _DMIS_LENGTH[name] != _scale(units):
+        raise InputError(f"UNITS/{name} disagrees with --units {units}", src, line)
+    return _DMIS_LENGTH[name]
+
+
+def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
+    """DMIS: nominal ``F(label)=FEAT/POINT,CART,x,y,z,i,j,k`` and actual ``FA(label)=…`` statements,
+    a trailing ``$`` continuing a statement. Every nominal needs its actual and vice versa (a file
+    of actuals only goes with a CAD nominal: :func:`~ncadapt.measure.read_dmis_actuals`).
+
+    Lengths are in the units of the last ``UNITS/MM|CM|METER|INCH|FEET,…`` statement before them
+    (MM before any, or ``units`` for a file without one: a file's own statement must agree with
+    ``units``). Polar points (``FEAT/POINT,POL``) are refused."""
+    statements, src = dmis_statements(path)
     nominal: dict[str, tuple[int, list[float]]] = {}
     actual: dict[str, tuple[int, list[float]]] = {}
     k = _scale(units)
     for ln, st in statements:
-        u = _DMIS_UNITS.match(st)
-        if u:
-            name = u.group(1).upper()
-            if name not in _DMIS_LENGTH:
-                raise InputError(
-                    f"UNITS/{name}: unknown length unit; expected one of {', '.join(_DMIS_LENGTH)}", src, ln
-                )
-            if units and _DMIS_LENGTH[name] != _scale(units):
-                raise InputError(f"UNITS/{name} disagrees with --units {units}", src, ln)
-            k = _DMIS_LENGTH[name]
+        unit = dmis_units(st, units, src, ln)
+        if unit is not None:
+            k = unit
             continue
         m = _DMIS.match(st)
         if not m:
@@ -210,7 +226,12 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
             raise InputError(f"duplicate id {label!r} (first at line {table[label][0]})", src, ln)
         table[label] = (ln, nums)
     if not nominal:
-        raise InputError("no F(label)=FEAT/POINT,CART nominal points", src)
+        said = (
+            f"; it holds actual points only ({len(actual)} FA(label)): give the CAD model as the nominal (--nominal)"
+            if actual
+            else ""
+        )
+        raise InputError(f"no F(label)=FEAT/POINT,CART nominal points{said}", src)
     for a, b, what in ((nominal, actual, "actual FA"), (actual, nominal, "nominal F")):
         for label, (ln, _) in a.items():
             if label not in b:
@@ -229,17 +250,13 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
     )
 
 
-def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
-    """QIF 3 results: ``PointFeatureNominal`` (``Location``, ``Normal``) and the
-    ``PointFeatureMeasurement`` (``Location``) that refers to it through its feature item.
-
-    Lengths are in the document's ``FileUnits/PrimaryUnits/LinearUnit`` (its ``UnitName``: mm, cm,
-    m, in, ft …), else in ``units`` (mm by default); a declared unit must agree with ``units``."""
+def qif_root(path):
+    """The root element of a QIF (XML) file, parsed by lxml without entity expansion, DTD or
+    network (a measurement file cannot make the reader fetch or inline anything else), and the
+    file's name for messages."""
     from lxml import etree
 
     src = str(path)
-    # no entity expansion and no network: a measurement file cannot make the reader fetch or inline
-    # anything else
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
     try:
         root = etree.parse(str(path), parser).getroot()
@@ -251,24 +268,60 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
         raise InputError(f"not well-formed XML (QIF): {msg}", src, line or 0, col or 0) from None
     if root is None:
         raise InputError("not a QIF (XML) document: no root element", src)
+    return root, src
 
-    def local(el):
-        return etree.QName(el).localname
 
-    k = _scale(units)
+def local_name(el) -> str:
+    """An XML element's name without its namespace ('' for a comment or a processing instruction)."""
+    from lxml import etree
+
+    return etree.QName(el).localname if isinstance(el.tag, str) else ""
+
+
+def qif_scale(root, units: str | None, src: str) -> float:
+    """Millimetres per length unit of a QIF document: its ``FileUnits/PrimaryUnits/LinearUnit``
+    (``UnitName`` mm, cm, m, in, ft …; a ``UnitConversion/Factor`` to an ``SIUnitName`` of metre
+    must agree with it), else ``units`` (mm by default). An unknown unit, a factor that disagrees
+    or a unit that disagrees with ``units`` is an :class:`InputError` at the element's line."""
     for el in root.iter():
-        if isinstance(el.tag, str) and local(el) == "LinearUnit":
-            name = next((c.text or "" for c in el if isinstance(c.tag, str) and local(c) == "UnitName"), "").strip()
-            if name.lower() not in UNITS_MM:
+        parent = el.getparent()
+        if local_name(el) != "LinearUnit" or parent is None or local_name(parent) != "PrimaryUnits":
+            continue
+        kids = {local_name(c): c for c in el if local_name(c)}
+        name = (kids["UnitName"].text or "").strip() if "UnitName" in kids else ""
+        if name.lower() not in UNITS_MM:
+            raise InputError(
+                f"LinearUnit {name!r}: unknown length unit; expected one of {', '.join(UNITS_MM)}", src, el.sourceline
+            )
+        mm = UNITS_MM[name.lower()]
+        conv = kids.get("UnitConversion")
+        factor = next((c for c in conv if local_name(c) == "Factor"), None) if conv is not None else None
+        si = (kids["SIUnitName"].text or "").strip().lower() if "SIUnitName" in kids else ""
+        if factor is not None and si in ("meter", "metre"):
+            f = _number(factor.text or "", src, factor.sourceline, "UnitConversion Factor")
+            if not math.isclose(f * 1000.0, mm, rel_tol=1e-6):
                 raise InputError(
-                    f"LinearUnit {name!r}: unknown length unit; expected one of {', '.join(UNITS_MM)}",
+                    f"LinearUnit {name!r} ({mm:g} mm) disagrees with its UnitConversion Factor {f:g} m",
                     src,
-                    el.sourceline,
+                    factor.sourceline,
                 )
-            if units and UNITS_MM[name.lower()] != _scale(units):
-                raise InputError(f"LinearUnit {name!r} disagrees with --units {units}", src, el.sourceline)
-            k = UNITS_MM[name.lower()]
-            break
+        if units and mm != _scale(units):
+            raise InputError(f"LinearUnit {name!r} disagrees with --units {units}", src, el.sourceline)
+        return mm
+    return _scale(units)
+
+
+def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
+    """QIF 3 results: ``PointFeatureNominal`` (``Location``, ``Normal``) and the measured point
+    (``PointFeatureActual``, or ``PointFeatureMeasurement``, with its ``Location``) that refers to
+    it through its feature item. A file of measured points only goes with a CAD nominal
+    (:func:`~ncadapt.measure.read_qif_actuals`).
+
+    Lengths are in the document's ``FileUnits/PrimaryUnits/LinearUnit`` (its ``UnitName``: mm, cm,
+    m, in, ft …), else in ``units`` (mm by default); a declared unit must agree with ``units``."""
+    root, src = qif_root(path)
+    local = local_name
+    k = qif_scale(root, units, src)
 
     def child(el, name):
         for c in el:
@@ -299,13 +352,18 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
             nominals[el.get("id")] = (el.sourceline, vec(el, "Location", el), vec(el, "Normal", el))
         elif name == "PointFeatureItem":
             items[el.get("id")] = ref(el, "FeatureNominalId")
-        elif name == "PointFeatureMeasurement":
+        elif name in ("PointFeatureActual", "PointFeatureMeasurement"):
             fid = ref(el, "FeatureItemId")
             if fid in measured:
                 raise InputError(f"feature item {fid} measured twice", src, el.sourceline)
             measured[fid] = (el.sourceline, vec(el, "Location", el))
     if not nominals:
-        raise InputError("no PointFeatureNominal elements", src)
+        said = (
+            f"; it holds measured points only ({len(measured)}): give the CAD model as the nominal (--nominal)"
+            if measured
+            else ""
+        )
+        raise InputError(f"no PointFeatureNominal elements{said}", src)
     by_nominal = {}
     for fid, (ln, loc) in measured.items():
         nid = items.get(fid, fid)
@@ -338,20 +396,32 @@ def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measureme
     p = Path(path)
     if not p.is_file():
         raise InputError("no such file", str(p))
-    data = p.read_bytes()
-    head = data[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
-    from ..probing import is_plan, read_log_with_plan
+    kind = sniff(p)
+    if kind == "plan":  # an ncadapt probe plan: its nominal points with the probe log it names
+        from ..probing import read_log_with_plan
 
-    if is_plan(head):  # an ncadapt probe plan: its nominal points with the probe log it names
         if units not in (None, "mm"):
             raise InputError(f"a probe plan and its log are in mm; --units {units} disagrees", str(p), 1)
         return read_log_with_plan(p, probe_radius=probe_radius)
+    reader = {"qif": read_qif, "dmis": read_dmis, "csv": read_csv}.get(kind, read_xyzijk)
+    return reader(p, probe_radius, units)
+
+
+def sniff(path) -> str:
+    """Which kind of measurement file ``path`` is, from its contents: ``plan`` (an ncadapt probe
+    plan), ``qif`` (XML), ``dmis`` (a point feature anywhere — a long header may come first — or a
+    DMIS header statement), ``csv`` (a header naming x) or ``xyzijk``."""
+    from ..probing import is_plan
+
+    data = Path(path).read_bytes()
+    head = data[:4096].decode("utf-8", "replace").lstrip("\ufeff").lstrip()
+    if is_plan(head):
+        return "plan"
     if head.startswith("<"):
-        return read_qif(p, probe_radius, units)
-    # DMIS: a point feature anywhere (a long header may come first), or a DMIS header statement
+        return "qif"
     if re.search(rb"FEAT\s*/\s*POINT", data, re.I) or re.match(r"(DMISMN|DMISMD)\s*/", head, re.I):
-        return read_dmis(p, probe_radius, units)
+        return "dmis"
     first = head.splitlines()[0] if head else ""
     if re.search(r"[A-Za-z]", first) and "," in first and re.search(r"\bx\b", first, re.I):
-        return read_csv(p, probe_radius, units)
-    return read_xyzijk(p, probe_radius, units)
+        return "csv"
+    return "xyzijk"
