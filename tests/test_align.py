@@ -430,7 +430,7 @@ def test_compensate_aligns_then_compensates_the_form(tmp_path):
     assert np.abs(np.array(j["alignment"]["translation"]) - T_TRUE).max() < 1e-3
     assert np.abs(np.radians(j["alignment"]["rotation"]) - ANGLES_TRUE).max() < 1e-5
     assert j["alignment"]["rms"] == pytest.approx(np.sqrt(np.mean(e**2) + NOISE**2), rel=0.1)
-    assert sorted(f["id"] for f in j["faces"]) == [1, 3, 6]  # x = 0, y = 0, z = H in OpenCASCADE's order
+    assert sorted(j["faces"]) == [1, 3, 6]  # x = 0, y = 0, z = H in OpenCASCADE's order
     # the written part, read back with OpenCASCADE and cut along the faces' normals (as in
     # tests/test_cad_compensate.py): the form error left, E − dF, against E
     from test_cad_compensate import _along, _count, _read_step, _truth_figures, _valid

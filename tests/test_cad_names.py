@@ -148,7 +148,7 @@ def test_analyze_and_compensate_choose_a_face_by_name(named_block, tmp_path):
     r = CliRunner().invoke(main, [*args, "--part", str(tmp_path / "c.step")])
     assert r.exit_code == 0, r.output
     j = json.loads(out.read_text())
-    assert j["faces"] == [{"id": top, "name": "top"}]
+    assert j["faces"] == [top] and j["face_names"] == ["top"]
     assert [(b["face"], b["name"]) for b in j["by_face"]] == [(top, "top")]
 
 

@@ -793,7 +793,9 @@ def _compensate_cad(
         "alignment": meas.alignment.as_dict(),
         **a.as_dict(),
         **d.as_dict(),
-        "faces": [{"id": i, "name": proj.name_of(i)} for i in pc.ids],
+        # the faces used: their ids, and their names from the STEP file (None where unnamed)
+        "faces": list(pc.ids),
+        "face_names": [proj.name_of(i) for i in pc.ids],
         "by_face": [{"face": f.face, "name": proj.name_of(f.face)} | f.as_dict() for f in pc.faces],
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
         "correction": _cad_correction_of(pc, nominal, prev, previous),
