@@ -30,6 +30,20 @@ def _python_twin(field):
     return PyGrid(field.xs, field.ys, field.dz, outside=field.outside)
 
 
+@pytest.fixture(autouse=True)
+def _twins_sampled_as_the_engine_samples(monkeypatch):
+    """The engine samples an arc a bilinear grid leaves flat at its end only; the Python twin of a
+    grid is sampled the same way (its evaluation stays Python's), so the figures compare."""
+    spec = correction._grid_spec
+
+    def twin_spec(field):
+        if type(field) is PyGrid:
+            return spec(fields.GridField(field.xs, field.ys, field.dz, outside=field.outside))
+        return spec(field)
+
+    monkeypatch.setattr(correction, "_grid_spec", twin_spec)
+
+
 def _grids():
     rng = np.random.default_rng(7)
     xs = np.linspace(0, 10, 11)
@@ -206,3 +220,44 @@ def test_correct_to_from_memory_is_native_too(tmp_path):
     assert (tmp_path / "a.ngc").read_bytes() == whole.data
     assert c.max_displacement == whole.correction.max_displacement
     assert c.n_points == whole.correction.n_points
+
+
+@pytest.mark.parametrize(
+    "src",
+    [
+        PROGRAM,
+        # a later piece writes more decimals: the first pass, read ahead, is run again
+        "G21 G90 G0 X1 Y1 Z5\nG1 Z-1 F100\nG1 X7 Y3\nG1 X2 Y9\n" + "G1 X3 Y3\n" * 20 + "G1 X4.12500 Y4.50000\nM30\n",
+        # refused by the engine (an unsupported construct): the Python evaluation reports it
+        "G21 G90 G0 X1 Y1\nG1 X5 Y5 F100\nG68 X0 Y0 R10\nG1 X4 Y4\nM30\n",
+    ],
+)
+def test_a_program_read_ahead_is_corrected_as_one_read_then(tmp_path, monkeypatch, src):
+    """The command line starts reading the program before it imports numpy and reads the field
+    (``_nc.read_ahead``); the correction that takes those pieces writes the same bytes and figures,
+    refuses the same way, and one started on another file or with another piece size is not used."""
+    monkeypatch.setattr(correction, "_PIECE_BYTES", 64)
+    prog = tmp_path / "p.ngc"
+    prog.write_text(src)
+    other = tmp_path / "other.ngc"
+    other.write_text("G21 G90 G0 X0 Y0 Z1\nG1 Z0 F10\nX3\nM2\n")
+    field = FIELDS[2]
+    want = _run(tmp_path, field, src, name="plain.ngc", max_segment=1.0)
+    for path, piece, room, used in (
+        (prog, 64, 2, True),
+        (prog, 64, 32, True),
+        (other, 64, 32, False),
+        (prog, 4096, 32, True),
+    ):
+        ahead = _nc.read_ahead(str(path), piece, "linuxcnc", room)
+        try:
+            c = nc.correct_file(prog, tmp_path / "ahead.ngc", field, max_segment=1.0, read_ahead=ahead)
+            got = ((tmp_path / "ahead.ngc").read_bytes(), c)
+        except (RefusedError, InputError) as e:
+            got = ("refused", type(e), str(e))
+        if want[0] == "refused":
+            assert got[1:3] == want[1:3]
+        else:
+            assert got == want
+        # taken by the engine (another piece size is then dropped by it)
+        assert ahead.taken == used

@@ -336,3 +336,29 @@ def test_offsets_the_program_does_not_tell_leave_moves_uncorrected(tmp_path):
         out = nc.parse(src).correct(fields.Shift((0, 0, 0.05)))
         assert out.text.splitlines()[4] == "G1 X5 Y5", code
         assert any("not corrected because the position is unknown" in w for w in out.correction.warnings), code
+
+
+@pytest.mark.parametrize("r, kept", [(0.25, True), (5.0, False)])
+def test_arcs_under_a_grid_field_in_the_engine(tmp_path, r, kept):
+    """The engine's own grid evaluation (``correct_file``): a small circle after a cut, where the
+    bilinear grid varies by less than the chord tolerance over its circle, is sampled at its end
+    only and kept an arc; rs274's arc of the output is within the tolerance of the input's circle
+    displaced by the field at 1,000 points. A large one is cut into chords as before."""
+    xs = np.arange(0.0, 21.0)
+    g = 0.002
+    grid = fields.GridField(xs, xs, np.tile(g * xs, (len(xs), 1)) + 0.01, outside="error")
+    src = f"G21 G90 G17 G0 X10 Y10 Z1\nG1 Z0 F100\nG2 X10 Y10 I-{r} J0\nG1 X12\nM2\n"
+    (tmp_path / "a.ngc").write_text(src)
+    c = nc.correct_file(tmp_path / "a.ngc", tmp_path / "b.ngc", grid)
+    a, b = canonical(tmp_path / "a.ngc"), canonical(tmp_path / "b.ngc")
+    assert b.error is None
+    assert ("arc" in b.kinds) == kept and c.arcs_linearised == (0 if kept else 1)
+    if kept:
+        # the circle's end only, beside the plunge's and the last move's points
+        assert c.n_points < 10
+        ma, mb = moves(a)[a.kinds.index("arc")], moves(b)[b.kinds.index("arc")]
+        t = np.linspace(0, 1, 1001)
+        pa = ma.at(t)
+        want = pa + np.column_stack([np.zeros((len(t), 2)), g * pa[:, 0] + 0.01])
+        # the field varies by 2·g·r = 1 µm around the circle, which is how far the arc is from it
+        assert np.abs(mb.at(t) - want).max() == pytest.approx(2 * g * r, abs=1.5e-4)

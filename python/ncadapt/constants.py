@@ -26,6 +26,14 @@ MAX_SEGMENT_RANGE = (1e-3, 1e9)
 #: Most pieces one block is cut into; a block that needs more is refused at its line.
 MAX_PIECES_PER_BLOCK = 1_000_000
 
+#: What a field does at points outside its measured area: refuse them, hold the nearest value,
+#: or extend linearly.
+OUTSIDE = ("error", "clamp", "extrapolate")
+
+#: Bytes of a program read, corrected and written at a time (whole lines): memory stays bounded
+#: whatever the program's length.
+PIECE_BYTES = 1 << 18
+
 #: Default largest displacement ``correct`` writes without refusing, mm.
 LIMIT = 0.5
 

@@ -19,7 +19,7 @@ from .errors import InputError, RefusedError
 _AXES = "XYZABCUVW"
 # bytes of program per piece of a correction or inspection (about 10,000 lines): a few hundred
 # thousand sample points, a few MB at a time, whatever the program's length
-_PIECE_BYTES = 1 << 18
+_PIECE_BYTES = constants.PIECE_BYTES
 
 
 @dataclass(frozen=True)
@@ -273,6 +273,12 @@ def _native_field(field) -> tuple | None:
     return None
 
 
+def _grid_spec(field) -> tuple | None:
+    """The native spec of a bilinear grid field (:func:`_native_field`), else None."""
+    spec = _native_field(field)
+    return spec if spec is not None and spec[0] == "grid" else None
+
+
 def _correct_native(
     source,
     name,
@@ -291,6 +297,7 @@ def _correct_native(
     gy,
     expand_cycles=False,
     dialect="linuxcnc",
+    read_ahead=None,
 ) -> Correction | None:
     """The correction run by the engine alone (reading, field, figures, emitting and writing to
     ``out_file`` in threads without the GIL), for the fields of :func:`_native_field`. None when a
@@ -321,6 +328,7 @@ def _correct_native(
             lambda a, b: say(f"correcting lines {a + 1:,}-{b:,}"),
             bool(expand_cycles),
             dialect,
+            read_ahead,
         ),
         name,
     )
@@ -351,6 +359,7 @@ def _correct(
     out_file=None,
     expand_cycles=False,
     dialect="linuxcnc",
+    read_ahead=None,
 ) -> Correction:
     """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
 
@@ -386,6 +395,7 @@ def _correct(
             gy=gy,
             expand_cycles=expand_cycles,
             dialect=dialect,
+            read_ahead=read_ahead,
         )
         if c is not None:
             return c
@@ -401,6 +411,8 @@ def _correct(
             _PIECE_BYTES,
             bool(expand_cycles),
             dialect,
+            # sampled as the engine samples for itself: an arc a bilinear grid leaves flat at its end
+            _grid_spec(field),
         ),
         name,
     )

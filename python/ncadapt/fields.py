@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import constants
 from ._io import csv_column, csv_reader, plain_csv, read_text
 from .constants import COORD_MAX
 from .errors import InputError, RefusedError, cut
@@ -50,7 +51,7 @@ __all__ = [
 ]
 
 #: What a field does with points outside its domain.
-OUTSIDE = ("error", "clamp", "extrapolate")
+OUTSIDE = constants.OUTSIDE
 _EPS = 1e-9
 
 

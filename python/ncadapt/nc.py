@@ -149,13 +149,16 @@ def correct_file(
     field: Callable[[np.ndarray], np.ndarray],
     *,
     dialect: str = "linuxcnc",
+    read_ahead=None,
     **options,
 ) -> Correction:
     """Correct the program in file ``path`` and write it to ``output``, reading and writing it
     piece by piece: memory stays bounded whatever the program's length.
 
     Takes the options of :meth:`Program.correct`, and the program's ``dialect`` (one of
-    :data:`DIALECTS`; ``ncadapt.dialects.resolve`` detects it). The output is written atomically: when a check
+    :data:`DIALECTS`; ``ncadapt.dialects.resolve`` detects it). ``read_ahead``: a
+    ``ncadapt._nc.read_ahead(path, constants.PIECE_BYTES, dialect)`` started earlier on the same
+    file (the command line starts one before its imports), whose pieces the engine takes. The output is written atomically: when a check
     refuses (an unsupported construct, a displacement over the limit, a point outside the field),
     nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
     """
@@ -163,7 +166,15 @@ def correct_file(
     _refuse_overwrite(out, p)
     with atomic_open(out) as f, _BackgroundWriter(f) as w:
         return _correct(
-            str(p), str(p), w.write, field, keep_points=False, out_file=f, dialect=_check_dialect(dialect), **options
+            str(p),
+            str(p),
+            w.write,
+            field,
+            keep_points=False,
+            out_file=f,
+            dialect=_check_dialect(dialect),
+            read_ahead=read_ahead,
+            **options,
         )
 
 

@@ -204,6 +204,7 @@ impl Program {
             only_supported,
             grid_x,
             grid_y,
+            grid: None,
         };
         let s = py
             .allow_threads(|| self.inner.sample(&opts))
@@ -285,9 +286,10 @@ struct Corrector {
 #[pymethods]
 impl Corrector {
     /// `source`: the program's bytes, or the path of its file (str); `dialect`: linuxcnc,
-    /// fanuc, grbl or marlin.
+    /// fanuc, grbl or marlin; `grid`: the native spec of a bilinear grid field the samples are for
+    /// (an arc it leaves flat is sampled at its end, as `correct_native` samples it).
     #[new]
-    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false, dialect="linuxcnc"))]
+    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false, dialect="linuxcnc", grid=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -301,8 +303,13 @@ impl Corrector {
         piece_bytes: usize,
         expand_cycles: bool,
         dialect: &str,
+        grid: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let dialect = Dialect::from_name(dialect).map_err(to_py)?;
+        let grid = match grid.map(native_field).transpose()? {
+            Some(Field::Grid(g)) => Some(std::sync::Arc::new(g)),
+            _ => None,
+        };
         let src = if let Ok(b) = source.downcast::<PyBytes>() {
             Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
         } else {
@@ -323,6 +330,7 @@ impl Corrector {
             only_supported,
             grid_x,
             grid_y,
+            grid,
         };
         let (jobs, job_rx) = std::sync::mpsc::channel::<Job>();
         let (done_tx, done) = std::sync::mpsc::channel::<Done>();
@@ -614,12 +622,54 @@ fn output_file(_fd: i32) -> PyResult<Option<std::fs::File>> {
     Ok(None)
 }
 
+/// A program being read, lexed and interpreted ahead of its correction ([`read_ahead`]).
+#[pyclass(module = "ncadapt._nc")]
+struct ReadAhead {
+    inner: std::sync::Mutex<Option<pipeline::ReadAhead>>,
+    path: String,
+}
+
+#[pymethods]
+impl ReadAhead {
+    /// A correction has taken the pieces read ahead.
+    #[getter]
+    fn taken(&self) -> bool {
+        self.inner.lock().map_or(true, |g| g.is_none())
+    }
+}
+
+/// Start reading the program file `path` (in pieces of `piece_bytes`, as `dialect`) in a thread
+/// of its own, up to `ahead` pieces, for a `correct_native` of the same file to continue: the
+/// caller's start-up (imports, reading the field) then runs beside it. Unused, it stops.
+#[pyfunction]
+#[pyo3(signature = (path, piece_bytes, dialect="linuxcnc", ahead=32))]
+fn read_ahead(
+    path: String,
+    piece_bytes: usize,
+    dialect: &str,
+    ahead: usize,
+) -> PyResult<ReadAhead> {
+    let dialect = Dialect::from_name(dialect).map_err(to_py)?;
+    let src = Source::File(std::path::PathBuf::from(&path));
+    let reader = src.open().map_err(to_py)?;
+    Ok(ReadAhead {
+        inner: std::sync::Mutex::new(Some(pipeline::ReadAhead::start(
+            reader,
+            piece_bytes.max(1),
+            dialect,
+            ahead,
+        ))),
+        path,
+    })
+}
+
 /// Correct a program (bytes, or the path of its file) with a native field, writing the output
 /// to the open file descriptor `fd` (from its current offset) in threads that run without the
 /// GIL. Returns the figures as a dict, or None when a check refuses the program (the caller runs
-/// the Python evaluation to report it). `progress(first, end)` is called for each piece.
+/// the Python evaluation to report it). `progress(first, end)` is called for each piece. `ahead`:
+/// a [`read_ahead`] of the same file (path), whose pieces the first pass takes.
 #[pyfunction]
-#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false, dialect="linuxcnc"))]
+#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false, dialect="linuxcnc", ahead=None))]
 #[allow(clippy::too_many_arguments)]
 fn correct_native<'py>(
     py: Python<'py>,
@@ -639,12 +689,25 @@ fn correct_native<'py>(
     progress: Option<PyObject>,
     expand_cycles: bool,
     dialect: &str,
+    ahead: Option<&Bound<'py, ReadAhead>>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let dialect = Dialect::from_name(dialect).map_err(to_py)?;
     let src = if let Ok(b) = source.downcast::<PyBytes>() {
         Source::Bytes(std::sync::Arc::new(b.as_bytes().to_vec()))
     } else {
         Source::File(std::path::PathBuf::from(source.extract::<String>()?))
+    };
+    // the pieces read ahead, when they are of this file
+    let ahead = match (ahead, &src) {
+        (Some(a), Source::File(p)) => {
+            let a = a.borrow();
+            if p.to_str() == Some(a.path.as_str()) {
+                a.inner.lock().ok().and_then(|mut g| g.take())
+            } else {
+                None
+            }
+        }
+        _ => None,
     };
     let field = native_field(field)?;
     if fd < 0 {
@@ -661,6 +724,7 @@ fn correct_native<'py>(
             only_supported: true,
             grid_x,
             grid_y,
+            grid: None,
         },
         piece_bytes: piece_bytes.max(1),
         limit,
@@ -691,7 +755,9 @@ fn correct_native<'py>(
         })
     };
     let r = py
-        .allow_threads(|| pipeline::correct(&|| src.open(), &field, &opts, &out, &mut say))
+        .allow_threads(|| {
+            pipeline::correct_ahead(&|| src.open(), &field, &opts, &out, &mut say, ahead)
+        })
         .map_err(to_py)?;
     let rep = match r {
         Outcome::Done(rep) => rep,
@@ -721,6 +787,8 @@ fn _nc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Program>()?;
     m.add_class::<Corrector>()?;
     m.add_function(wrap_pyfunction!(correct_native, m)?)?;
+    m.add_function(wrap_pyfunction!(read_ahead, m)?)?;
+    m.add_class::<ReadAhead>()?;
     m.add_function(wrap_pyfunction!(eval_field, m)?)?;
     m.add("EngineError", m.py().get_type::<EngineError>())?;
     // the package's one version (the crates'), without importlib.metadata at start-up

@@ -55,6 +55,7 @@ fn main() {
             only_supported: true,
             grid_x: xs,
             grid_y: ys,
+            grid: None,
         },
         piece_bytes: 1 << 18,
         limit: 1.0,

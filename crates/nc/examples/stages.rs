@@ -27,6 +27,7 @@ fn main() {
         only_supported: true,
         grid_x: grid.clone(),
         grid_y: grid,
+        grid: None,
     };
     let prog = nc::Program {
         src,

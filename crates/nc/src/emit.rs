@@ -440,6 +440,11 @@ impl<'a> Emitter<'a> {
                         &samples.t[f..f + c],
                         &disp[3 * f..3 * (f + c)],
                         uvw,
+                        samples
+                            .flat
+                            .binary_search_by_key(&(ri as u32), |&(r, _)| r)
+                            .ok()
+                            .map(|k| samples.flat[k].1),
                     )?;
                 } else {
                     self.uncorrected(li, ri);
@@ -643,6 +648,7 @@ impl<'a> Emitter<'a> {
         ts: &[f64],
         disp: &[f64],
         uvw: &[f64],
+        flat: Option<f64>,
     ) -> Result<(), NcError> {
         let (it, lx) = (self.it, self.lx);
         let rec = &it.records[ri];
@@ -723,7 +729,23 @@ impl<'a> Emitter<'a> {
                         <= tol2
                 })
             };
-        let keep_arc = rec.motion.is_arc() && moved == 0 && (uniform && on_path || helix);
+        // an arc the sampler found flat under a grid field (sampled at its end only): the field
+        // varies over it by `range` at most and the output starts it where the field puts its
+        // start (the block before is corrected), so the helix to its end's displacement is
+        // within `range` and the rounding of it everywhere; the start is checked to be so
+        let flat_ok = flat.is_some_and(|range| {
+            (de[a1] - ds[a1]).abs() < half_mm
+                && (de[a2] - ds[a2]).abs() < half_mm
+                && (de[an] - ds[an]).abs() <= range + 2.0 * half_mm
+        });
+        if flat.is_some() && !flat_ok {
+            return Err(NcError::Usage(format!(
+                "line {}: an arc sampled at its end only does not start where the field puts it",
+                rec.line + 1
+            )));
+        }
+        let keep_arc =
+            rec.motion.is_arc() && moved == 0 && (uniform && on_path || helix || flat_ok);
         // a straight move whose corrected pieces all lie on one line, within half a unit of the
         // last written digit (the rounding every written number has), is written as one move; when
         // it also moves another axis (A B C U V W), which the machine interpolates with XYZ, each
@@ -1438,6 +1460,7 @@ mod tests {
             only_supported: true,
             grid_x: vec![],
             grid_y: vec![],
+            grid: None,
         };
         let s = sample(&it, &o).unwrap();
         let mut d = Vec::new();
@@ -1673,6 +1696,7 @@ mod tests {
             only_supported: true,
             grid_x: vec![],
             grid_y: vec![],
+            grid: None,
         };
         let field = |s: &Samples| {
             s.xyz

@@ -125,6 +125,50 @@ impl Grid {
     }
 }
 
+impl Grid {
+    /// The least and largest displacement over the rectangle [x0, x1] × [y0, y1], when it lies
+    /// inside the measured area and crosses at most four grid lines each way: the bilinear field
+    /// is monotone along x and along y within a cell, so its extremes over the rectangle are at
+    /// the corners of the rectangle cut by the grid lines, which are evaluated. None otherwise.
+    pub fn range_over(&self, x0: f64, x1: f64, y0: f64, y1: f64) -> Option<(f64, f64)> {
+        let [bx0, bx1, by0, by1] = self.bounds;
+        if !(x0 >= bx0 && x1 <= bx1 && y0 >= by0 && y1 <= by1) {
+            return None;
+        }
+        let inside = |g: &[f64], a: f64, b: f64| -> Option<([f64; 6], usize)> {
+            let (i, j) = (
+                g.partition_point(|&v| v <= a),
+                g.partition_point(|&v| v < b),
+            );
+            if j.saturating_sub(i) > 4 {
+                return None;
+            }
+            let mut at = [a; 6];
+            let mut n = 1;
+            for &v in &g[i..j.max(i)] {
+                at[n] = v;
+                n += 1;
+            }
+            at[n] = b;
+            Some((at, n + 1))
+        };
+        let (xs, nx) = inside(&self.xs, x0, x1)?;
+        let (ys, ny) = inside(&self.ys, y0, y1)?;
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &y in &ys[..ny] {
+            for &x in &xs[..nx] {
+                let v = self.dz(x, y)?;
+                if !v.is_finite() {
+                    return None;
+                }
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        Some((lo, hi))
+    }
+}
+
 impl Field {
     /// Check a grid's shape (the Python side has validated its values).
     pub fn check(&self) -> Result<(), String> {

@@ -287,8 +287,39 @@ fn write_pieces(
     Ok(())
 }
 
+/// The reading thread of a first pass started ahead of the correction, while the caller is still
+/// preparing (Python imports numpy and reads the field meanwhile, on a core that would idle):
+/// it reads, lexes and interprets up to `ahead` pieces before it waits. Given to
+/// [`correct_ahead`] with the same piece size and dialect; dropped, its thread stops at its next
+/// piece.
+pub struct ReadAhead {
+    rx: Receiver<Result<Piece, NcError>>,
+    handle: std::thread::JoinHandle<Option<ReadEnd>>,
+    piece_bytes: usize,
+    dialect: crate::interp::Dialect,
+}
+
+impl ReadAhead {
+    pub fn start(
+        reader: Reader,
+        piece_bytes: usize,
+        dialect: crate::interp::Dialect,
+        ahead: usize,
+    ) -> Self {
+        let (tx, rx) = sync_channel::<Result<Piece, NcError>>(ahead.max(2));
+        let handle =
+            std::thread::spawn(move || read_pieces(reader, piece_bytes, None, dialect, tx));
+        ReadAhead {
+            rx,
+            handle,
+            piece_bytes,
+            dialect,
+        }
+    }
+}
+
 /// One pass. `Ok(Err(style))`: the program's style differs from the one assumed; run again
-/// with it.
+/// with it. With `ahead` (a first pass) the pieces come from its thread.
 fn pass(
     open: &dyn Fn() -> Result<Reader, NcError>,
     field: &Field,
@@ -296,19 +327,41 @@ fn pass(
     style: Option<(NumberStyle, bool)>,
     out: &std::fs::File,
     progress: &mut dyn FnMut(usize, usize) -> bool,
+    ahead: Option<ReadAhead>,
 ) -> Result<Result<Outcome, (NumberStyle, bool)>, NcError> {
-    let reader = open()?;
+    let reader = match ahead {
+        Some(_) => None,
+        None => Some(open()?),
+    };
     let bounds = field.bounds();
+    // the sampler knows a grid field: an arc it leaves flat stays an arc, sampled at its end
+    let mut sample_opts = opts.sample.clone();
+    if let Field::Grid(g) = field {
+        sample_opts.grid = Some(std::sync::Arc::new(g.clone()));
+    }
     std::thread::scope(|scope| {
-        let (piece_tx, piece_rx) = sync_channel::<Result<Piece, NcError>>(2);
         let (job_tx, job_rx) = sync_channel::<Job>(2);
         let (back_tx, back_rx) = channel::<(Samples, Vec<f64>)>();
         let piece_bytes = opts.piece_bytes;
         let (write_tx, write_rx) = sync_channel::<Vec<u8>>(2);
         let (written_tx, written_rx) = channel::<Vec<u8>>();
         let dialect = opts.dialect;
-        let reading =
-            scope.spawn(move || read_pieces(reader, piece_bytes, style, dialect, piece_tx));
+        let (piece_rx, reading): (_, Box<dyn FnOnce() -> Option<ReadEnd>>) = match (ahead, reader) {
+            (Some(a), _) => (
+                a.rx,
+                Box::new(move || a.handle.join().expect("the reading thread panicked")),
+            ),
+            (None, Some(reader)) => {
+                let (piece_tx, piece_rx) = sync_channel::<Result<Piece, NcError>>(2);
+                let h =
+                    scope.spawn(move || read_pieces(reader, piece_bytes, style, dialect, piece_tx));
+                (
+                    piece_rx,
+                    Box::new(move || h.join().expect("the reading thread panicked")),
+                )
+            }
+            (None, None) => unreachable!(),
+        };
         let (expand, arc_tol) = (opts.expand_cycles, opts.sample.chord_tol);
         let emitting = scope
             .spawn(move || emit_pieces(job_rx, back_tx, write_tx, written_rx, expand, arc_tol));
@@ -339,7 +392,7 @@ fn pass(
             };
             if let Err(e) = sample_range(
                 &piece.interp,
-                &opts.sample,
+                &sample_opts,
                 0..piece.interp.records.len(),
                 &mut samples,
             ) {
@@ -392,7 +445,7 @@ fn pass(
         }
         drop(piece_rx);
         drop(job_tx);
-        let read_end = reading.join().expect("the reading thread panicked");
+        let read_end = reading();
         let emitted = emitting.join().expect("the emitting thread panicked");
         let wrote = writing.join().expect("the writing thread panicked");
         if let Some(e) = failed {
@@ -435,8 +488,22 @@ pub fn correct(
     out: &std::fs::File,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Outcome, NcError> {
+    correct_ahead(open, field, opts, out, progress, None)
+}
+
+/// [`correct`] whose first pass takes its pieces from `ahead`, started on the same program (it
+/// is used only when its piece size and dialect are the options').
+pub fn correct_ahead(
+    open: &dyn Fn() -> Result<Reader, NcError>,
+    field: &Field,
+    opts: &Options,
+    out: &std::fs::File,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+    ahead: Option<ReadAhead>,
+) -> Result<Outcome, NcError> {
     field.check().map_err(NcError::Usage)?;
-    match pass(open, field, opts, None, out, progress)? {
+    let ahead = ahead.filter(|a| a.piece_bytes == opts.piece_bytes && a.dialect == opts.dialect);
+    match pass(open, field, opts, None, out, progress, ahead)? {
         Ok(o) => Ok(o),
         Err(style) => {
             // (a stop asked for during the first pass has ended it already)
@@ -445,7 +512,7 @@ pub fn correct(
             f.set_len(0)
                 .and_then(|_| f.seek(std::io::SeekFrom::Start(0)))
                 .map_err(|e| NcError::Usage(format!("cannot write the output: {e}")))?;
-            match pass(open, field, opts, Some(style), out, progress)? {
+            match pass(open, field, opts, Some(style), out, progress, None)? {
                 Ok(o) => Ok(o),
                 Err(_) => Err(NcError::Usage(
                     "the program's number style changed between two readings".into(),

@@ -21,6 +21,10 @@ pub struct SampleOpts {
     /// Sorted grid lines to split at (x then y); empty for none.
     pub grid_x: Vec<f64>,
     pub grid_y: Vec<f64>,
+    /// The grid field the samples are for, when the engine evaluates it: a G17 arc over which it
+    /// varies by no more than the chord tolerance is sampled at its end only (it stays an arc,
+    /// and its chords are not needed).
+    pub grid: Option<std::sync::Arc<crate::field::Grid>>,
 }
 
 /// Sample points: the end of every piece, in block order.
@@ -36,6 +40,9 @@ pub struct Samples {
     pub rec0: usize,
     /// For every record sampled: first sample index and count (count 0: not sampled).
     pub range: Vec<(u32, u32)>,
+    /// Arcs sampled at their end only because the grid field varies over them by no more than
+    /// the chord tolerance: (record index, that variation in mm), in record order.
+    pub flat: Vec<(u32, f64)>,
 }
 
 impl Samples {
@@ -114,6 +121,44 @@ pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> f64
     n
 }
 
+/// How much the grid field varies over a G17 arc's circle (the larger radius of a spiral), when
+/// that is within the chord tolerance less a margin for the rounding of written numbers and the
+/// block before the arc, in this run, is a corrected move (its end, where the output starts the
+/// arc, is displaced by the field there). None otherwise.
+fn flat_under(
+    it: &Interp,
+    i: usize,
+    start: &[f64; NAXES],
+    opts: &SampleOpts,
+    s: &Samples,
+) -> Option<f64> {
+    let g = opts.grid.as_ref()?;
+    let rec = &it.records[i];
+    let k = i.checked_sub(s.rec0)?.checked_sub(1)?;
+    let prev = &it.records[s.rec0 + k];
+    if rec.plane != 0
+        || prev.cycle != 0
+        || prev.motion == Motion::Other
+        || s.range.get(k).is_none_or(|&(_, c)| c == 0)
+    {
+        return None;
+    }
+    let c = rec.center;
+    let r = (start[0] - c[0])
+        .hypot(start[1] - c[1])
+        .max((rec.end[0] - c[0]).hypot(rec.end[1] - c[1]));
+    if !r.is_finite() {
+        return None;
+    }
+    let (lo, hi) = g.range_over(c[0] - r, c[0] + r, c[1] - r, c[1] + r)?;
+    (hi - lo <= opts.chord_tol - FLAT_MARGIN).then_some(hi - lo)
+}
+
+/// What [`flat_under`] leaves of the chord tolerance for the rounding of the numbers around the
+/// arc: half a unit of the last written digit, at most 0.000005 inch (the emitter writes at least
+/// 4 decimals in mm and 5 in inch).
+pub const FLAT_MARGIN: f64 = 0.000_005 * 25.4;
+
 fn too_many(rec: &Record, n: f64) -> NcError {
     NcError::Interpret {
         line: rec.line as usize + 1,
@@ -148,6 +193,7 @@ pub fn sample_range(
     s.t.clear();
     s.rec.clear();
     s.range.clear();
+    s.flat.clear();
     s.rec0 = recs.start;
     let mut cuts: Vec<f64> = Vec::new();
     let (grid_x, grid_y) = (GridLines::new(&opts.grid_x), GridLines::new(&opts.grid_y));
@@ -205,6 +251,20 @@ pub fn sample_range(
             s.xyz.extend_from_slice(&end);
             s.t.push(1.0);
             s.rec.push(i as u32);
+        } else if let Some(range) = rec
+            .motion
+            .is_arc()
+            .then(|| flat_under(it, i, &start, opts, s))
+            .flatten()
+        {
+            // the field varies by no more than the chord tolerance anywhere within the arc's
+            // circle, and the block before it is corrected (so the output starts the arc where
+            // the field puts its start): the arc stays an arc, moved along a helix to its end's
+            // displacement (the emitter keeps it), and only its end is needed
+            s.xyz.extend_from_slice(&end);
+            s.t.push(1.0);
+            s.rec.push(i as u32);
+            s.flat.push((i as u32, range));
         } else if rec.motion.is_arc() {
             let geom = arc_sweep(rec, &start);
             let an = PLANE_AXES[rec.plane as usize][2];
@@ -384,6 +444,7 @@ mod tests {
             only_supported: true,
             grid_x: vec![],
             grid_y: vec![],
+            grid: None,
         }
     }
 

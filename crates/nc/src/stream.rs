@@ -178,6 +178,7 @@ mod tests {
             only_supported: true,
             grid_x: vec![],
             grid_y: vec![],
+            grid: None,
         };
         let field = |s: &Samples| {
             s.xyz

@@ -6,8 +6,7 @@ from pathlib import Path
 
 import click
 
-from .. import constants, dialects, nc
-from .. import fields as _fields
+from .. import constants, dialects
 from ._common import (
     FiniteRange,
     check_outputs,
@@ -62,7 +61,7 @@ def _shift(ctx, param, value):
 )
 @click.option(
     "--outside",
-    type=click.Choice(_fields.OUTSIDE),
+    type=click.Choice(constants.OUTSIDE),
     default="error",
     show_default=True,
     help="Points outside the field's domain.",
@@ -124,6 +123,14 @@ def correct(
         raise click.UsageError("give exactly one of --field FILE or --shift DX,DY,DZ")
     check_outputs({"input program": program, "field file": field_path}, {"-o": output, "--json": json_path})
     d = dialects.resolve(program, dialect)
+    # the engine starts reading the program while numpy is imported and the field read, on the
+    # core that would wait
+    from .._nc import read_ahead
+
+    ahead = read_ahead(str(program), constants.PIECE_BYTES, d.name)
+    from .. import fields as _fields
+    from .. import nc
+
     with progress() as say:
         if field_path is not None:
             say(f"reading {field_path}")
@@ -143,6 +150,7 @@ def correct(
             progress=say,
             expand_cycles=expand_cycles,
             dialect=d.name,
+            read_ahead=ahead,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
