@@ -12,12 +12,10 @@ import numpy as np
 from .._io import csv_reader
 from ..errors import InputError
 from ._readers import (
-    _DMIS,
     UNITS_MM,
     _number,
     _scale,
-    dmis_statements,
-    dmis_units,
+    dmis_points,
     local_name,
     qif_root,
     qif_scale,
@@ -101,19 +99,10 @@ def read_dmis_actuals(path, units: str | None = None) -> Actuals:
     without its three coordinates, a repeated label, and nominal points (``F(label)=FEAT/POINT``) —
     paired with every actual (the file carries its own nominals: read it without ``--nominal``) or
     with some (a mix of nominal/actual pairs and actual-only points)."""
-    statements, src = dmis_statements(path)
-    k = _scale(units)
+    points, src = dmis_points(path, units)
     nominal: dict[str, int] = {}
     actual: dict[str, tuple[int, list[float]]] = {}
-    for ln, st in statements:
-        unit = dmis_units(st, units, src, ln)
-        if unit is not None:
-            k = unit
-            continue
-        m = _DMIS.match(st)
-        if not m:
-            continue
-        kind, label, system, rest = m.group(1).upper(), m.group(2).strip(), m.group(3).upper(), m.group(4)
+    for ln, kind, label, system, rest, k in points:
         statement = f"{kind}({label})=FEAT/POINT"
         if kind == "F":
             if label in nominal:

@@ -192,6 +192,25 @@ def dmis_units(statement: str, units: str | None, src: str, line: int) -> float 
     return _DMIS_LENGTH[name]
 
 
+def dmis_points(path, units: str | None = None) -> tuple[list[tuple[int, str, str, str, str, float]], str]:
+    """The ``F(label)=FEAT/POINT,…`` and ``FA(label)=FEAT/POINT,…`` statements of a DMIS file, each
+    as (line, ``F`` or ``FA``, label, coordinate system, the rest of the statement, millimetres per
+    unit of the last ``UNITS`` before it — or of ``units`` for a file without one), and the file's
+    name for messages."""
+    statements, src = dmis_statements(path)
+    k = _scale(units)
+    out = []
+    for ln, st in statements:
+        unit = dmis_units(st, units, src, ln)
+        if unit is not None:
+            k = unit
+            continue
+        m = _DMIS.match(st)
+        if m:
+            out.append((ln, m.group(1).upper(), m.group(2).strip(), m.group(3).upper(), m.group(4), k))
+    return out, src
+
+
 def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
     """DMIS: nominal ``F(label)=FEAT/POINT,CART,x,y,z,i,j,k`` and actual ``FA(label)=…`` statements,
     a trailing ``$`` continuing a statement. Every nominal needs its actual and vice versa (a file
@@ -200,19 +219,10 @@ def read_dmis(path, probe_radius: float = 0.0, units: str | None = None) -> Meas
     Lengths are in the units of the last ``UNITS/MM|CM|METER|INCH|FEET,…`` statement before them
     (MM before any, or ``units`` for a file without one: a file's own statement must agree with
     ``units``). Polar points (``FEAT/POINT,POL``) are refused."""
-    statements, src = dmis_statements(path)
+    points, src = dmis_points(path, units)
     nominal: dict[str, tuple[int, list[float]]] = {}
     actual: dict[str, tuple[int, list[float]]] = {}
-    k = _scale(units)
-    for ln, st in statements:
-        unit = dmis_units(st, units, src, ln)
-        if unit is not None:
-            k = unit
-            continue
-        m = _DMIS.match(st)
-        if not m:
-            continue
-        kind, label, system, rest = m.group(1).upper(), m.group(2).strip(), m.group(3).upper(), m.group(4)
+    for ln, kind, label, system, rest, k in points:
         if system != "CART":
             raise InputError(
                 f"FEAT/POINT,{system}: only Cartesian (CART) points are read; export the points in CART", src, ln
