@@ -362,3 +362,52 @@ def test_arcs_under_a_grid_field_in_the_engine(tmp_path, r, kept):
         want = pa + np.column_stack([np.zeros((len(t), 2)), g * pa[:, 0] + 0.01])
         # the field varies by 2·g·r = 1 µm around the circle, which is how far the arc is from it
         assert np.abs(mb.at(t) - want).max() == pytest.approx(2 * g * r, abs=1.5e-4)
+
+
+POLAR = """G21 G90 G17 G92.1
+G0 X0 Y0 Z1
+G1 Z0 F100
+G1 @10 ^30
+G1 ^60
+G1 @5
+G91 G1 @1 ^10
+G1 ^10
+G90 G0 X3 Y4
+G0 @10
+G1 Z-1
+G1 @12
+G2 @12 ^90 R12
+G91 G0 ^10
+G90 G1 X0 Y0
+G92 X5 Y5
+G1 @3 ^45
+G92.1
+M2
+"""
+
+
+@pytest.mark.parametrize("inch", [False, True])
+@pytest.mark.parametrize("field", ["zero", "shift", "tilt"])
+def test_polar_coordinates_as_rs274(tmp_path, inch, field):
+    """LinuxCNC's polar words (@ distance, ^ angle about the program's origin; a word left out
+    keeps the current point's, G91 adds to it): our reading ends every block where rs274 does; a
+    zero correction leaves the program as it is; otherwise rs274's motion of the output follows
+    the input's displaced, corrected blocks written in X and Y where their polar words would not
+    reach the corrected end (a rapid from a point the correction moved, in G91, too)."""
+    src = POLAR.replace("G21", "G20") if inch else POLAR
+    (tmp_path / "p.ngc").write_text(src)
+    prog = nc.read(tmp_path / "p.ngc")
+    _compare_endpoints(prog, tmp_path / "p.ngc")
+    if field == "zero":
+        assert prog.correct(fields.Shift((0, 0, 0)), rapids=True).data == prog.data
+        return
+    f = fields.Shift((0.01, -0.02, 0.05)) if field == "shift" else _Tilt(0.002)
+    out = _corrected_matches(tmp_path, src, f, name="q.ngc", limit=5.0)
+    assert "@" in out.text  # the polar words that still reach their end stay
+
+
+def test_polar_words_with_x_or_in_a_cycle_are_refused_as_rs274():
+    with pytest.raises(InputError, match="polar coordinates"):
+        nc.parse("G21 G90 G0 X1 Y1 Z1\nG1 X2 @3 ^4 F100\nM2\n")
+    prog = nc.parse("G21 G90 G0 X1 Y1 Z5\nG91 G81 R1 Z-1 ^60 L6 F10\nM2\n")
+    assert any("polar" in u.construct for u in prog.unsupported)

@@ -247,6 +247,11 @@ fn is_motion_g(w: &Word) -> bool {
         }
 }
 
+/// LinuxCNC's polar distance `@` or angle `^`.
+fn is_polar(w: &Word) -> bool {
+    matches!(w.letter, b'@' | b'^')
+}
+
 /// G0, G1, G2 or G3: the motion codes of a Fanuc control's group 01, which its canned cycles
 /// (group 09) and G80 leave as they are.
 fn is_g01(w: &Word) -> bool {
@@ -323,6 +328,9 @@ pub struct Emitter<'a> {
     /// The offsets of the program's coordinates in the block being written ([`Interp::frames`]):
     /// an absolute number `v` is the position `v·unit + off`.
     off: [f64; NAXES],
+    /// Where the polar words of the block being written take the output, when they stay (for
+    /// [`Emitter::set_axes`]).
+    keep_polar: Option<[f64; 2]>,
 }
 
 impl<'a> Emitter<'a> {
@@ -340,6 +348,7 @@ impl<'a> Emitter<'a> {
             eol: if lx.crlf { b"\r\n" } else { b"\n" },
             st,
             off: [0.0; NAXES],
+            keep_polar: None,
         }
     }
 
@@ -615,6 +624,25 @@ impl<'a> Emitter<'a> {
         } else if explicit {
             self.st.out_motion = None;
         }
+        // polar words (LinuxCNC's @ ^) that take the current point (G91, or one of them left
+        // out) go elsewhere from where the output is: written as X and Y to the program's end
+        if rec.motion != Motion::Other && words.iter().any(is_polar) {
+            let half_mm = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
+            let p = self.polar_end(li, rec);
+            if (0..2).any(|a| (p[a] - rec.end[a]).abs() >= half_mm)
+                && (0..2).all(|a| rec.end[a].is_finite() && self.st.epos[a].is_finite())
+            {
+                self.polar_to_xy(li);
+                let mut target = self.st.epos;
+                for (k, t) in target.iter_mut().enumerate() {
+                    if rec.named & (1 << k) != 0 {
+                        *t = rec.end[k];
+                    }
+                }
+                self.set_axes(li, rec, &target, 0);
+                return;
+            }
+        }
         let rewrite = rec.supported && rec.incremental && rec.motion != Motion::Other;
         let mut written = [None; NAXES];
         if rewrite {
@@ -677,6 +705,8 @@ impl<'a> Emitter<'a> {
         }
         let words = lx.line_words(li);
         let epos0 = self.st.epos;
+        // polar words: where they take the output from where it is
+        let polar_end = words.iter().any(is_polar).then(|| self.polar_end(li, rec));
         let explicit = words.iter().any(|w| self.sets_motion(w));
         let d0 = [disp[0], disp[1], disp[2]];
         let uniform = disp
@@ -776,6 +806,14 @@ impl<'a> Emitter<'a> {
         if straight || keep_arc {
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
+            // polar words that reach the corrected end stay; others are written as X and Y
+            if let Some(p) = polar_end {
+                if (0..2).all(|a| (p[a] - target[a]).abs() < half_mm) {
+                    self.keep_polar = Some(p);
+                } else {
+                    self.polar_to_xy(li);
+                }
+            }
             self.set_axes(li, rec, &target, moved);
             // an R-format arc names no centre: moved as a whole, its radius is the same
             if keep_arc && rec.arc_absolute && !words.iter().any(|w| w.letter == b'R') {
@@ -784,6 +822,9 @@ impl<'a> Emitter<'a> {
             return Ok(());
         }
         // split or linearised: the original line carries the first piece
+        if polar_end.is_some() {
+            self.polar_to_xy(li);
+        }
         let linearise = rec.motion.is_arc();
         if linearise {
             self.st.stats.arcs_linearised += 1;
@@ -1261,6 +1302,42 @@ impl<'a> Emitter<'a> {
 
     /// Aim the block's axis words at `target` (mm), rewriting only what changes and adding the
     /// axis words it lacks.
+    /// Where the polar words of line `li` (block `rec`) take the output from where it is, as
+    /// LinuxCNC reads them (X and Y, mm).
+    fn polar_end(&self, li: usize, rec: &Record) -> [f64; 2] {
+        let u = if rec.inch { MM_PER_INCH } else { 1.0 };
+        let (mut dist, mut angle) = (None, None);
+        for w in self.lx.line_words(li) {
+            match w.letter {
+                b'@' => dist = Some(w.value),
+                b'^' => angle = Some(w.value),
+                _ => {}
+            }
+        }
+        let (cx, cy) = (
+            (self.st.epos[0] - self.off[0]) / u,
+            (self.st.epos[1] - self.off[1]) / u,
+        );
+        let (r0, a0) = (cx.hypot(cy), cy.atan2(cx).to_degrees());
+        let (r, a) = if rec.incremental {
+            (r0 + dist.unwrap_or(0.0), a0 + angle.unwrap_or(0.0))
+        } else {
+            (dist.unwrap_or(r0), angle.unwrap_or(a0))
+        };
+        [
+            r * a.to_radians().cos() * u + self.off[0],
+            r * a.to_radians().sin() * u + self.off[1],
+        ]
+    }
+
+    /// Remove the polar words of line `li`: the block's X and Y are then written as its other
+    /// axis words are (where they differ from where the output is).
+    fn polar_to_xy(&mut self, li: usize) {
+        for w in self.lx.line_words(li).iter().filter(|w| is_polar(w)) {
+            self.remove_word(li, w);
+        }
+    }
+
     /// Write the block's axis words for `target`; axes of `also` (bits of AXES) are written
     /// where they differ even when the block does not name them.
     fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES], also: u16) {
@@ -1268,6 +1345,13 @@ impl<'a> Emitter<'a> {
         let words = lx.line_words(li);
         let half = self.fmt.half(rec.inch);
         let mut seen = [false; NAXES];
+        // polar words kept: they give X and Y
+        if let Some(p) = self.keep_polar.take() {
+            seen[0] = true;
+            seen[1] = true;
+            self.st.epos[0] = p[0];
+            self.st.epos[1] = p[1];
+        }
         for w in words {
             if let Some(a) = axis_index(w.letter) {
                 seen[a] = true;

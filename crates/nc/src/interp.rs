@@ -614,7 +614,6 @@ impl Interpreter {
                 let construct = match kind {
                     Opaque::Expression => "parameters or expressions (# or [ ])",
                     Opaque::OWordFlow => "O-word subroutine or control flow",
-                    Opaque::Polar => "polar coordinates (@ ^)",
                     Opaque::GrblSetting => {
                         "grbl setting ($n=, $RST=, $N0=): it changes how the machine runs what follows"
                     }
@@ -640,7 +639,7 @@ impl Interpreter {
                 }
                 // an assignment alone moves nothing; anything else may move any axis
                 let assignment_only = words.is_empty() && kind == Opaque::Expression;
-                if !assignment_only || kind == Opaque::Polar {
+                if !assignment_only {
                     st.pos = [f64::NAN; NAXES];
                     push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
                     out.unsupported[idx].blocks += 1;
@@ -662,6 +661,9 @@ impl Interpreter {
             let mut l_word: Option<f64> = None;
             let mut q_word: Option<f64> = None;
             let mut e_word: Option<usize> = None;
+            // LinuxCNC's polar distance @ and angle ^ (degrees), with the column of the first
+            let mut polar: [Option<f64>; 2] = [None; 2];
+            let mut polar_col = 0usize;
             let mut seen: u32 = 0;
             let mut wcol = [0usize; 26];
             for w in words {
@@ -710,6 +712,20 @@ impl Interpreter {
                     b'L' => l_word = Some(w.value),
                     b'Q' => q_word = Some(w.value),
                     b'E' => e_word = Some(col(w)),
+                    b'@' | b'^' => {
+                        let k = (w.letter == b'^') as usize;
+                        if polar[k].is_some() {
+                            return Err(ierr(
+                                li,
+                                col(w),
+                                format!("more than one {} word in one block", w.letter as char),
+                            ));
+                        }
+                        if polar.iter().all(|v| v.is_none()) {
+                            polar_col = col(w);
+                        }
+                        polar[k] = Some(w.value);
+                    }
                     b'T' => {
                         let t = w.value.round() as u32;
                         if !out.summary.tools.contains(&t) {
@@ -718,6 +734,19 @@ impl Interpreter {
                     }
                     _ => {}
                 }
+            }
+
+            // polar coordinates stand for X and Y (read below, once the block's units are known)
+            let polar_used = polar.iter().any(|v| v.is_some());
+            if polar_used {
+                if axis[0].is_some() || axis[1].is_some() {
+                    return Err(ierr(
+                        li,
+                        polar_col,
+                        "polar coordinates (@ ^) and X or Y in one block; give one or the other",
+                    ));
+                }
+                named |= 0b11;
             }
 
             // on a Fanuc-family control a length or angle written without a decimal point counts
@@ -1144,6 +1173,49 @@ impl Interpreter {
             }
 
             let unit = if st.inch { MM_PER_INCH } else { 1.0 };
+            if polar_used {
+                let canned = matches!(st.mode, Mode::Canned(_));
+                let why = if st.dialect != Dialect::LinuxCnc {
+                    Some("polar coordinates (@ ^), LinuxCNC's: not read in this dialect")
+                } else if canned
+                    || home.is_some()
+                    || g53
+                    || nonmodal_axis_user.is_some()
+                    || frame_code.is_some()
+                {
+                    Some("polar coordinates (@ ^) in a canned cycle or with G28, G30, G53, G10, G52 or G92")
+                } else {
+                    None
+                };
+                if let Some(why) = why {
+                    let idx = push_unsupported(out, li, polar_col, why);
+                    out.unsupported[idx].blocks += 1;
+                    st.pos = [f64::NAN; NAXES];
+                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                    continue;
+                }
+                // as LinuxCNC: about the origin of the program's coordinates, in the XY plane
+                // whatever the plane; a word left out keeps the current point's distance or
+                // angle, and in G91 each word adds to it
+                let (cx, cy) = (
+                    (st.pos[0] - st.off[0]) / unit,
+                    (st.pos[1] - st.off[1]) / unit,
+                );
+                let (r0, a0) = (cx.hypot(cy), cy.atan2(cx).to_degrees());
+                let (rr, aa) = if st.incremental {
+                    (r0 + polar[0].unwrap_or(0.0), a0 + polar[1].unwrap_or(0.0))
+                } else {
+                    (polar[0].unwrap_or(r0), polar[1].unwrap_or(a0))
+                };
+                let (x, y) = (rr * aa.to_radians().cos(), rr * aa.to_radians().sin());
+                if st.incremental {
+                    axis[0] = Some(x - cx);
+                    axis[1] = Some(y - cy);
+                } else {
+                    axis[0] = Some(x);
+                    axis[1] = Some(y);
+                }
+            }
             // an arc with centre words and no axis words is a full circle back to its start
             let full_circle = named == 0
                 && matches!(st.mode, Mode::Motion(m) if m.is_arc())

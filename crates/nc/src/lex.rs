@@ -30,8 +30,6 @@ pub enum Opaque {
     Expression,
     /// `O` words with a keyword (`sub`, `call`, `if`, `while`, ...) or a named `o<...>`.
     OWordFlow,
-    /// LinuxCNC polar words `@` and `^`.
-    Polar,
     /// A grbl system command that moves the machine: homing `$H`, a jog `$J=...`.
     GrblMove,
     /// A grbl system command that changes the machine's settings: `$100=250`, `$RST=#`, `$N0=...`.
@@ -356,16 +354,13 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
                     line.opaque = Some((Opaque::Expression, i as u32));
                     i = end;
                 }
-                b'@' | b'^' => {
-                    line.opaque = Some((Opaque::Polar, i as u32));
-                    i = end;
-                }
                 b'$' if first => {
                     // a grbl system command: the whole line, kept as written
                     line.opaque = Some((grbl_kind(&s[i + 1..end]), i as u32));
                     i = end;
                 }
-                b'a'..=b'z' | b'A'..=b'Z' | b'$' => {
+                // (`@` and `^`: LinuxCNC's polar distance and angle)
+                b'a'..=b'z' | b'A'..=b'Z' | b'$' | b'@' | b'^' => {
                     let letter = c.to_ascii_uppercase();
                     let wstart = i;
                     let mut j = i + 1;
