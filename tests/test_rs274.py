@@ -411,3 +411,42 @@ def test_polar_words_with_x_or_in_a_cycle_are_refused_as_rs274():
         nc.parse("G21 G90 G0 X1 Y1 Z1\nG1 X2 @3 ^4 F100\nM2\n")
     prog = nc.parse("G21 G90 G0 X1 Y1 Z5\nG91 G81 R1 Z-1 ^60 L6 F10\nM2\n")
     assert any("polar" in u.construct for u in prog.unsupported)
+
+
+TOOL_LENGTHS = """G21 G90 G17 G0 X0 Y0 Z5
+G49
+G1 Z1 F100
+G43.1 Z2
+G1 Z0
+X5
+G91 G1 Z-0.5
+G90 G43.1 Z0.5
+G1 X8
+G49
+G1 X10 Y2
+G1 Z-1
+M2
+"""
+
+
+def test_tool_lengths_move_the_tip_coordinates_as_rs274(tmp_path):
+    """Program coordinates are the tool tip's: G43.1 Z2 makes the standing tip read 2 mm lower,
+    G49 takes it back (rs274 prints the tip), so a G91 move after G43.1 starts there; our reading
+    ends every block where rs274 does and the correction follows the displaced path."""
+    (tmp_path / "t.ngc").write_text(TOOL_LENGTHS)
+    prog = nc.read(tmp_path / "t.ngc")
+    _compare_endpoints(prog, tmp_path / "t.ngc")
+    assert not prog.unsupported
+    _corrected_matches(tmp_path, TOOL_LENGTHS, _Tilt(0.002), name="u.ngc")
+
+
+def test_a_tool_table_length_leaves_the_tip_height_unknown():
+    """G43 H takes the length from the tool table, which the program does not give: the tip's
+    height is unknown until a move sets Z (a G91 Z move after it is left as written, with the
+    warning), not read as if the length had not changed."""
+    src = "G21 G90 G0 X0 Y0 Z5\nG43 H1\nG91 G1 Z-6 F100\nG90 G1 X5\nG1 Z-1\nX8\nM2\n"
+    out = nc.parse(src).correct(fields.Shift((0, 0, 0.05)))
+    lines = out.text.splitlines()
+    assert lines[2] == "G91 G1 Z-6 F100" and lines[3] == "G90 G1 X5"
+    assert any("position is unknown" in w for w in out.correction.warnings)
+    assert lines[4] == "G1 Z-0.95" and lines[5] == "X8"

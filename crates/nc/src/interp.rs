@@ -125,6 +125,13 @@ pub struct Record {
     pub frame: u32,
 }
 
+/// Tool length offsets of a tool table (or at a program's start): unknown along Z.
+const UNKNOWN_LENGTH: [f64; NAXES] = {
+    let mut t = [0.0; NAXES];
+    t[2] = f64::NAN;
+    t
+};
+
 /// [`Record::cycle`] of a move of a canned cycle.
 pub const CYCLE_MOVE: u8 = 1;
 /// [`Record::cycle`] of the feed that ends at the bottom of a hole.
@@ -359,7 +366,6 @@ struct Active {
     diameter: Option<(u32, usize)>,
     inverse_time: Option<(u32, usize)>,
     flow: Option<(u32, usize)>,
-    tool_offset: Option<(u32, usize)>,
     /// A work coordinate system other than the one the program's moves began in.
     wcs: Option<(u32, usize)>,
 }
@@ -375,7 +381,6 @@ impl Active {
             .or(self.cutter_comp)
             .or(self.canned)
             .or(self.inverse_time)
-            .or(self.tool_offset)
             .or(self.wcs)
             .map(|(_, idx)| idx)
     }
@@ -411,6 +416,9 @@ struct State {
     dialect: Dialect,
     /// The last of G0, G1, G2, G3 (Fanuc's group 01, which a canned cycle leaves as it is).
     g01: Option<Motion>,
+    /// The tool length offsets in force, per axis (mm): G43.1's words, 0 after G49, NaN after
+    /// G43/G43.2 (the tool table's) and at the start.
+    tlo: [f64; NAXES],
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -531,6 +539,7 @@ impl Interpreter {
                 frame: 0,
                 dialect,
                 g01: None,
+                tlo: UNKNOWN_LENGTH,
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -886,6 +895,8 @@ impl Interpreter {
             let mut home: Option<(i32, usize)> = None;
             // G92, G52, G92.1/.2/.3, G10 L2/L20 on the system in force: the offsets they set
             let mut frame_code: Option<(i32, usize)> = None;
+            // G43, G43.1, G43.2 or G49 in the block
+            let mut tool_length: Option<i32> = None;
             let mut unit_change = None;
             let mut untraced: Option<usize> = None;
             for &(c, gc) in &gs[..ng] {
@@ -917,15 +928,10 @@ impl Interpreter {
                             st.active.cutter_comp = Some((li as u32, idx));
                         }
                     }
-                    // tool length: program coordinates are the tool tip; G43.1 takes its offsets from
-                    // the axis words, and rs274 then traces the spindle, not the tip
-                    430 | 490 => st.active.tool_offset = None,
-                    432 => {}
-                    431 => {
-                        let idx = push_unsupported(out, li, gc, "dynamic tool length offset G43.1");
-                        st.active.tool_offset = Some((li as u32, idx));
-                        nonmodal_axis_user = Some((c, idx));
-                    }
+                    // tool length: program coordinates are the tool tip's, so a new length moves the
+                    // tip's coordinates where the tool stands (by the table's length: unknown here;
+                    // G43.1's words give it; G49 takes it off)
+                    430 | 432 | 490 | 431 => tool_length = Some(c),
                     540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => {
                         let o = c as u16;
                         if !out.summary.work_offsets.contains(&o) {
@@ -1173,6 +1179,37 @@ impl Interpreter {
             }
 
             let unit = if st.inch { MM_PER_INCH } else { 1.0 };
+            if let Some(c) = tool_length {
+                // the lengths in force (mm) after the code: G43.1 its words (others 0), G49 none,
+                // G43/G43.2 the tool table's along Z, which the program does not tell (a table's
+                // X and Y offsets, a lathe's, are not followed)
+                let new = match c {
+                    431 => {
+                        let mut t = [0.0; NAXES];
+                        for (k, v) in axis.iter().enumerate() {
+                            if let Some(v) = v {
+                                t[k] = v * axis_unit(k, unit);
+                            }
+                        }
+                        t
+                    }
+                    490 => [0.0; NAXES],
+                    _ => UNKNOWN_LENGTH,
+                };
+                // the tip's coordinates where the tool stands (NaN where a length is unknown)
+                for ((p, old), now) in st.pos.iter_mut().zip(st.tlo).zip(new) {
+                    *p += old - now;
+                }
+                st.tlo = new;
+                if c == 431 {
+                    // its axis words are the lengths, not a move
+                    if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                        out.summary.end_line = Some(li as u32);
+                        break;
+                    }
+                    continue;
+                }
+            }
             if polar_used {
                 let canned = matches!(st.mode, Mode::Canned(_));
                 let why = if st.dialect != Dialect::LinuxCnc {
