@@ -815,6 +815,7 @@ def _compensate_cad(
     if json_path:
         write_json(json_path, payload)
     if report_path:
+        from ..report import cad_maps as rep_cad
         from ..report import freeform as rep
         from ..report import write
 
@@ -841,6 +842,7 @@ def _compensate_cad(
                 sections=secs,
                 faces=[(f.face, f.points) for f in pc.faces],
                 predicted=predicted,
+                cad=rep_cad.CadReport(pc, proj.face, proj.uv, meas.nominal, {i: proj.name_of(i) for i in pc.ids}),
             ),
         )
 

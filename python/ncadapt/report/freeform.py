@@ -137,13 +137,14 @@ def section(compensation, xy, axis: str, at: float, names=("x", "y")) -> Section
 
 
 # ---------------------------------------------------------------------------------------- plots
-def _callout_marks(ax, xy, idx):
+def _callout_marks(ax, xy, idx, labels=None):
+    """Circle the points ``idx`` of ``xy`` and number them 1, 2, … (or ``labels``)."""
     ax.scatter(xy[idx, 0], xy[idx, 1], s=70, facecolors="none", edgecolors="k", linewidths=1.2)
     # neighbouring callouts are common (the largest deviations sit together): labels go round
     offsets = ((7, 7), (7, -15), (-15, 7), (-15, -15), (0, 14), (0, -20))
     for k, j in enumerate(idx):
         ax.annotate(
-            str(k + 1),
+            str(k + 1 if labels is None else labels[k]),
             (xy[j, 0], xy[j, 1]),
             xytext=offsets[k % len(offsets)],
             textcoords="offset points",
@@ -391,6 +392,7 @@ def render(
     callouts: int = CALLOUTS,
     faces=None,
     predicted=None,
+    cad=None,
 ) -> str:
     """The report as HTML text.
 
@@ -403,7 +405,9 @@ def render(
     ``callouts``: how many of the largest |deviations| are numbered on the maps and listed;
     ``faces``: [(face id, indices of its points)] of a CAD nominal (the tolerance table by face);
     ``predicted`` (n,): the deviations predicted after the correction, mm (default: ``deviation``
-    minus the compensation's gain × the systematic part).
+    minus the compensation's gain × the systematic part); ``cad``: a
+    :class:`~ncadapt.report.cad_maps.CadReport` of a CAD nominal (the correction map face by face,
+    the callouts located by face, (u, v) and x, y, z, the 3-D view on the part).
     """
     xy = np.asarray(xy, float)[:, :2]
     deviation = np.asarray(deviation, float)
@@ -422,6 +426,18 @@ def render(
             for k, v in summary.items()
         )
         parts.append(("Result", f"<div class='cards'>{cards}</div>"))
+    if cad is not None:
+        from . import cad_maps
+
+        parts.append(("The correction to be cut", cad_maps.correction_section(cad, marked["measured"])))
+
+        def callout_table(values, idx, div_id):
+            return cad_maps.callout_table(cad, values, idx, div_id)
+    else:
+
+        def callout_table(values, idx, div_id):
+            return _callout_table(xy, values, idx, names, div_id)
+
     if compensation is not None:
         parts.append(("The correction to be cut", _correction_section(compensation, xy, names, extrapolation)))
     if tolerance is not None:
@@ -439,10 +455,9 @@ def render(
             + _stats_table(series)
             + _maps(xy, series, names, marked)
             + "<h3>Largest deviations, measured</h3>"
-            + _callout_table(xy, deviation, marked["measured"], names, "callouts-measured")
+            + callout_table(deviation, marked["measured"], "callouts-measured")
             + (
-                "<h3>Largest deviations, after</h3>"
-                + _callout_table(xy, after, marked["after"], names, "callouts-after")
+                "<h3>Largest deviations, after</h3>" + callout_table(after, marked["after"], "callouts-after")
                 if after is not None
                 else ""
             ),
@@ -455,8 +470,13 @@ def render(
             from . import cad_sections
 
             parts.append((f"Section {sec.axis} = {sec.at:g} mm", cad_sections.block(sec, deviation)))
-    view_points = np.column_stack([xy, np.zeros(len(xy))]) if points is None else np.asarray(points, float)
-    parts.append(("3-D view", surface_view(view_points, series)))
+    if cad is not None:
+        from . import cad_maps
+
+        parts.append(("3-D view", cad_maps.part_view(cad, series)))
+    else:
+        view_points = np.column_stack([xy, np.zeros(len(xy))]) if points is None else np.asarray(points, float)
+        parts.append(("3-D view", surface_view(view_points, series)))
     edges = histogram_edges([v for _, v in series])
     parts.append(
         (
