@@ -283,11 +283,10 @@ def view_figure(cad: CadReport, series):
     keep = _every(n, VIEW_POINTS)
     kept = np.zeros(n, bool)
     kept[keep] = True
-    vals = [(name, np.asarray(v, float) * UM) for name, v in series]
+    from .freeform import mesh, symmetric_range
 
-    def scale(w):
-        m = max(float(np.nanmax(np.abs(w))) if np.size(w) else 0.0, 1e-6)
-        return -m, m
+    vals = [(name, np.asarray(v, float) * UM) for name, v in series]
+    scale = symmetric_range
 
     hover = "x %{x:.3f} mm<br>y %{y:.3f} mm<br>z %{z:.3f} mm<br>%{intensity:.1f} µm<extra>face {f}</extra>"
     traces, point_idx = [], []
@@ -299,17 +298,12 @@ def view_figure(cad: CadReport, series):
         tri = _point_triangles(f.coords[sel])
         lo, hi = scale(vals[0][1])
         traces.append(
-            go.Mesh3d(
-                x=p[:, 0],
-                y=p[:, 1],
-                z=p[:, 2],
-                i=tri[:, 0],
-                j=tri[:, 1],
-                k=tri[:, 2],
-                intensity=vals[0][1][idx],
-                colorscale="RdBu_r",
-                cmin=lo,
-                cmax=hi,
+            mesh(
+                p,
+                tri,
+                vals[0][1][idx],
+                lo,
+                hi,
                 showscale=len(traces) == 0,
                 colorbar={"title": {"text": "µm"}},
                 name=f"face {f.face}, points",
@@ -331,17 +325,12 @@ def view_figure(cad: CadReport, series):
     first_corr = len(traces)
     for f, (p, tri, c) in zip(part.faces, corr):  # type: ignore[attr-defined]
         traces.append(
-            go.Mesh3d(
-                x=p[:, 0],
-                y=p[:, 1],
-                z=p[:, 2],
-                i=tri[:, 0],
-                j=tri[:, 1],
-                k=tri[:, 2],
-                intensity=c,
-                colorscale="RdBu_r",
-                cmin=lo_c,
-                cmax=hi_c,
+            mesh(
+                p,
+                tri,
+                c,
+                lo_c,
+                hi_c,
                 showscale=len(traces) == first_corr,
                 colorbar={"title": {"text": "−dF, µm"}},
                 name=f"face {f.face}, correction",

@@ -261,6 +261,32 @@ def _section_plot(sec: Section, deviation):
     return figure_png(fig)
 
 
+def symmetric_range(w) -> tuple[float, float]:
+    """A colour range centred on zero that holds every finite value of ``w`` (µm)."""
+    m = max(float(np.nanmax(np.abs(w))) if np.size(w) else 0.0, 1e-6)
+    return -m, m
+
+
+def mesh(p, tri, values, lo: float, hi: float, **kw):
+    """A plotly ``Mesh3d`` of points ``p`` (n, 3) and triangles ``tri`` (m, 3) coloured by ``values``
+    on the red-blue scale from ``lo`` to ``hi``; ``kw`` passes on (name, colorbar, hovertemplate …)."""
+    import plotly.graph_objects as go
+
+    return go.Mesh3d(
+        x=p[:, 0],
+        y=p[:, 1],
+        z=p[:, 2],
+        i=tri[:, 0],
+        j=tri[:, 1],
+        k=tri[:, 2],
+        intensity=values,
+        colorscale="RdBu_r",
+        cmin=lo,
+        cmax=hi,
+        **kw,
+    )
+
+
 def surface_view(points, series, div_id: str = "surface3d") -> str:
     """An interactive 3-D view (plotly, its library embedded: no network) of deviations on the
     surface: the measured points' nominal positions ``points`` (n, 3) mm, triangulated over their
@@ -278,11 +304,7 @@ def surface_view(points, series, div_id: str = "surface3d") -> str:
     plane = np.linalg.svd(c, full_matrices=False)[2][:2]  # the points' best plane: a height field over it
     tri = Delaunay(c @ plane.T).simplices
     vals = [(name, np.asarray(v, float)[keep] * UM) for name, v in series]
-
-    def scale(w):
-        m = max(float(np.abs(w).max()), 1e-6)
-        return -m, m
-
+    scale = symmetric_range
     lo, hi = scale(vals[0][1])
     # the box in the data's proportions; the thinnest axis of a flat part (its height) drawn a
     # quarter of the widest, said in the caption; a plane stays flat
@@ -292,17 +314,12 @@ def surface_view(points, series, div_id: str = "surface3d") -> str:
     tall = 0.25 / ratio[thin] if 1e-6 < ratio[thin] < 0.25 else 1.0
     ratio[thin] = max(ratio[thin] * tall, 0.02)
     fig = go.Figure(
-        go.Mesh3d(
-            x=p[:, 0],
-            y=p[:, 1],
-            z=p[:, 2],
-            i=tri[:, 0],
-            j=tri[:, 1],
-            k=tri[:, 2],
-            intensity=vals[0][1],
-            colorscale="RdBu_r",
-            cmin=lo,
-            cmax=hi,
+        mesh(
+            p,
+            tri,
+            vals[0][1],
+            lo,
+            hi,
             colorbar={"title": {"text": "µm"}},
             hovertemplate="x %{x:.3f} mm<br>y %{y:.3f} mm<br>z %{z:.3f} mm<br>%{intensity:.1f} µm<extra></extra>",
             flatshading=False,
