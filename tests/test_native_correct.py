@@ -261,3 +261,12 @@ def test_a_program_read_ahead_is_corrected_as_one_read_then(tmp_path, monkeypatc
             assert got == want
         # taken by the engine (another piece size is then dropped by it)
         assert ahead.taken == used
+    # a field the engine does not evaluate: the Python evaluation reads the program itself and
+    # the pieces read ahead are dropped
+    ahead = _nc.read_ahead(str(prog), 64, "linuxcnc")
+    try:
+        c = nc.correct_file(prog, tmp_path / "twin.ngc", _python_twin(field), max_segment=1.0, read_ahead=ahead)
+        assert (tmp_path / "twin.ngc").read_bytes() == want[0]
+    except (RefusedError, InputError) as e:
+        assert want[0] == "refused" and str(e) == want[2]
+    assert ahead.taken

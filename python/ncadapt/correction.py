@@ -377,6 +377,8 @@ def _correct(
     grid = getattr(field, "grid_lines", None)
     gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
     spec = _native_field(field) if out_file is not None and not keep_points else None
+    if spec is None and read_ahead is not None:
+        read_ahead.cancel()  # the Python evaluation reads the program itself
     if spec is not None:
         c = _correct_native(
             source,

@@ -631,10 +631,18 @@ struct ReadAhead {
 
 #[pymethods]
 impl ReadAhead {
-    /// A correction has taken the pieces read ahead.
+    /// A correction has taken the pieces read ahead (or they were dropped).
     #[getter]
     fn taken(&self) -> bool {
         self.inner.lock().map_or(true, |g| g.is_none())
+    }
+
+    /// Drop the pieces read ahead (the correction reads the program itself): the reading
+    /// thread stops and its memory is freed.
+    fn cancel(&self) {
+        if let Ok(mut g) = self.inner.lock() {
+            g.take();
+        }
     }
 }
 
