@@ -245,3 +245,23 @@ def test_cad_section_options_are_checked(plate, tmp_path):
         r = CliRunner().invoke(main, [*base, *extra])
         assert r.exit_code == 2 and message in r.output, r.output
         assert not (tmp_path / "r.html").exists()
+
+
+def test_analyze_counts_the_points_in_tolerance(cylinder, tmp_path):
+    """``analyze --tolerance T``: the shares of the measured deviations inside ±T, above and below,
+    over the part and by face (the same closed-form counts as compensate's before), and the
+    report's banded maps."""
+    js, rp = tmp_path / "a.json", tmp_path / "a.html"
+    args = ["analyze", cylinder["csv"], "--nominal", cylinder["step"], "--tolerance", T, "--json", js]
+    r = CliRunner().invoke(main, [str(a) for a in [*args, "--report", rp]])
+    assert r.exit_code == 0, r.output
+    j = json.loads(js.read_text())
+    side, top = (f["tolerance"] for f in j["faces"])
+    assert side == pytest.approx({"points": 33 * 27, "inside": 14 / 27, "above": 6 / 27, "below": 7 / 27}, abs=1e-12)
+    x = cylinder["top_x"]
+    n_in = int(np.count_nonzero(x <= T / 0.0006))
+    assert top["inside"] == pytest.approx(n_in / len(x), abs=1e-12)
+    assert j["tolerance"]["value"] == T
+    assert j["tolerance"]["before"]["inside"] == pytest.approx((33 * 14 + n_in) / (33 * 27 + len(x)), abs=1e-12)
+    assert f"tolerance ±{T:g} mm" in r.output
+    assert "Tolerance" in rp.read_text()

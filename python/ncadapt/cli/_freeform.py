@@ -224,10 +224,19 @@ def _print_alignment(al) -> None:
         summary(f"alignment residual rms {al.rms:.2g} mm (exact: one constraint per degree of freedom)")
 
 
+def _tolerance_option(text):
+    """``--tolerance T``, mm."""
+    return click.option("--tolerance", type=FiniteRange(0, constants.COORD_MAX, min_open=True), help=text)
+
+
 @click.command()
 @click.argument("measurements", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @_cad_options
 @_align_options
+@_tolerance_option(
+    "Profile tolerance ±T, mm: the share of the points inside it and above and below it, in the summary, "
+    "the JSON (`tolerance`; with --nominal by face as well) and the report's tolerance-banded maps."
+)
 @_moran_options
 @handle_errors
 def analyze(
@@ -238,6 +247,7 @@ def analyze(
     align,
     align_dof,
     datums,
+    tolerance,
     weights,
     power,
     threshold,
@@ -298,10 +308,31 @@ def analyze(
             + "; ".join(f"{_face_said(f['id'], f['name'])} ({f['n_points']:,} points)" for f in proj.faces_used())
         )
     _print_analysis(a)
+    faces = proj.faces_used() if proj is not None else None
+    tol = None
+    if tolerance is not None:
+        import numpy as np
+
+        from ..report import freeform as rep
+
+        tol = {"value": tolerance, "before": rep.tolerance_shares(meas.deviation, tolerance)}
+        for f in faces or []:
+            f["tolerance"] = rep.tolerance_shares(meas.deviation[np.asarray(proj.face) == f["id"]], tolerance)
+            summary(
+                f"{_face_said(f['id'], f['name'])}: tolerance ±{tolerance:g} mm: "
+                f"{100 * f['tolerance']['inside']:.1f} % of its points inside"
+            )
+        b = tol["before"]
+        summary(
+            f"tolerance ±{tolerance:g} mm: {100 * b['inside']:.1f} % of the points inside, "
+            f"{100 * b['above']:.1f} % above, {100 * b['below']:.1f} % below"
+        )
     if json_path:
         extra = {"alignment": meas.alignment.as_dict()} if meas.alignment is not None else {}
-        if proj is not None:
-            extra["faces"] = proj.faces_used()
+        if faces is not None:
+            extra["faces"] = faces
+        if tol is not None:
+            extra["tolerance"] = tol
         write_json(json_path, {"input": str(measurements), **extra, **a.as_dict()})
     if report_path:
         from ..report import freeform as rep
@@ -318,6 +349,7 @@ def analyze(
                 names=frame.names,
                 deviation=meas.deviation,
                 points=meas.nominal,
+                tolerance=tolerance,
             ),
         )
 
@@ -402,12 +434,10 @@ def analyze(
     help="With --nominal: the whole compensated part, .step/.stp (the compensated faces in place of the nominal "
     "ones; --surface then writes those faces alone).",
 )
-@click.option(
-    "--tolerance",
-    type=FiniteRange(0, constants.COORD_MAX, min_open=True),
-    help="Profile tolerance ±T, mm: the share of points inside it before and predicted after (measured − "
+@_tolerance_option(
+    "Profile tolerance ±T, mm: the share of points inside it before and predicted after (measured − "
     "systematic), in the summary, the JSON and the report's tolerance-banded maps (with --nominal: by face "
-    "as well).",
+    "as well)."
 )
 @click.option(
     "--section",
