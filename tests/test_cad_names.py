@@ -150,6 +150,12 @@ def test_analyze_and_compensate_choose_a_face_by_name(named_block, tmp_path):
     j = json.loads(out.read_text())
     assert j["faces"] == [top] and j["face_names"] == ["top"]
     assert [(b["face"], b["name"]) for b in j["by_face"]] == [(top, "top")]
+    # the compensated part keeps the names: read back, each face's name is the one its place on
+    # the block gives (the compensated top moved by microns, its centre still at z = H)
+    written = cad.read_part(tmp_path / "c.step")
+    assert len(written.faces) == 6
+    for f, name in zip(written.faces, written.names):
+        assert name == _name_by_centre(_centre(f)) or (name == "top" and abs(_centre(f)[2] - H) < 0.01)
 
 
 @pytest.mark.parametrize(

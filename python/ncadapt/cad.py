@@ -131,16 +131,20 @@ def write(surface, path: str | os.PathLike) -> Path:
     return write_shape(face(surface), path)
 
 
-def write_shape(shape, path: str | os.PathLike) -> Path:
+def write_shape(shape, path: str | os.PathLike, names=()) -> Path:
     """Write an OpenCASCADE shape (a face, a compound of faces, a solid) as STEP (AP214) or IGES,
-    atomically, in millimetres."""
+    atomically, in millimetres. ``names``: (face, name) pairs written as the STEP file's face names
+    (through OpenCASCADE's XCAF writer, as :func:`read_part` reads them)."""
     p = Path(path)
     kind = FORMATS.get(p.suffix.lower())
     if kind is None:
         raise InputError(f"unknown CAD format {p.suffix!r}; use .step, .stp, .igs or .iges", str(p))
     f = shape
+    names = [(face, n) for face, n in names if n]
     with atomic_path(p) as tmp:
-        if kind == "step":
+        if kind == "step" and names:
+            ok = _write_named_step(f, names, tmp)
+        elif kind == "step":
             from OCP.IFSelect import IFSelect_RetDone
             from OCP.Interface import Interface_Static
             from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
@@ -161,6 +165,32 @@ def write_shape(shape, path: str | os.PathLike) -> Path:
         if not ok:
             raise OSError(f"OpenCASCADE could not write {p}")
     return p
+
+
+def _write_named_step(shape, names, path) -> bool:
+    """STEP through the XCAF writer: ``shape`` with each face of ``names`` a named sub-shape."""
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.Interface import Interface_Static
+    from OCP.STEPCAFControl import STEPCAFControl_Writer
+    from OCP.STEPControl import STEPControl_AsIs
+    from OCP.TCollection import TCollection_ExtendedString
+    from OCP.TDataStd import TDataStd_Name
+    from OCP.TDocStd import TDocStd_Document
+    from OCP.XCAFDoc import XCAFDoc_DocumentTool
+
+    with _quiet():
+        doc = TDocStd_Document(TCollection_ExtendedString("XmlXCAF"))
+        tool = XCAFDoc_DocumentTool.ShapeTool_s(doc.Main())
+        label = tool.AddShape(shape, False)
+        for face, name in names:
+            TDataStd_Name.Set_s(tool.AddSubShape(label, face), TCollection_ExtendedString(name))
+        w = STEPCAFControl_Writer()
+        w.SetNameMode(True)
+        Interface_Static.SetCVal_s("write.step.unit", "MM")
+        Interface_Static.SetIVal_s("write.stepcaf.subshapes.name", 1)
+        if not w.Transfer(doc, STEPControl_AsIs):
+            return False
+        return w.Write(str(path)) == IFSelect_RetDone
 
 
 def read_surface_points(path: str | os.PathLike, u, v) -> np.ndarray:
@@ -643,8 +673,9 @@ def replace_faces(shape, new: dict[int, object], tolerance: float):
     part sewn again (``BRepBuilderAPI_Sewing`` at ``tolerance`` mm: an edge of a moved face and
     the unmoved neighbour's edge are one edge again, its tolerance the gap between them).
 
-    Returns (the new shape, {id: the face in it}). A solid stays a solid (its shell closed and
-    oriented outward); the caller checks the result with :func:`is_valid`."""
+    Returns (the new shape, {id: the face in it} for every face, replaced or not). A solid stays a
+    solid (its shell closed and oriented outward); the caller checks the result with
+    :func:`is_valid`."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeSolid, BRepBuilderAPI_Sewing
     from OCP.BRepLib import BRepLib
     from OCP.TopAbs import TopAbs_SHELL, TopAbs_SOLID
@@ -653,13 +684,16 @@ def replace_faces(shape, new: dict[int, object], tolerance: float):
 
     old = faces(shape)
     if len(old) == 1:
-        return new[1], dict(new)
+        return new.get(1, old[0]), {1: new.get(1, old[0])}
     sew = BRepBuilderAPI_Sewing(tolerance)
     for i, f in enumerate(old, 1):
         sew.Add(new.get(i, f))
     sew.Perform()
     out = sew.SewedShape()
-    placed = {i: (sew.Modified(f) if sew.IsModified(f) else f) for i, f in new.items()}
+    placed = {}
+    for i, f in enumerate(old, 1):
+        g = new.get(i, f)
+        placed[i] = sew.Modified(g) if sew.IsModified(g) else g
     if _count(shape, TopAbs_SOLID) == 1 and _count(out, TopAbs_SHELL) == 1:
         ex = TopExp_Explorer(out, TopAbs_SHELL)
         solid = BRepBuilderAPI_MakeSolid(TopoDS.Shell(ex.Current())).Solid()

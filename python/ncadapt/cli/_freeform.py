@@ -790,7 +790,8 @@ def _compensate_cad(
             cad.write_shape(pc.surfaces(), surface_path)
         if part_path is not None:
             say(f"writing {part_path}")
-            cad.write_shape(pc.part, part_path)
+            # the faces keep the names the STEP file gave them
+            cad.write_shape(pc.part, part_path, [(pc.placed[i], proj.name_of(i)) for i in sorted(pc.placed)])
     _print_alignment(meas.alignment)
     _print_analysis(a)
     _print_decomposition(a, d)

@@ -529,7 +529,8 @@ class FaceCompensation:
 @dataclass(frozen=True)
 class PartCompensation:
     """The compensated CAD part: ``part`` (an OpenCASCADE shape, valid by ``BRepCheck_Analyzer``)
-    with each compensated face (``placed`` {face id: face in the part}) replacing the nominal one;
+    with each compensated face replacing the nominal one (``placed`` {face id: face in the part},
+    every face);
     ``check_error`` mm: the largest |distance along the normal from the nominal face to the
     compensated one + dF| at ``check_points`` points of the faces; ``max_tolerance`` mm: the
     widest gap an edge of the sewn part covers (an unmoved neighbour's edge against a moved face's)."""
