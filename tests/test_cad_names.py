@@ -214,3 +214,39 @@ def test_a_step_file_the_xcaf_reader_fails_on_is_read_without_names(named_block,
     monkeypatch.setattr(cad, "_step_names", fails)  # the forked reader inherits it
     part = cad.read_part(named_block)
     assert part.names == (None,) * 6 and len(part.faces) == 6
+
+
+PROBE = ["--stylus-radius", "1.5", "--approach", "3", "--overtravel", "1", "--feed", "100"]
+
+
+def test_probe_points_take_a_face_by_name(named_block, tmp_path):
+    """``probe points --face NAME``: the points are placed on the face the name selects (the top,
+    z = H), as by its id."""
+    part = cad.read_part(named_block)
+    (top,) = part.select(["top"])
+    outs = []
+    for face in ("top", str(top)):
+        out = tmp_path / f"p_{face}.ngc"
+        js = tmp_path / f"p_{face}.json"
+        args = ["probe", "points", "--nominal", str(named_block), "--face", face, "--n", "9", "-o", str(out)]
+        r = CliRunner().invoke(main, [*args, *PROBE, "--json", str(js)])
+        assert r.exit_code == 0, r.output
+        outs.append(out.read_text())
+    assert outs[0] == outs[1]
+    r = CliRunner().invoke(
+        main,
+        [
+            "probe",
+            "points",
+            "--nominal",
+            str(named_block),
+            "--face",
+            "side",
+            "--n",
+            "9",
+            "-o",
+            str(tmp_path / "x"),
+            *PROBE,
+        ],
+    )
+    assert r.exit_code == 2 and "the name is given to faces" in r.output

@@ -663,7 +663,7 @@ def test_points_from_a_file_must_lie_on_the_face(tmp_path):
             tmp_path / "o.ngc",
         ]
     )
-    assert r.exit_code == 2 and "has 1 face(s)" in r.output
+    assert r.exit_code == 2 and "the CAD file has faces 1 to 1" in r.output
     bad = tmp_path / "bad.step"
     bad.write_text("ISO-10303-21;\nnonsense\n")
     r = run(

@@ -177,10 +177,10 @@ def grid(extent, program, margin, step, nx, ny, safe_z, depth, feed, fast_feed, 
 @click.option(
     "--face",
     "face_id",
-    type=click.IntRange(1, 10_000_000),
-    default=1,
+    metavar="ID|NAME",
+    default="1",
     show_default=True,
-    help="Face to probe, numbered from 1 in the file's order.",
+    help="Face to probe: its number from 1 in the file's order, or its name in the STEP file.",
 )
 @click.option("--n", "n", type=click.IntRange(1, 5000), help="Number of points to place on the face, 1 to 5000.")
 @click.option("--adaptive", is_flag=True, help="Place the points denser where the face bends more (with --n).")
@@ -283,11 +283,9 @@ def points(
     )
     with progress() as say:
         say(f"reading {nominal}")
-        shape = cad.read_shape(nominal)
-        fs = cad.faces(shape)
-        if face_id > len(fs):
-            raise _bad("--face", f"{face_id}: {nominal} has {len(fs)} face(s)")
-        face = fs[face_id - 1]
+        part = cad.read_part(nominal)
+        (face_id,) = part.select([face_id])
+        face = part.faces[face_id - 1]
         say("placing the points")
         if n is not None:
             try:
