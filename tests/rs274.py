@@ -29,7 +29,8 @@ _PLANES = {"CANON_PLANE_XY": (0, 1, 2), "CANON_PLANE_XZ": (2, 0, 1), "CANON_PLAN
 
 @dataclass
 class Canon:
-    """Canonical motion: kinds ('traverse', 'feed', 'arc') and end points (n, 6) X Y Z A B C in mm/deg."""
+    """Canonical motion: kinds ('traverse', 'feed', 'arc', 'probe') and end points (n, 6) X Y Z A B C in
+    mm/deg (a probing move's end is its target: rs274 has no probe to trip)."""
 
     kinds: list[str]
     ends: np.ndarray
@@ -82,10 +83,10 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             g5x = lengths([float(a) for a in args.split(",")[1:7]])
         elif name == "SET_G92_OFFSET":
             g92 = lengths([float(a) for a in args.split(",")[:6]])
-        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "STRAIGHT_PROBE"):
             v = [float(a) for a in args.split(",")]
             ends.append(list(lengths(v) + g5x + g92))
-            kinds.append("traverse" if name == "STRAIGHT_TRAVERSE" else "feed")
+            kinds.append({"STRAIGHT_TRAVERSE": "traverse", "STRAIGHT_FEED": "feed"}.get(name, "probe"))
             arcs.append(None)
             res = max(res, 0.00005 * scale)
         elif name == "ARC_FEED":

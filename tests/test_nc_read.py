@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from ncadapt import InputError, nc
+from ncadapt import InputError, fields, nc
 
 
 def test_every_byte_is_kept(tmp_path):
@@ -78,7 +78,6 @@ def test_errors_name_line_and_column(text, line, col, message):
         ),
         ("G0 X0 Y0 Z0\nG28.1 X1\n", 2, "G28.1 with axis words"),
         ("G0 X0 Y0 Z0\nG93 G1 X1 F2\n", 2, "inverse-time feed G93"),
-        ("G0 X0 Y0 Z0\nG38.2 Z-5 F10\n", 2, "probing G38.2"),
         ("G0 X0 Y0 Z0\nG5.2 X1 Y1 P1 L3\n", 2, "spline G5.2"),
     ],
 )
@@ -166,3 +165,19 @@ def test_a_work_system_chosen_after_a_homing_or_machine_move_is_the_first(head):
     # those axis words are no move in a work system, so G55 is the system the moves begin in
     prog = nc.parse(f"{head} G55 G0 X0 Y0 Z5\nG1 Z-1 F100\nM2\n")
     assert not [u for u in prog.unsupported if "work coordinate system" in u.construct]
+
+
+def test_probing_moves_are_copied_and_leave_their_axes_unknown():
+    """G38.2–G38.5 stop where the probe trips: copied as written (not refused), noted, the axes
+    they move unknown until a move sets them; the mode stays (a later block of axis words alone
+    probes too), as in LinuxCNC."""
+    src = "G21 G90 G0 X0 Y0 Z5\nG38.2 Z-10 F50\nZ-12\nG0 Z5\nG1 X10 F100\nM2\n"
+    prog = nc.parse(src)
+    assert not prog.unsupported
+    b = prog.blocks
+    assert b.motion.tolist() == [0, 4, 4, 0, 1]
+    assert np.isnan(b.end[1:3, 2]).all() and b.end[3, 2] == 5
+    out = prog.correct(fields.Shift((0, 0, 0.05)), rapids=True)
+    lines = out.text.splitlines()
+    assert lines[1:3] == ["G38.2 Z-10 F50", "Z-12"]
+    assert [n for n, _ in out.correction.notes] == [2, 3]

@@ -66,7 +66,7 @@ def _corrected_matches(tmp_path, src: str, field, name="p.ngc", **kw):
     # and the feed moves follow the corrected path we predicted
     c = out.correction
     predicted = c.points + c.displacements
-    feed = [m for m in moves(canon) if m.kind != "traverse"]
+    feed = [m for m in moves(canon) if m.kind in ("feed", "arc")]
     # rs274 prints 4 decimals, we write 4 (mm) or 5 (inch): in mm the two roundings add up to the
     # 1e-4 mm required; in inch programs to 0.00005 + 0.000005 in
     ours = 0.5e-5 * 25.4 if prog.units == "inch" else 0.5e-4
@@ -450,3 +450,16 @@ def test_a_tool_table_length_leaves_the_tip_height_unknown():
     assert lines[2] == "G91 G1 Z-6 F100" and lines[3] == "G90 G1 X5"
     assert any("position is unknown" in w for w in out.correction.warnings)
     assert lines[4] == "G1 Z-0.95" and lines[5] == "X8"
+
+
+def test_probing_moves_are_copied_as_rs274_reads_them(tmp_path):
+    """G38.2/G38.3 are copied (rs274 prints them as STRAIGHT_PROBE); the engine's block ends agree
+    with rs274's where it knows them (the probe's axes are unknown after it), and the cut after the
+    program sets Z again follows the displaced path."""
+    src = "G21 G90 G0 X0 Y0 Z5\nG38.2 Z-10 F50\nG0 Z5\nG1 Z-1 F100\nX10\nG38.3 X12\nG1 X20\nG1 Y5\nM2\n"
+    (tmp_path / "g.ngc").write_text(src)
+    prog = nc.read(tmp_path / "g.ngc")
+    assert canonical(tmp_path / "g.ngc").kinds.count("probe") == 2
+    _compare_endpoints(prog, tmp_path / "g.ngc")
+    out = _corrected_matches(tmp_path, src, fields.Shift((0.01, -0.02, 0.05)), name="h.ngc")
+    assert "G38.2 Z-10 F50" in out.text and "G38.3 X12" in out.text

@@ -390,6 +390,8 @@ impl Active {
 enum Mode {
     Motion(Motion),
     Canned(i32),
+    /// G38.2–G38.5: probing moves, which stop where the probe trips (copied, not traced).
+    Probe,
     None,
 }
 
@@ -1047,6 +1049,8 @@ impl Interpreter {
                         }
                         nonmodal_axis_user = Some((c, idx));
                     }
+                    // a probing move stops where the probe trips: copied, its axes unknown after it
+                    382..=385 => motion_word = Some((Mode::Probe, gc)),
                     500 => st.active.scaling = None,
                     160 => {
                         let idx = push_unsupported(out, li, gc, "polar coordinates G16");
@@ -1057,7 +1061,6 @@ impl Interpreter {
                         let what = match c {
                             50..=53 => "spline",
                             330 | 331 => "spindle-synchronised motion",
-                            382..=385 => "probing",
                             171 | 181 | 191 => "UVW plane",
                             700 | 710 | 720 | 711 | 721 => "lathe cycle",
                             _ => "unknown G code",
@@ -1367,6 +1370,19 @@ impl Interpreter {
 
             let blocker = st.active.first();
             match st.mode {
+                Mode::Probe => {
+                    out.notes.push(Note {
+                        line: li as u32,
+                        message: "G38 probing move: kept as written, not corrected; the axes it moves are unknown afterwards (it stops where the probe trips)".into(),
+                    });
+                    for k in 0..NAXES {
+                        if axis[k].is_some() {
+                            end[k] = f64::NAN;
+                        }
+                    }
+                    st.pos = end;
+                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                }
                 Mode::None => {
                     let idx = push_unsupported(
                         out,
