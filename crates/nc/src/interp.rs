@@ -1354,34 +1354,16 @@ impl Interpreter {
             let mut end = target(&st.pos, &axis, st.incremental && !g53, unit, &st.off);
 
             if g53 {
-                out.notes.push(Note {
-                line: li as u32,
-                message: "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards".into(),
-            });
-                for k in 0..NAXES {
-                    if axis[k].is_some() {
-                        end[k] = f64::NAN;
-                    }
-                }
-                st.pos = end;
-                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                let what = "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards";
+                untraced_move(out, st, li, &axis, &mut end, named, what);
                 continue;
             }
 
             let blocker = st.active.first();
             match st.mode {
                 Mode::Probe => {
-                    out.notes.push(Note {
-                        line: li as u32,
-                        message: "G38 probing move: kept as written, not corrected; the axes it moves are unknown afterwards (it stops where the probe trips)".into(),
-                    });
-                    for k in 0..NAXES {
-                        if axis[k].is_some() {
-                            end[k] = f64::NAN;
-                        }
-                    }
-                    st.pos = end;
-                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                    let what = "G38 probing move: kept as written, not corrected; the axes it moves are unknown afterwards (it stops where the probe trips)";
+                    untraced_move(out, st, li, &axis, &mut end, named, what);
                 }
                 Mode::None => {
                     let idx = push_unsupported(
@@ -2171,6 +2153,30 @@ fn canned(
         choices,
     });
     Ok(())
+}
+
+/// A move the engine copies without tracing it (G53, G38): noted, the axes it names unknown
+/// after it.
+fn untraced_move(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    axis: &[Option<f64>; NAXES],
+    end: &mut [f64; NAXES],
+    named: u16,
+    what: &str,
+) {
+    out.notes.push(Note {
+        line: li as u32,
+        message: what.into(),
+    });
+    for (e, a) in end.iter_mut().zip(axis) {
+        if a.is_some() {
+            *e = f64::NAN;
+        }
+    }
+    st.pos = *end;
+    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
 }
 
 fn push_record(
