@@ -7,8 +7,8 @@
 
 use crate::error::NcError;
 use crate::interp::{
-    axis_index, cycle_steps, peck_clearance, CycleStep, Dialect, Hole, Interp, Motion, Record,
-    AXES, CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
+    axis_index, axis_unit, cycle_steps, peck_clearance, polar_xy, CycleStep, Dialect, Hole, Interp,
+    Motion, Record, AXES, CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
 };
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
@@ -560,11 +560,7 @@ impl<'a> Emitter<'a> {
     }
 
     fn unit(rec: &Record, k: usize) -> f64 {
-        if rec.inch && !(3..6).contains(&k) {
-            MM_PER_INCH
-        } else {
-            1.0
-        }
+        axis_unit(k, if rec.inch { MM_PER_INCH } else { 1.0 })
     }
 
     /// Where new words go in the block: after its last axis word, or after its last word.
@@ -1016,10 +1012,7 @@ impl<'a> Emitter<'a> {
                 for (k, e) in self.st.epos.iter_mut().enumerate().take(3) {
                     *e = it.records[last].end[k];
                 }
-                // a cycle block sets the modal motion, except on a Fanuc control (group 09)
-                if self.it.dialect != Dialect::Fanuc {
-                    self.st.out_motion = None;
-                }
+                self.after_cycle_block();
                 return Ok(());
             }
             return Err(err(format!(
@@ -1155,10 +1148,7 @@ impl<'a> Emitter<'a> {
         for ((e, v), o) in self.st.epos.iter_mut().zip(end).zip(off) {
             *e = v * u + o;
         }
-        // a cycle block sets the modal motion, except on a Fanuc control (group 09)
-        if self.it.dialect != Dialect::Fanuc {
-            self.st.out_motion = None;
-        }
+        self.after_cycle_block();
         Ok(())
     }
 
@@ -1300,34 +1290,32 @@ impl<'a> Emitter<'a> {
         self.edit_bytes(s, w.end, b"");
     }
 
-    /// Aim the block's axis words at `target` (mm), rewriting only what changes and adding the
-    /// axis words it lacks.
+    /// A cycle block written as a cycle block sets the output's modal motion as the program's,
+    /// except on a Fanuc control, whose cycles (group 09) leave the G0/G1/G2/G3 in force.
+    fn after_cycle_block(&mut self) {
+        if self.it.dialect != Dialect::Fanuc {
+            self.st.out_motion = None;
+        }
+    }
+
     /// Where the polar words of line `li` (block `rec`) take the output from where it is, as
     /// LinuxCNC reads them (X and Y, mm).
     fn polar_end(&self, li: usize, rec: &Record) -> [f64; 2] {
         let u = if rec.inch { MM_PER_INCH } else { 1.0 };
-        let (mut dist, mut angle) = (None, None);
+        let mut polar = [None; 2];
         for w in self.lx.line_words(li) {
             match w.letter {
-                b'@' => dist = Some(w.value),
-                b'^' => angle = Some(w.value),
+                b'@' => polar[0] = Some(w.value),
+                b'^' => polar[1] = Some(w.value),
                 _ => {}
             }
         }
-        let (cx, cy) = (
+        let cur = [
             (self.st.epos[0] - self.off[0]) / u,
             (self.st.epos[1] - self.off[1]) / u,
-        );
-        let (r0, a0) = (cx.hypot(cy), cy.atan2(cx).to_degrees());
-        let (r, a) = if rec.incremental {
-            (r0 + dist.unwrap_or(0.0), a0 + angle.unwrap_or(0.0))
-        } else {
-            (dist.unwrap_or(r0), angle.unwrap_or(a0))
-        };
-        [
-            r * a.to_radians().cos() * u + self.off[0],
-            r * a.to_radians().sin() * u + self.off[1],
-        ]
+        ];
+        let [x, y] = polar_xy(cur, polar, rec.incremental);
+        [x * u + self.off[0], y * u + self.off[1]]
     }
 
     /// Remove the polar words of line `li`: the block's X and Y are then written as its other
@@ -1338,8 +1326,9 @@ impl<'a> Emitter<'a> {
         }
     }
 
-    /// Write the block's axis words for `target`; axes of `also` (bits of AXES) are written
-    /// where they differ even when the block does not name them.
+    /// Aim the block's axis words at `target` (mm), rewriting only what changes and adding the
+    /// axis words it lacks; axes of `also` (bits of AXES) are written where they differ even when
+    /// the block does not name them.
     fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES], also: u16) {
         let lx = self.lx;
         let words = lx.line_words(li);
@@ -1424,13 +1413,7 @@ impl<'a> Emitter<'a> {
             let Some(a) = axis_index(w.letter) else {
                 continue;
             };
-            let u = if (3..6).contains(&a) {
-                1.0
-            } else if inch {
-                MM_PER_INCH
-            } else {
-                1.0
-            };
+            let u = axis_unit(a, if inch { MM_PER_INCH } else { 1.0 });
             if !off[a].is_finite() {
                 continue;
             }

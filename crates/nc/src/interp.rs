@@ -1234,20 +1234,12 @@ impl Interpreter {
                     push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                     continue;
                 }
-                // as LinuxCNC: about the origin of the program's coordinates, in the XY plane
-                // whatever the plane; a word left out keeps the current point's distance or
-                // angle, and in G91 each word adds to it
+                // as LinuxCNC: in the XY plane whatever the plane
                 let (cx, cy) = (
                     (st.pos[0] - st.off[0]) / unit,
                     (st.pos[1] - st.off[1]) / unit,
                 );
-                let (r0, a0) = (cx.hypot(cy), cy.atan2(cx).to_degrees());
-                let (rr, aa) = if st.incremental {
-                    (r0 + polar[0].unwrap_or(0.0), a0 + polar[1].unwrap_or(0.0))
-                } else {
-                    (polar[0].unwrap_or(r0), polar[1].unwrap_or(a0))
-                };
-                let (x, y) = (rr * aa.to_radians().cos(), rr * aa.to_radians().sin());
+                let [x, y] = polar_xy([cx, cy], polar, st.incremental);
                 if st.incremental {
                     axis[0] = Some(x - cx);
                     axis[1] = Some(y - cy);
@@ -1723,12 +1715,25 @@ fn target(
 
 /// Millimetres (or degrees) per program unit on axis k (A, B, C are in degrees in either unit).
 #[inline]
-fn axis_unit(k: usize, unit: f64) -> f64 {
+pub fn axis_unit(k: usize, unit: f64) -> f64 {
     if (3..6).contains(&k) {
         1.0
     } else {
         unit
     }
+}
+
+/// Where LinuxCNC's polar words take X and Y (program units), from the current point `cur` in
+/// program units: about the program's origin, `polar` the distance `@` and the angle `^`
+/// (degrees); a word left out keeps the current point's, and in G91 each word adds to it.
+pub fn polar_xy(cur: [f64; 2], polar: [Option<f64>; 2], incremental: bool) -> [f64; 2] {
+    let (r0, a0) = (cur[0].hypot(cur[1]), cur[1].atan2(cur[0]).to_degrees());
+    let (r, a) = if incremental {
+        (r0 + polar[0].unwrap_or(0.0), a0 + polar[1].unwrap_or(0.0))
+    } else {
+        (polar[0].unwrap_or(r0), polar[1].unwrap_or(a0))
+    };
+    [r * a.to_radians().cos(), r * a.to_radians().sin()]
 }
 
 /// The number G10 gives the work system `wcs` (G54 = 1 … G59.3 = 9).

@@ -157,7 +157,7 @@ fn flat_under(
 /// What [`flat_under`] leaves of the chord tolerance for the rounding of the numbers around the
 /// arc: half a unit of the last written digit, at most 0.000005 inch (the emitter writes at least
 /// 4 decimals in mm and 5 in inch).
-pub const FLAT_MARGIN: f64 = 0.000_005 * 25.4;
+pub const FLAT_MARGIN: f64 = 0.000_005 * crate::interp::MM_PER_INCH;
 
 fn too_many(rec: &Record, n: f64) -> NcError {
     NcError::Interpret {
@@ -245,26 +245,23 @@ pub fn sample_range(
             *prev_t = t;
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
-        if !prev.iter().all(|v| v.is_finite()) || rec.cycle == crate::interp::CYCLE_BOTTOM {
-            // from an unknown start only the end is known; a hole of a canned cycle is moved
-            // by the displacement at its bottom
-            s.xyz.extend_from_slice(&end);
-            s.t.push(1.0);
-            s.rec.push(i as u32);
-        } else if let Some(range) = rec
-            .motion
-            .is_arc()
+        let end_only =
+            !prev.iter().all(|v| v.is_finite()) || rec.cycle == crate::interp::CYCLE_BOTTOM;
+        // an arc over whose circle the field varies by no more than the chord tolerance, the block
+        // before it corrected (so the output starts the arc where the field puts its start): it
+        // stays an arc, moved along a helix to its end's displacement (the emitter keeps it)
+        let flat = (!end_only && rec.motion.is_arc())
             .then(|| flat_under(it, i, &start, opts, s))
-            .flatten()
-        {
-            // the field varies by no more than the chord tolerance anywhere within the arc's
-            // circle, and the block before it is corrected (so the output starts the arc where
-            // the field puts its start): the arc stays an arc, moved along a helix to its end's
-            // displacement (the emitter keeps it), and only its end is needed
+            .flatten();
+        if end_only || flat.is_some() {
+            // from an unknown start only the end is known; a hole of a canned cycle is moved
+            // by the displacement at its bottom; a flat arc needs no chords
             s.xyz.extend_from_slice(&end);
             s.t.push(1.0);
             s.rec.push(i as u32);
-            s.flat.push((i as u32, range));
+            if let Some(range) = flat {
+                s.flat.push((i as u32, range));
+            }
         } else if rec.motion.is_arc() {
             let geom = arc_sweep(rec, &start);
             let an = PLANE_AXES[rec.plane as usize][2];

@@ -12,14 +12,13 @@ import numpy as np
 from .._io import csv_reader
 from ..errors import InputError
 from ._readers import (
-    UNITS_MM,
     _number,
     _scale,
     dmis_points,
     local_name,
     qif_root,
     qif_scale,
-    sniff,
+    sniffed,
 )
 
 
@@ -40,12 +39,7 @@ def read_actuals(path, units: str | None = None) -> Actuals:
     (:func:`read_qif_actuals`), DMIS actuals (:func:`read_dmis_actuals`), else a CSV with a header
     naming ``x,y,z`` (optional ``id``; :func:`read_csv_actuals`). ``units``: the length unit of a file
     that declares none (mm by default); a file's own must agree. The points come back in mm."""
-    if units is not None and units not in UNITS_MM:
-        raise ValueError(f"units must be one of {', '.join(UNITS_MM)}, got {units!r}")
-    p = Path(path)
-    if not p.is_file():
-        raise InputError("no such file", str(p))
-    kind = sniff(p)
+    p, kind = sniffed(path, units)
     if kind == "qif":
         return read_qif_actuals(p, units)
     if kind == "dmis":

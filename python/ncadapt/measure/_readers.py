@@ -396,17 +396,23 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
     )
 
 
-def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
-    """Read measurements, choosing the reader from the file's contents. ``units`` (mm, inch …):
-    the length unit of a file that does not declare one (CSV, XYZIJK; DMIS and QIF without a
-    units statement); a file that declares one must agree. Results are in mm. An ncadapt probe plan
-    (:func:`ncadapt.probing.plan_text`) is read with the probe log it names."""
+def sniffed(path, units: str | None) -> tuple[Path, str]:
+    """The file ``path`` with the kind of its contents (:func:`sniff`), after checking ``units``
+    names a length unit and the file exists."""
     if units is not None and units not in UNITS_MM:
         raise ValueError(f"units must be one of {', '.join(UNITS_MM)}, got {units!r}")
     p = Path(path)
     if not p.is_file():
         raise InputError("no such file", str(p))
-    kind = sniff(p)
+    return p, sniff(p)
+
+
+def read(path, probe_radius: float = 0.0, units: str | None = None) -> Measurements:
+    """Read measurements, choosing the reader from the file's contents. ``units`` (mm, inch …):
+    the length unit of a file that does not declare one (CSV, XYZIJK; DMIS and QIF without a
+    units statement); a file that declares one must agree. Results are in mm. An ncadapt probe plan
+    (:func:`ncadapt.probing.plan_text`) is read with the probe log it names."""
+    p, kind = sniffed(path, units)
     if kind == "plan":  # an ncadapt probe plan: its nominal points with the probe log it names
         from ..probing import read_log_with_plan
 
