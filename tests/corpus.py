@@ -87,17 +87,48 @@ def _strip_k0(data: bytes) -> bytes:
     return _K0.sub(b"", data)
 
 
+# Haas auxiliary M codes (chip auger, coolant spigot, air gun, through-spindle coolant): they move
+# nothing, and LinuxCNC does not know them
+_HAAS_M = re.compile(rb"\bM0*(?:31|33|34|35|83|84|88|89)\b", re.IGNORECASE)
+
+
+def _strip_haas_m(data: bytes) -> bytes:
+    return _HAAS_M.sub(b"", data)
+
+
+# a P word (dwell) on G81, G73 or G83, which Fanuc/Haas controls ignore there and LinuxCNC refuses
+_CYCLE_LINE = re.compile(rb"^.*\bG0*(?:81|73|83)(?![\d.]).*$", re.IGNORECASE | re.MULTILINE)
+_P_WORD = re.compile(rb"\s?P\s*[+-]?(?:\d+\.?\d*|\.\d+)", re.IGNORECASE)
+
+
+def _strip_cycle_p(data: bytes) -> bytes:
+    return _CYCLE_LINE.sub(lambda m: _P_WORD.sub(b"", m.group(0)), data)
+
+
 ADJUSTMENTS = {
     "File ended with no percent sign or program end": ("M2 appended", _append_end),
     "K word given for arc in xy plane": ("K0 words removed", _strip_k0),
+    "Unknown m code used: M3": ("Haas auxiliary M codes removed", _strip_haas_m),
+    "Unknown m code used: M8": ("Haas auxiliary M codes removed", _strip_haas_m),
+    "P word with no G2 G3 G4 G10 G64": ("P words of G81/G73/G83 removed", _strip_cycle_p),
 }
 
 
+#: The diameter of every tool of :func:`tool_table`, inch (rs274 reads a table in inches
+#: without an INI file). 0: the comparison here reads rs274's motion as the programmed points,
+#: which cutter compensation moves by the radius; compensated motion with a radius is compared
+#: in tests/test_cutter_comp.py (the corpus programs included).
+TOOL_DIAMETER_INCH = 0.0
+#: The tools of :func:`tool_table` (number: diameter mm).
+TOOLS = {t: TOOL_DIAMETER_INCH * 25.4 for t in range(1, 100)}
+
+
 def tool_table(folder: Path) -> Path:
-    """A tool table with tools 1-99 (length and diameter 0), for programs that change tools."""
+    """A tool table with tools 1-99 (length 0, diameter :data:`TOOL_DIAMETER_INCH`), for programs
+    that change tools or compensate the cutter radius."""
     p = folder / "tools.tbl"
     if not p.exists():
-        p.write_text("".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100)))
+        p.write_text("".join(f"T{t} P{t} Z0 D{TOOL_DIAMETER_INCH} ;\n" for t in range(1, 100)))
     return p
 
 
@@ -620,7 +651,8 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.reason, r.refusal_line = f"{dialects.NAMES[d.name]} program, syntax not read", e.line
         return
     try:
-        prog = nc.read(entry.path, dialect=dialect)
+        # the tool table rs274 is given, so cutter compensation is followed as rs274 follows it
+        prog = nc.read(entry.path, dialect=dialect, tools=TOOLS)
         uns = prog.unsupported
     except InputError as e:
         r.outcome = f"refused: line {e.line}: {e.message}"
@@ -645,6 +677,10 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
     except RefusedError as e:
         r.outcome = f"refused: {_first_line(e)}"
         r.reason, r.refusal_line = _generic(e.message), _refusal_line(e)
+        return
+    except InputError as e:  # a construct the correction cannot write faithfully, at its line
+        r.outcome = f"refused: line {e.line}: {e.message}"
+        r.reason, r.refusal_line = _generic(e.message), e.line
         return
     r.outcome = "accepted"
     fieldof = {"shift": fields.Shift(SHIFT), "grid": grid}

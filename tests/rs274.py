@@ -16,7 +16,7 @@ import re
 import shutil
 import subprocess
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +39,9 @@ class Canon:
     #: largest rounding of a printed length in mm (0.00005 printed units)
     resolution_mm: float
     error: str | None
+    #: per move: cutter radius compensation was on (or the move is the one after G40, which
+    #: leaves the offset path)
+    comp: list = field(default_factory=list)
 
 
 def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = None) -> Canon:
@@ -68,13 +71,20 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     def lengths(v):
         return np.array([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
 
-    kinds, ends, arcs = [], [], []
+    kinds, ends, arcs, comp = [], [], [], []
     res = 0.0
+    comp_on = leaving = False
     for line in text.splitlines():
         m = _CALL.match(line)
         if not m:
             continue
         name, args = m.group(1), m.group(2)
+        if name == "COMMENT" and "cutter radius compensation" in args:
+            comp_on, leaving = " on " in args + " ", comp_on
+            continue
+        if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "STRAIGHT_PROBE", "ARC_FEED"):
+            comp.append(comp_on or leaving)
+            leaving = False
         if name == "USE_LENGTH_UNITS":
             scale = 25.4 if "INCHES" in args else (10.0 if "CM" in args else 1.0)
         elif name == "SELECT_PLANE":
@@ -109,7 +119,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     ):
         tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
-    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err)
+    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp)
 
 
 class Move:

@@ -70,7 +70,11 @@ def test_refused_construct_then_kept(tmp_path):
     p = tmp_path / "c.ngc"
     p.write_text("G0 X0 Y0 Z5\nG41 D1 G1 X5 F100\nG40 G1 X10\n")
     r = run("correct", p, "--shift", "0,0,0.01", "-o", tmp_path / "o.ngc")
-    assert r.exit_code == 1 and "line 2:1: cutter compensation G41 (1 motion block(s))" in r.stderr
+    assert (
+        r.exit_code == 1
+        and "line 2:1: cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table) (1 motion block(s))"
+        in r.stderr
+    )
     r = run("correct", p, "--shift", "0,0,0.01", "-o", tmp_path / "o.ngc", "--keep-unsupported")
     assert r.exit_code == 0 and "unsupported constructs kept unchanged (1)" in r.stdout
 

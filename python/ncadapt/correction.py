@@ -253,6 +253,24 @@ class _Warnings:
         return out
 
 
+def _comp_check(run, field, r, disp, checks, name):
+    """The refusal (line, why) of a piece with moves under cutter compensation, or None: the
+    field evaluated at the tool centre around its corners must not vary by more than the chord
+    tolerance, nor move X or Y (the engine's ``comp_check``)."""
+    first = int(r["line"][np.flatnonzero(r["flags"] & 32)[0]])
+    if getattr(field, "uses_axes", False):
+        # the rotary and U V W axes of a compensated move are not interpolated at the tool centre
+        return first, "cutter compensation with a field that depends on the rotary or U, V, W axes: not treated"
+    cpts = np.frombuffer(checks, dtype="<f8").reshape(-1, 3)
+    try:
+        cdisp = np.ascontiguousarray(field(cpts), dtype=np.float64) if len(cpts) else np.zeros((0, 3))
+    except _OutsideError:
+        return first, "the tool centre around a compensated corner is outside the field's domain"
+    if cdisp.shape != cpts.shape or not np.isfinite(cdisp).all():
+        raise RefusedError(f"{name}: the field is not finite at the tool around a compensated corner")
+    return _engine(lambda: run.comp_check(disp, cdisp), name)
+
+
 def _native_field(field) -> tuple | None:
     """The field as the engine evaluates it itself (``_nc.correct_native``): a :class:`Shift` or a
     bilinear :class:`GridField`, given with the numbers their ``_eval`` uses; None for any other
@@ -298,6 +316,7 @@ def _correct_native(
     expand_cycles=False,
     dialect="linuxcnc",
     read_ahead=None,
+    tools=(),
 ) -> Correction | None:
     """The correction run by the engine alone (reading, field, figures, emitting and writing to
     ``out_file`` in threads without the GIL), for the fields of :func:`_native_field`. None when a
@@ -329,6 +348,7 @@ def _correct_native(
             bool(expand_cycles),
             dialect,
             read_ahead,
+            list(tools),
         ),
         name,
     )
@@ -360,6 +380,7 @@ def _correct(
     expand_cycles=False,
     dialect="linuxcnc",
     read_ahead=None,
+    tools=None,
 ) -> Correction:
     """Read, sample, evaluate the field and emit, piece by piece; ``write`` takes the output bytes.
 
@@ -368,8 +389,10 @@ def _correct(
     callers discard what ``write`` received. With ``out_file`` (the open file ``write`` ends in,
     nothing written yet) a field the engine evaluates itself (:func:`_native_field`) is applied
     by the engine alone, writing to the file directly. ``dialect`` (``linuxcnc``, ``fanuc``,
-    ``grbl``, ``marlin``) is the controller the program is written for.
+    ``grbl``, ``marlin``) is the controller the program is written for. ``tools`` {tool number:
+    diameter mm}: the tool table cutter radius compensation (G41/G42) takes its radius from.
     """
+    tools = sorted((int(t), float(d)) for t, d in (tools or {}).items())
     say = progress or (lambda msg: None)
     check_sampling(chord_tol, max_segment)
     if not limit > 0:
@@ -398,6 +421,7 @@ def _correct(
             expand_cycles=expand_cycles,
             dialect=dialect,
             read_ahead=read_ahead,
+            tools=tools,
         )
         if c is not None:
             return c
@@ -415,6 +439,7 @@ def _correct(
             dialect,
             # sampled as the engine samples for itself: an arc a bilinear grid leaves flat at its end
             _grid_spec(field),
+            tools,
         ),
         name,
     )
@@ -425,8 +450,9 @@ def _correct(
     n_pts, total, refused = 0, 0.0, False
     notes = _Warnings(field, clearance)
     approach = _Approach()
+    comp_refusal = None  # (line, why): cutter compensation the correction cannot follow
     while (chunk := _engine(run.next, name)) is not None:
-        first, end, xyz, rec, recs = chunk
+        first, end, xyz, rec, recs, checks = chunk
         say(f"correcting lines {first + 1:,}-{end:,}")
         r = _piece_records(recs)
         notes.add(r)
@@ -465,6 +491,9 @@ def _correct(
         if uvw is not None and not np.isfinite(uvw).all():
             bad = int(np.flatnonzero(~np.isfinite(uvw).all(axis=1))[0])
             raise RefusedError(f"{name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")
+        if comp_refusal is None and (r["flags"] & 32).any():
+            comp_refusal = _comp_check(run, field, r, disp, checks, name)
+            refused |= comp_refusal is not None
         approach.add(r, recs_i, pts, disp)
         refused |= approach.found is not None
         norms = np.sqrt(np.einsum("ij,ij->i", disp, disp) + (0.0 if uvw is None else np.einsum("ij,ij->i", uvw, uvw)))
@@ -493,6 +522,9 @@ def _correct(
             f"(first at line {outside[0]['line']}); --outside clamp or extrapolate (outside= in Python) allows them",
             outside,
         )
+    if comp_refusal is not None:
+        line, why = comp_refusal
+        raise RefusedError(f"{name}: line {line}: {why}; nothing written", [{"line": line}])
     worst_norm = worst[0][0] if worst else 0.0
     into_part = approach.error(name)
     if into_part is not None:

@@ -19,7 +19,7 @@ G1 X2
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -136,11 +136,14 @@ def _check_dialect(dialect: str) -> str:
     return dialect
 
 
-def parse(text: str | bytes, name: str | None = None, dialect: str = "linuxcnc") -> Program:
+def parse(
+    text: str | bytes, name: str | None = None, dialect: str = "linuxcnc", tools: Mapping[int, float] | None = None
+) -> Program:
     """Read a program from a string or bytes; ``name`` is used in error messages, ``dialect``
-    (one of :data:`DIALECTS`) is the controller it is written for."""
+    (one of :data:`DIALECTS`) is the controller it is written for, ``tools`` the tool table
+    for cutter radius compensation (:attr:`Program.tools`)."""
     data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else bytes(text)
-    return Program(data, name=name or "<string>", dialect=dialect)
+    return Program(data, name=name or "<string>", dialect=dialect, tools=tools)
 
 
 def correct_file(
@@ -184,15 +187,16 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     return _inspect(str(path), str(path), _check_dialect(dialect))
 
 
-def read(path: str | os.PathLike, dialect: str = "linuxcnc") -> Program:
-    """Read a program file written for ``dialect`` (one of :data:`DIALECTS`). Raises
+def read(path: str | os.PathLike, dialect: str = "linuxcnc", tools: Mapping[int, float] | None = None) -> Program:
+    """Read a program file written for ``dialect`` (one of :data:`DIALECTS`), with the tool
+    table ``tools`` for cutter radius compensation (:attr:`Program.tools`). Raises
     :class:`InputError` naming ``path:line:col`` on bad input."""
     p = Path(path)
     try:
         data = p.read_bytes()
     except OSError as e:
         raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
-    return Program(data, path=p, dialect=dialect)
+    return Program(data, path=p, dialect=dialect, tools=tools)
 
 
 class Program:
@@ -209,10 +213,14 @@ class Program:
         *,
         lazy: bool = False,
         dialect: str = "linuxcnc",
+        tools: Mapping[int, float] | None = None,
     ):
         self._data = data
         #: The controller the program is written for (one of :data:`DIALECTS`).
         self.dialect = _check_dialect(dialect)
+        #: Tool diameters (mm) by tool number (:func:`ncadapt.tooltable.read`): cutter radius
+        #: compensation (G41/G42) takes its radius from them; without them it is unsupported.
+        self.tools = {int(t): float(d) for t, d in (tools or {}).items()}
         self.path = Path(path) if path is not None else None
         self.name = str(path) if path is not None else (name or "<program>")
         self.correction: Correction | None = None
@@ -226,7 +234,7 @@ class Program:
         """The native program, parsed on first use."""
         if self._native is None:
             try:
-                self._native = _Native.parse(self._data, self.dialect)
+                self._native = _Native.parse(self._data, self.dialect, sorted(self.tools.items()))
             except EngineError as e:
                 raise _engine_error(e, self.name) from None
         return self._native
@@ -350,6 +358,7 @@ class Program:
         clearance: float | None = None,
         progress: Callable[[str], None] | None = None,
         expand_cycles: bool = False,
+        tools: Mapping[int, float] | None = None,
     ) -> Program:
         """Apply a correction field and return the corrected program.
 
@@ -377,6 +386,12 @@ class Program:
             Write canned cycles (G73, G81-G83, G85, G89) as the G0/G1 moves (and G4 dwells)
             LinuxCNC makes of them. By default a cycle block stays a cycle block, each hole moved
             by the displacement at its bottom: X and Y by its x and y, Z and R by its z.
+        tools : mapping of int to float, mm, optional
+            Tool diameters by tool number (:func:`ncadapt.tooltable.read`; default
+            :attr:`tools`): cutter radius compensation (G41/G42 D…, or the tool loaded by M6)
+            takes its radius from it, and the field is evaluated where the tool centre is
+            (docs/nc-engine.md). Without one such programs are refused; G41.1/G42.1 give their
+            diameter themselves.
 
         Returns
         -------
@@ -385,7 +400,9 @@ class Program:
             point and its displacement. :meth:`correct_to` writes a file without holding them.
         """
         parts: list[bytes] = []
-        self._refuse_unsupported(keep_unsupported)
+        tools = self.tools if tools is None else tools
+        if tools == self.tools:
+            self._refuse_unsupported(keep_unsupported)
         c = _correct(
             self._data,
             self.name,
@@ -401,9 +418,10 @@ class Program:
             keep_points=True,
             expand_cycles=expand_cycles,
             dialect=self.dialect,
+            tools=tools,
         )
         # the corrected program is parsed only if it is used as a program again
-        result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True, dialect=self.dialect)
+        result = Program(b"".join(parts), name=f"{self.name} (corrected)", lazy=True, dialect=self.dialect, tools=tools)
         result.correction = c
         return result
 
@@ -417,7 +435,9 @@ class Program:
         """
         p = Path(path)
         _refuse_overwrite(p, self.path)
-        self._refuse_unsupported(options.get("keep_unsupported", False))
+        options.setdefault("tools", self.tools)
+        if options["tools"] == self.tools:
+            self._refuse_unsupported(options.get("keep_unsupported", False))
         with atomic_open(p) as f, _BackgroundWriter(f) as w:
             return _correct(
                 self._data, self.name, w.write, field, keep_points=False, out_file=f, dialect=self.dialect, **options
@@ -459,7 +479,7 @@ def _inspect(source, name, dialect="linuxcnc") -> dict:
     lo = {k: np.full(3, np.inf) for k in ("all", "feed")}
     hi = {k: np.full(3, -np.inf) for k in ("all", "feed")}
     while (chunk := _engine(run.next, name)) is not None:
-        _, _, xyz, rec, recs = chunk
+        _, _, xyz, rec, recs, _ = chunk
         pts = np.frombuffer(xyz, dtype="<f8").reshape(-1, 3)
         motion = np.frombuffer(recs["motion"], dtype=np.uint8)[np.frombuffer(rec, dtype="<u4")]
         run.discard()

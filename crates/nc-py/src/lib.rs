@@ -87,6 +87,7 @@ fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict
                 | (r.arc_absolute as u8) << 2
                 | (r.supported as u8) << 3
                 | ((r.cycle != 0) as u8) << 4
+                | ((r.comp != nc::interp::NO_COMP) as u8) << 5
         })
         .collect();
     let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();
@@ -136,13 +137,14 @@ struct Program {
 impl Program {
     /// `dialect`: linuxcnc, fanuc, grbl or marlin.
     #[staticmethod]
-    #[pyo3(signature = (data, dialect="linuxcnc"))]
-    fn parse(py: Python<'_>, data: &[u8], dialect: &str) -> PyResult<Self> {
+    #[pyo3(signature = (data, dialect="linuxcnc", tools=Vec::new()))]
+    fn parse(py: Python<'_>, data: &[u8], dialect: &str, tools: Vec<(u32, f64)>) -> PyResult<Self> {
         let dialect = Dialect::from_name(dialect).map_err(to_py)?;
+        let tools = std::sync::Arc::new(tools);
         // a borrowed slice, copied once (a Vec<u8> argument would be extracted byte by byte)
         let data = data.to_vec();
         let inner = py
-            .allow_threads(|| nc::Program::parse_as(data, dialect))
+            .allow_threads(|| nc::Program::parse_with(data, dialect, tools))
             .map_err(to_py)?;
         Ok(Program { inner })
     }
@@ -213,13 +215,16 @@ impl Program {
     }
 }
 
-/// A piece sampled for Python: first line, end line, xyz bytes, record bytes, the piece's records.
+/// A piece sampled for Python: first line, end line, the bytes of the points the field is
+/// evaluated at, record bytes, the piece's records, the bytes of the cutter compensation's
+/// corner points.
 type ChunkArrays<'py> = (
     usize,
     usize,
     Bound<'py, PyBytes>,
     Bound<'py, PyBytes>,
     Bound<'py, PyDict>,
+    Bound<'py, PyBytes>,
 );
 
 /// One piece handed to the emitting thread: its lines, samples and displacements.
@@ -289,7 +294,7 @@ impl Corrector {
     /// fanuc, grbl or marlin; `grid`: the native spec of a bilinear grid field the samples are for
     /// (an arc it leaves flat is sampled at its end, as `correct_native` samples it).
     #[new]
-    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false, dialect="linuxcnc", grid=None))]
+    #[pyo3(signature = (source, chord_tol, max_segment, include_rapids, only_supported, grid_x, grid_y, piece_bytes, expand_cycles=false, dialect="linuxcnc", grid=None, tools=Vec::new()))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -304,8 +309,10 @@ impl Corrector {
         expand_cycles: bool,
         dialect: &str,
         grid: Option<&Bound<'_, PyAny>>,
+        tools: Vec<(u32, f64)>,
     ) -> PyResult<Self> {
         let dialect = Dialect::from_name(dialect).map_err(to_py)?;
+        let tools = std::sync::Arc::new(tools);
         let grid = match grid.map(native_field).transpose()? {
             Some(Field::Grid(g)) => Some(std::sync::Arc::new(g)),
             _ => None,
@@ -320,7 +327,9 @@ impl Corrector {
         let stream = py
             .allow_threads(|| -> Result<Stream, NcError> {
                 let (style, crlf) = scan_style(src.open()?, piece_bytes)?;
-                Ok(Stream::new(src.open()?, piece_bytes, style, crlf).with_dialect(dialect))
+                Ok(Stream::new(src.open()?, piece_bytes, style, crlf)
+                    .with_dialect(dialect)
+                    .with_tools(tools))
             })
             .map_err(to_py)?;
         let opts = SampleOpts {
@@ -378,9 +387,11 @@ impl Corrector {
         })
     }
 
-    /// Read and sample the next piece: (first line, end line, xyz bytes, record bytes, the
-    /// piece's records as `Program.records` gives them, with `origin`, the position before
-    /// them), or None at the end of the program.
+    /// Read and sample the next piece: (first line, end line, the bytes of the points to evaluate
+    /// the field at (3 per sample: the sample, or the tool centre under cutter compensation),
+    /// record bytes, the piece's records as `Program.records` gives them, with `origin`, the
+    /// position before them, the bytes of the tool-centre points around compensated corners for
+    /// [`Corrector::comp_check`]), or None at the end of the program.
     fn next<'py>(&mut self, py: Python<'py>) -> PyResult<Option<ChunkArrays<'py>>> {
         if self.current.is_some() {
             return Err(PyValueError::new_err(
@@ -412,12 +423,39 @@ impl Corrector {
         let r = (
             a,
             b,
-            raw_bytes(py, &samples.xyz),
+            raw_bytes(py, samples.eval_points()),
             raw_bytes(py, &samples.rec),
             recs,
+            raw_bytes(py, &samples.checks),
         );
         self.current = Some((piece, samples));
         Ok(Some(r))
+    }
+
+    /// The current piece's refusal under cutter compensation given the displacements at its
+    /// samples and at its corner points: (1-based line, message), or None.
+    fn comp_check(
+        &self,
+        disp: PyBuffer<f64>,
+        cdisp: PyBuffer<f64>,
+    ) -> PyResult<Option<(u32, String)>> {
+        let (piece, samples) = self
+            .current
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("no piece read"))?;
+        let (d, c) = (f64_slice(&disp)?, f64_slice(&cdisp)?);
+        if d.len() != samples.xyz.len() || c.len() != samples.checks.len() {
+            return Err(PyValueError::new_err(
+                "displacements do not match the piece's samples and corner points",
+            ));
+        }
+        Ok(nc::sample::comp_check(
+            &piece.interp,
+            samples,
+            d,
+            c,
+            self.opts.chord_tol,
+        ))
     }
 
     /// Hand the current piece with its displacements (C-contiguous float64, 3 per sample) to the
@@ -677,7 +715,7 @@ fn read_ahead(
 /// the Python evaluation to report it). `progress(first, end)` is called for each piece. `ahead`:
 /// a [`read_ahead`] of the same file (path), whose pieces the first pass takes.
 #[pyfunction]
-#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false, dialect="linuxcnc", ahead=None))]
+#[pyo3(signature = (source, fd, field, chord_tol, max_segment, include_rapids, grid_x, grid_y, piece_bytes, limit, keep_unsupported, clearance, shift_norm, progress, expand_cycles=false, dialect="linuxcnc", ahead=None, tools=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn correct_native<'py>(
     py: Python<'py>,
@@ -698,6 +736,7 @@ fn correct_native<'py>(
     expand_cycles: bool,
     dialect: &str,
     ahead: Option<&Bound<'py, ReadAhead>>,
+    tools: Vec<(u32, f64)>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let dialect = Dialect::from_name(dialect).map_err(to_py)?;
     let src = if let Ok(b) = source.downcast::<PyBytes>() {
@@ -741,6 +780,7 @@ fn correct_native<'py>(
         shift_norm,
         expand_cycles,
         dialect,
+        tools: std::sync::Arc::new(tools),
     };
     // between pieces: the progress display, and Python's signal handlers (SIGTERM, Ctrl-C), which
     // run only when the main thread asks for them; an exception they raise stops the run

@@ -64,6 +64,7 @@ fn main() {
         shift_norm: None,
         expand_cycles: false,
         dialect: nc::interp::Dialect::LinuxCnc,
+        tools: Default::default(),
     };
     let runs: usize = std::env::var("RUNS")
         .ok()

@@ -293,6 +293,10 @@ pub struct EmitState {
     /// sticky words are no longer the cycle's.
     cyc_expanded: bool,
     steps: Vec<CycleStep>,
+    /// Under cutter compensation: the length (mm, in the plane) of the last piece the output
+    /// has of the last move in the plane; a move after an inside corner needs it longer than the
+    /// tool stops short there ([`crate::interp::Comp::trim`]).
+    comp_piece: f64,
 }
 
 impl EmitState {
@@ -307,6 +311,7 @@ impl EmitState {
             tail: Vec::new(),
             tail_ends: Vec::new(),
             expand_cycles: false,
+            comp_piece: f64::INFINITY,
             arc_tol: 0.0,
             cyc_level: f64::NAN,
             cyc_r: None,
@@ -316,6 +321,11 @@ impl EmitState {
         }
     }
 }
+
+/// Under cutter compensation, the last piece of a straight move cut in pieces is kept this many
+/// tool radii long: the tool stops short of an inside corner after it by r·tan(θ/2) for a turn
+/// θ, so corners up to 2·atan(2) = 126.9° are reached; a sharper one after a cut move is refused.
+pub const COMP_GUARD: f64 = 2.0;
 
 /// Emits a corrected program.
 pub struct Emitter<'a> {
@@ -419,6 +429,7 @@ impl<'a> Emitter<'a> {
                 }
                 let (f, c) = samples.of(ri);
                 self.off = self.it.frames[self.it.records[ri].frame as usize];
+                self.comp_corner(ri)?;
                 let uvw = if uvw.is_empty() {
                     uvw
                 } else {
@@ -664,6 +675,40 @@ impl<'a> Emitter<'a> {
     }
 
     /// Write a sampled block with its displacements.
+    /// Under cutter compensation: a move after an inside corner needs the output's piece before
+    /// the corner longer than the tool stops short there (else the controller finds the corner
+    /// unreachable); the move's whole length (in the plane) stands as the last piece until
+    /// [`Emitter::corrected`] cuts it.
+    fn comp_corner(&mut self, ri: usize) -> Result<(), NcError> {
+        let rec = &self.it.records[ri];
+        if rec.comp == crate::interp::NO_COMP {
+            return Ok(());
+        }
+        let c = &self.it.comps[rec.comp as usize];
+        let start = start_of(self.it, ri);
+        let len = if rec.motion.is_arc() {
+            let (_, d, r0, r1) = crate::sample::arc_sweep(rec, &start);
+            d.abs() * 0.5 * (r0 + r1)
+        } else {
+            (rec.end[0] - start[0]).hypot(rec.end[1] - start[1])
+        };
+        if !(len > 1e-9) {
+            return Ok(()); // a move along Z: the tool stands
+        }
+        if c.trim > 0.0 && !(self.st.comp_piece > c.trim) {
+            return Err(NcError::Interpret {
+                line: rec.line as usize + 1,
+                col: 1,
+                message: format!(
+                    "an inside corner under cutter compensation: the tool stops {:.4} mm short of the corner, but the corrected program's piece before it is {:.4} mm long (the controller would find the corner unreachable); raise --chord-tol so the move before stays whole",
+                    c.trim, self.st.comp_piece
+                ),
+            });
+        }
+        self.st.comp_piece = len;
+        Ok(())
+    }
+
     fn corrected(
         &mut self,
         li: usize,
@@ -799,7 +844,33 @@ impl<'a> Emitter<'a> {
                         }
                     })
                 });
-        if straight || keep_arc {
+        // under cutter compensation the pieces of a move are corners for the controller: the
+        // move after G41/G42 or G40 goes between the programmed and the offset point, so cut in
+        // pieces its first (last) piece alone would; it is written whole, when the corrected path
+        // along it is straight within the chord tolerance. Other straight moves keep their
+        // pieces clear of the corners' ends ([`Emitter::comp_pieces`])
+        let comp = (rec.comp != crate::interp::NO_COMP).then(|| &it.comps[rec.comp as usize]);
+        let comp_whole = comp.is_some_and(|c| !rec.motion.is_arc() && c.start != c.end);
+        if comp_whole && !straight {
+            let e = xyz_at(n - 1);
+            let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
+            let worst = (0..n - 1)
+                .map(|k| dist2_to_segment(&xyz_at(k), &a, &e))
+                .fold(0.0f64, f64::max)
+                .sqrt();
+            if !(worst <= self.st.arc_tol) || !only_xyz || moved != 0 {
+                return Err(NcError::Interpret {
+                    line: rec.line as usize + 1,
+                    col: 1,
+                    message: format!(
+                        "the move that starts or ends cutter compensation must stay one move, but the corrected path along it is {:.1} µm off a straight line (more than the chord tolerance {} mm), or it moves another axis; plunge with G1 before turning compensation on, correct the rapid before it (--rapids), or raise --chord-tol",
+                        worst * 1000.0,
+                        self.st.arc_tol
+                    ),
+                });
+            }
+        }
+        if straight || keep_arc || comp_whole {
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
             // polar words that reach the corrected end stay; others are written as X and Y
@@ -841,11 +912,14 @@ impl<'a> Emitter<'a> {
             self.restore_modal(li, rec, explicit);
         }
         // a uniform straight move that starts off the corrected path needs one piece to reach it
-        let pieces = if !linearise && uniform && only_xyz && moved == 0 {
-            n - 1..n
+        let keep: Vec<usize> = if let Some(c) = comp {
+            self.comp_pieces(rec, c, &start, xyz, disp, n)?
+        } else if !linearise && uniform && only_xyz && moved == 0 {
+            vec![0, n - 1]
         } else {
-            1..n
+            (0..n).collect()
         };
+        let pieces = &keep[1..];
         // program stops move to the last piece (they stay where they are when there is none)
         let mut stops: Vec<u8> = Vec::new();
         for w in words.iter().filter(|w| is_stop_m(w) && !pieces.is_empty()) {
@@ -853,7 +927,7 @@ impl<'a> Emitter<'a> {
             stops.extend_from_slice(&self.src[w.start as usize..w.end as usize]);
             self.remove_word(li, w);
         }
-        let first = target_at(0, ts[0]);
+        let first = target_at(keep[0], ts[keep[0]]);
         self.set_axes(li, rec, &first, moved);
         let prefix: &[u8] = if self.lx.lines[li].block_delete {
             b"/"
@@ -863,7 +937,7 @@ impl<'a> Emitter<'a> {
         // XYZ and the other axes the block names, in the order of AXES
         let axes = 0b111 | rec.named | moved;
         let half = self.fmt.half(rec.inch);
-        for k in pieces {
+        for &k in pieces {
             let t0 = self.st.tail.len();
             let body = t0 + prefix.len();
             self.st.tail.extend_from_slice(prefix);
@@ -924,6 +998,83 @@ impl<'a> Emitter<'a> {
             }
         }
         Ok(())
+    }
+
+    /// The samples a compensated move cut in pieces is written at (ascending, the last the end),
+    /// and the output's last piece of it kept in [`EmitState::comp_piece`]. The first piece must
+    /// be longer than the tool stops short at an inside corner before the move; the last one is
+    /// kept [`COMP_GUARD`] tool radii long for a corner after it (a sharper one is refused there,
+    /// [`Emitter::comp_corner`]). A straight move's samples closer to its ends are left out when
+    /// the corrected path passes them within the chord tolerance, else the move is refused; an
+    /// arc's chords cannot be left out.
+    fn comp_pieces(
+        &mut self,
+        rec: &crate::interp::Record,
+        c: &crate::interp::Comp,
+        start: &[f64; NAXES],
+        xyz: &[f64],
+        disp: &[f64],
+        n: usize,
+    ) -> Result<Vec<usize>, NcError> {
+        let along = |k: usize| (xyz[3 * k] - start[0]).hypot(xyz[3 * k + 1] - start[1]);
+        let len = along(n - 1);
+        let refuse = |message: String| NcError::Interpret {
+            line: rec.line as usize + 1,
+            col: 1,
+            message,
+        };
+        if rec.motion.is_arc() {
+            let (a, b) = (along(0), {
+                let k = n.saturating_sub(2);
+                (xyz[3 * (n - 1)] - xyz[3 * k]).hypot(xyz[3 * (n - 1) + 1] - xyz[3 * k + 1])
+            });
+            if !(a > c.trim) {
+                return Err(refuse(format!(
+                    "an inside corner under cutter compensation before an arc cut in chords: the tool stops {:.4} mm short of the corner, longer than the first chord ({a:.4} mm); raise --chord-tol so the arc stays an arc",
+                    c.trim
+                )));
+            }
+            self.st.comp_piece = if n > 1 { b } else { a };
+            return Ok((0..n).collect());
+        }
+        let guard = (COMP_GUARD * c.radius).min(len);
+        let mut keep: Vec<usize> = (0..n)
+            .filter(|&k| k == n - 1 || (along(k) > c.trim && len - along(k) >= guard))
+            .collect();
+        if keep.len() > 1 && along(keep[0]) <= c.trim {
+            keep.remove(0);
+        }
+        // the samples left out must be on the corrected path the pieces take
+        let at = |k: usize| {
+            [
+                xyz[3 * k] + disp[3 * k],
+                xyz[3 * k + 1] + disp[3 * k + 1],
+                xyz[3 * k + 2] + disp[3 * k + 2],
+            ]
+        };
+        let mut from = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
+        let mut worst = 0.0f64;
+        let mut j = 0;
+        for &k in &keep {
+            let to = at(k);
+            for m in j..k {
+                worst = worst.max(dist2_to_segment(&at(m), &from, &to));
+            }
+            from = to;
+            j = k + 1;
+        }
+        let worst = worst.sqrt();
+        if !(worst <= self.st.arc_tol) {
+            return Err(refuse(format!(
+                "a move under cutter compensation: its pieces next to the corners must be longer than the tool stops short there ({:.4} mm at the start, {guard:.4} mm kept at the end), and the corrected path over them is {:.1} µm off a straight line (more than the chord tolerance {} mm); raise --chord-tol",
+                c.trim,
+                worst * 1000.0,
+                self.st.arc_tol
+            )));
+        }
+        let k = keep.len();
+        self.st.comp_piece = len - if k > 1 { along(keep[k - 2]) } else { 0.0 };
+        Ok(keep)
     }
 
     /// A canned-cycle block: each hole moved by the displacement at its bottom (X, Y by its x

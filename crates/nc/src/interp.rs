@@ -123,6 +123,37 @@ pub struct Record {
     pub cycle: u8,
     /// Index into [`Interp::frames`]: the offsets of the program's coordinates in this block.
     pub frame: u32,
+    /// Index into [`Interp::comps`] for a move under cutter radius compensation (or the move
+    /// that ends it), [`NO_COMP`] otherwise.
+    pub comp: u32,
+}
+
+/// [`Record::comp`] of a move without cutter radius compensation.
+pub const NO_COMP: u32 = u32::MAX;
+
+/// Where the tool centre is, under cutter radius compensation (G41/G42), relative to the
+/// programmed point of a move, as LinuxCNC puts it: the contour offset by the tool radius to the
+/// side, the first move from the programmed start to the offset end, the move after G40 from the
+/// offset to the programmed end. The field is evaluated at the tool centre.
+#[derive(Clone, Debug, Default)]
+pub struct Comp {
+    /// The tool radius, mm.
+    pub radius: f64,
+    /// A straight move: the tool centre's offset (X, Y, mm) from the programmed point at the
+    /// block's start and end, linear in between.
+    pub start: [f64; 2],
+    pub end: [f64; 2],
+    /// An arc: the offset is this (mm) times the unit vector from the arc's centre to the point.
+    pub radial: f64,
+    /// The tool centre around the corner before the move (X, Y offsets from the block's start
+    /// point, mm): first where the move before ended, whose displacement the corner gets, then
+    /// the arc the controller adds about an outside corner, or the point where the two offset
+    /// paths meet at an inside one, and where this move starts. Empty without a corner.
+    pub corner: Vec<[f64; 2]>,
+    /// At an inside corner before the move: how far (mm) the tool stops short of the offset
+    /// ends there, along the move before and along this one (0 elsewhere). A piece the
+    /// corrected program cuts next to the corner must be longer.
+    pub trim: f64,
 }
 
 /// Tool length offsets of a tool table (or at a program's start): unknown along Z.
@@ -352,6 +383,8 @@ pub struct Interp {
     pub frame_lines: Vec<(u32, u32, bool)>,
     /// The dialect the program was read in.
     pub dialect: Dialect,
+    /// Cutter radius compensation of the run's moves ([`Record::comp`]).
+    pub comps: Vec<Comp>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -421,6 +454,25 @@ struct State {
     /// The tool length offsets in force, per axis (mm): G43.1's words, 0 after G49, NaN after
     /// G43/G43.2 (the tool table's) and at the start.
     tlo: [f64; NAXES],
+    /// Cutter radius compensation in force (G41/G42 with a known radius).
+    comp: Option<CompOn>,
+    /// After G40: the offset the tool centre stands at until the move that ends compensation.
+    comp_exit: Option<[f64; 2]>,
+    /// The tool a T word selected, and the one M6 loaded.
+    tool_next: Option<u32>,
+    tool_loaded: Option<u32>,
+    /// Tool diameters (tool number, mm) of the tool table the caller gave.
+    tools: std::sync::Arc<Vec<(u32, f64)>>,
+}
+
+/// Cutter radius compensation in force.
+#[derive(Clone, Copy, Debug)]
+struct CompOn {
+    /// Tool radius (mm), positive with the tool left of the contour (G41), negative right.
+    r: f64,
+    /// The tool centre's offset and the contour's direction at the end of the last move in the
+    /// plane; None before the first (the entry move).
+    last: Option<([f64; 2], [f64; 2])>,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -486,12 +538,7 @@ pub fn interpret(lx: &Lexed) -> Result<Interp, NcError> {
 
 /// Interpret a lexed program written for `dialect`.
 pub fn interpret_as(lx: &Lexed, dialect: Dialect) -> Result<Interp, NcError> {
-    let mut ip = Interpreter::with_dialect(dialect);
-    let mut it = ip.run(lx, 0)?;
-    it.unsupported = ip.unsupported;
-    it.notes = ip.notes;
-    it.summary = ip.summary;
-    Ok(it)
+    Interpreter::with_dialect(dialect).run_all(lx)
 }
 
 /// The interpreter's state between runs of lines: a program read piece by piece (a stream) is
@@ -542,6 +589,11 @@ impl Interpreter {
                 dialect,
                 g01: None,
                 tlo: UNKNOWN_LENGTH,
+                comp: None,
+                comp_exit: None,
+                tool_next: None,
+                tool_loaded: None,
+                tools: Default::default(),
             },
             grouped: Vec::new(),
             first_content_seen: false,
@@ -550,6 +602,22 @@ impl Interpreter {
             notes: Vec::new(),
             summary: Summary::default(),
         }
+    }
+
+    /// The tool table for cutter radius compensation: (tool number, diameter mm). G41/G42 with
+    /// a D word take tool D's diameter, without one the loaded tool's (T…M6); G41.1/G42.1 their D.
+    pub fn with_tools(mut self, tools: std::sync::Arc<Vec<(u32, f64)>>) -> Self {
+        self.st.tools = tools;
+        self
+    }
+
+    /// Interpret a whole lexed program: one run, with what the interpreter gathered.
+    pub fn run_all(mut self, lx: &Lexed) -> Result<Interp, NcError> {
+        let mut it = self.run(lx, 0)?;
+        it.unsupported = self.unsupported;
+        it.notes = self.notes;
+        it.summary = self.summary;
+        Ok(it)
     }
 
     /// The program has ended (M2, M30 or a closing `%`): later lines are not read.
@@ -571,6 +639,7 @@ impl Interpreter {
             frames: vec![self.st.off],
             frame_lines: Vec::new(),
             dialect: self.st.dialect,
+            comps: Vec::new(),
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
@@ -672,6 +741,7 @@ impl Interpreter {
             let mut l_word: Option<f64> = None;
             let mut q_word: Option<f64> = None;
             let mut e_word: Option<usize> = None;
+            let mut d_word: Option<f64> = None;
             // LinuxCNC's polar distance @ and angle ^ (degrees), with the column of the first
             let mut polar: [Option<f64>; 2] = [None; 2];
             let mut polar_col = 0usize;
@@ -723,6 +793,7 @@ impl Interpreter {
                     b'L' => l_word = Some(w.value),
                     b'Q' => q_word = Some(w.value),
                     b'E' => e_word = Some(col(w)),
+                    b'D' => d_word = Some(w.value),
                     b'@' | b'^' => {
                         let k = (w.letter == b'^') as usize;
                         if polar[k].is_some() {
@@ -739,6 +810,7 @@ impl Interpreter {
                     }
                     b'T' => {
                         let t = w.value.round() as u32;
+                        st.tool_next = Some(t);
                         if !out.summary.tools.contains(&t) {
                             out.summary.tools.push(t);
                         }
@@ -878,7 +950,10 @@ impl Interpreter {
             // M codes the engine does not know may do anything, also with the axis words of the block
             let mut unknown_m: Option<usize> = None;
             for &(m, mc) in &ms[..nm] {
-                if m_group(m).is_none() && !matches!(m, 98 | 99) {
+                if m_group(m).is_none()
+                    && !matches!(m, 98 | 99)
+                    && !(st.dialect == Dialect::Fanuc && HAAS_AUXILIARY_M.contains(&m))
+                {
                     unknown_m = Some(grouped_unsupported(
                         out,
                         grouped,
@@ -899,6 +974,11 @@ impl Interpreter {
             let mut frame_code: Option<(i32, usize)> = None;
             // G43, G43.1, G43.2 or G49 in the block
             let mut tool_length: Option<i32> = None;
+            // G41, G41.1, G42 or G42.1 turning compensation on
+            let mut comp_code: Option<(i32, usize)> = None;
+            if ms[..nm].iter().any(|&(m, _)| m == 6) {
+                st.tool_loaded = st.tool_next;
+            }
             let mut unit_change = None;
             let mut untraced: Option<usize> = None;
             for &(c, gc) in &gs[..ng] {
@@ -918,8 +998,27 @@ impl Interpreter {
                     910 => st.incremental = true,
                     901 => st.arc_absolute = true,
                     911 => st.arc_absolute = false,
-                    400 => st.active.cutter_comp = None,
+                    400 => {
+                        st.active.cutter_comp = None;
+                        if let Some(on) = st.comp.take() {
+                            st.comp_exit = on.last.map(|(o, _)| o);
+                        }
+                    }
+                    410 | 411 | 420 | 421
+                        if st.active.cutter_comp.is_none()
+                            && st.comp.is_none()
+                            && matches!(st.dialect, Dialect::LinuxCnc | Dialect::Fanuc) =>
+                    {
+                        comp_code = Some((c, gc));
+                    }
                     410 | 411 | 420 | 421 => {
+                        if st.comp.is_some() {
+                            return Err(ierr(
+                                li,
+                                gc,
+                                "cutter compensation turned on when it is on; G40 first",
+                            ));
+                        }
                         if st.active.cutter_comp.is_none() {
                             let idx = push_unsupported(
                                 out,
@@ -1182,6 +1281,9 @@ impl Interpreter {
             }
 
             let unit = if st.inch { MM_PER_INCH } else { 1.0 };
+            if let Some((c, gc)) = comp_code {
+                comp_on(out, st, li, c, gc, d_word, l_word, unit)?;
+            }
             if let Some(c) = tool_length {
                 // the lengths in force (mm) after the code: G43.1 its words (others 0), G49 none,
                 // G43/G43.2 the tool table's along Z, which the program does not tell (a table's
@@ -1270,6 +1372,25 @@ impl Interpreter {
                 }
             }
             let any_axis = named != 0 || full_circle || standing;
+            // under compensation (or before the move that ends it) only G0-G3 moves are followed
+            if (st.comp.is_some() || st.comp_exit.is_some())
+                && (frame_code.is_some()
+                    || nonmodal_axis_user.is_some()
+                    || home.is_some()
+                    || g53
+                    || polar_used
+                    || (any_axis && matches!(st.mode, Mode::Canned(_) | Mode::Probe | Mode::None)))
+            {
+                let idx = push_unsupported(
+                    out,
+                    li,
+                    axis_col,
+                    "a move other than G0, G1, G2 or G3 (a canned cycle, probing, G10, G28, G30, G52, G53, G92, polar coordinates) with cutter compensation on: not treated",
+                );
+                st.comp = None;
+                st.comp_exit = None;
+                st.active.cutter_comp = Some((li as u32, idx));
+            }
 
             // offsets: the program's coordinates move, the machine does not
             if let Some((c, gc)) = frame_code {
@@ -1500,15 +1621,31 @@ impl Interpreter {
                         && center[1].is_finite()
                         && (!m.is_arc() || finite(&st.pos, 0b111))
                         && finite(&st.pos, named & !0b111);
-                    let supported = blocker.is_none() && e_construct.is_none();
+                    let mut supported = blocker.is_none() && e_construct.is_none();
                     if let Some(idx) = blocker {
                         out.unsupported[idx].blocks += 1;
                     }
                     if let Some(idx) = e_construct {
                         out.unsupported[idx].blocks += 1;
                     }
+                    let comp = match comp_move(st, m, &st.pos.clone(), &end, center) {
+                        Ok(c) => c,
+                        Err(why) => {
+                            let idx = push_unsupported(out, li, axis_col, why);
+                            out.unsupported[idx].blocks += 1;
+                            st.comp = None;
+                            st.comp_exit = None;
+                            st.active.cutter_comp = Some((li as u32, idx));
+                            supported = false;
+                            None
+                        }
+                    };
                     st.pos = end;
                     push_record(out, st, li, m, supported && known, named, center, turns);
+                    if let Some(c) = comp {
+                        out.records.last_mut().unwrap().comp = out.comps.len() as u32;
+                        out.comps.push(c);
+                    }
                     let s = &mut out.summary;
                     s.counts[m as usize] += 1;
                     if m.is_arc() {
@@ -1647,6 +1784,12 @@ fn unused_word(
         .find(|&&(l, used, _)| has(l) && !used)
         .map(|&(l, _, users)| (l, users))
 }
+
+/// M codes of Haas controls (Fanuc dialect) that switch auxiliary equipment and move no axis,
+/// from the Haas mill and lathe operator's manuals' M-code lists: chip auger forward and stop
+/// (M31, M33), coolant spigot position (M34, M35), air gun on/off (M83, M84), through-spindle
+/// coolant on/off (M88, M89). Copied as written.
+const HAAS_AUXILIARY_M: [i32; 8] = [31, 33, 34, 35, 83, 84, 88, 89];
 
 /// Modal group of an M code as LinuxCNC groups them; None for codes the engine does not know.
 fn m_group(m: i32) -> Option<u8> {
@@ -2184,6 +2327,226 @@ fn untraced_move(
     push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
 }
 
+/// G41/G42 (tool D's diameter from the tool table, or the loaded tool's) or G41.1/G42.1 (D the
+/// diameter): compensation followed when the radius is known and the plane is XY; otherwise an
+/// unsupported construct that blocks the moves until G40.
+#[allow(clippy::too_many_arguments)]
+fn comp_on(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    c: i32,
+    gc: usize,
+    d_word: Option<f64>,
+    l_word: Option<f64>,
+    unit: f64,
+) -> Result<(), NcError> {
+    let name = g_name(c);
+    let diameter: Result<f64, String> = if st.plane != 0 {
+        Err(format!(
+            "cutter compensation {name} in the ZX or YZ plane (a lathe's nose radius): not treated"
+        ))
+    } else if st.comp_exit.is_some() {
+        Err(format!(
+            "cutter compensation {name} again before a move ended the compensation before it"
+        ))
+    } else if matches!(c, 411 | 421) {
+        match d_word {
+            None => return Err(ierr(li, gc, format!("{name} needs a D word (the diameter)"))),
+            Some(_) if l_word.is_some() => Err(format!(
+                "cutter compensation {name} with an L word (a lathe tool's orientation): not treated"
+            )),
+            Some(d) => Ok(d * unit),
+        }
+    } else {
+        let tool = match d_word {
+            Some(d) if d < 0.0 || d.fract() != 0.0 => {
+                return Err(ierr(
+                    li,
+                    gc,
+                    format!("{name} D{d}: D must be a tool number (a whole number >= 0)"),
+                ))
+            }
+            Some(d) => Some(d as u32),
+            None => st.tool_loaded,
+        };
+        match tool {
+            Some(0) => Ok(0.0),
+            Some(t) => match st.tools.iter().find(|&&(n, _)| n == t) {
+                Some(&(_, d)) => Ok(d),
+                None if st.tools.is_empty() => Err(format!(
+                    "cutter compensation {name} with tool {t}: its diameter is not known; give the tool table (--tool-table)"
+                )),
+                None => Err(format!(
+                    "cutter compensation {name} with tool {t}, which the tool table does not hold"
+                )),
+            },
+            None => Err(format!(
+                "cutter compensation {name} with no D word and no tool loaded (T… M6): the radius is not known"
+            )),
+        }
+    };
+    match diameter {
+        Ok(d) => {
+            // a negative diameter puts the tool on the other side, as LinuxCNC reads it
+            let side = if matches!(c, 410 | 411) { 1.0 } else { -1.0 };
+            st.comp = Some(CompOn {
+                r: side * d / 2.0,
+                last: None,
+            });
+        }
+        Err(why) => {
+            let idx = push_unsupported(out, li, gc, &why);
+            st.active.cutter_comp = Some((li as u32, idx));
+        }
+    }
+    Ok(())
+}
+
+/// Turn between directions: an angle (rad) of the corner arc's pieces checked.
+const COMP_CORNER_STEP: f64 = std::f64::consts::PI / 12.0;
+
+/// The tool centre's offsets for a move under cutter radius compensation, or the move that ends
+/// it (None for other moves); Err names why the move cannot be followed.
+fn comp_move(
+    st: &mut State,
+    m: Motion,
+    s: &[f64; NAXES],
+    e: &[f64; NAXES],
+    center: [f64; 2],
+) -> Result<Option<Comp>, &'static str> {
+    let (dx, dy) = (e[0] - s[0], e[1] - s[1]);
+    let moves_xy = m.is_arc() || dx.hypot(dy) > 1e-9;
+    let fixed = |o: [f64; 2], radius: f64| Comp {
+        radius,
+        start: o,
+        end: o,
+        ..Default::default()
+    };
+    if let Some(off) = st.comp_exit {
+        let radius = off[0].hypot(off[1]);
+        if !moves_xy {
+            return Ok(Some(fixed(off, radius)));
+        }
+        if m.is_arc() {
+            return Err("an arc as the move after G40 that ends cutter compensation: lead out with a straight move");
+        }
+        st.comp_exit = None;
+        return Ok(Some(Comp {
+            radius,
+            start: off,
+            ..Default::default()
+        }));
+    }
+    let Some(on) = st.comp.as_mut() else {
+        return Ok(None);
+    };
+    let r = on.r;
+    if !moves_xy {
+        // the tool stands where the last move in the plane left it (before the entry: unmoved)
+        return Ok(on.last.map(|(o, _)| fixed(o, r.abs())));
+    }
+    if !(s[0].is_finite() && s[1].is_finite() && e[0].is_finite() && e[1].is_finite()) {
+        return Err(
+            "a move under cutter compensation from or to a position the program does not tell",
+        );
+    }
+    let unit = |x: f64, y: f64| {
+        let l = x.hypot(y);
+        [x / l, y / l]
+    };
+    let (o0, t0, o1, t1, radial) = if m.is_arc() {
+        if on.last.is_none() {
+            return Err(
+                "an arc as the first move of cutter compensation: lead in with a straight move",
+            );
+        }
+        let ccw = m == Motion::ArcCcw;
+        // the tool left of a counter-clockwise arc is inside it
+        let k = if ccw { -r } else { r };
+        let (u0, u1) = (
+            unit(s[0] - center[0], s[1] - center[1]),
+            unit(e[0] - center[0], e[1] - center[1]),
+        );
+        if k < 0.0 && -k >= (s[0] - center[0]).hypot(s[1] - center[1]) {
+            return Err("an arc under cutter compensation whose radius is not larger than the tool's on the side it cuts");
+        }
+        let tan = |u: [f64; 2]| if ccw { [-u[1], u[0]] } else { [u[1], -u[0]] };
+        (
+            [k * u0[0], k * u0[1]],
+            tan(u0),
+            [k * u1[0], k * u1[1]],
+            tan(u1),
+            k,
+        )
+    } else {
+        let t = unit(dx, dy);
+        let o = [-r * t[1], r * t[0]];
+        (o, t, o, t, 0.0)
+    };
+    let (start, corner) = match on.last {
+        None => {
+            if dx.hypot(dy) <= r.abs() {
+                return Err("the move that starts cutter compensation is not longer than the tool radius (the controller refuses it)");
+            }
+            ([0.0; 2], Vec::new())
+        }
+        Some((a, ta)) => (o0, comp_corner(a, ta, o0, t0, r)),
+    };
+    // an inside corner: the point where the offset paths meet (second of the corner points)
+    let trim = if corner.is_empty() || r * ta_cross(on.last, t0) <= 0.0 {
+        0.0
+    } else if corner.len() == 3 {
+        let (a, q) = (corner[0], corner[1]);
+        (q[0] - a[0])
+            .hypot(q[1] - a[1])
+            .max((q[0] - o0[0]).hypot(q[1] - o0[1]))
+    } else {
+        f64::INFINITY // (a reversal: the offset paths meet far behind the corner, if at all)
+    };
+    on.last = Some((o1, t1));
+    Ok(Some(Comp {
+        radius: r.abs(),
+        start,
+        end: o1,
+        radial,
+        corner,
+        trim,
+    }))
+}
+
+/// The turn (cross product) from the direction at the end of the last move to `t`.
+fn ta_cross(last: Option<([f64; 2], [f64; 2])>, t: [f64; 2]) -> f64 {
+    last.map_or(0.0, |(_, ta)| ta[0] * t[1] - ta[1] * t[0])
+}
+
+/// The tool centre around a corner of a compensated contour (offsets from the corner, mm): `a`,
+/// where the move before ends, with the contour's direction `ta` there; `b` and `tb` where the
+/// next starts. An outside corner gets the arc of the tool radius about the corner, an inside one
+/// the point where the two offset paths' tangents meet. Empty when the paths join.
+fn comp_corner(a: [f64; 2], ta: [f64; 2], b: [f64; 2], tb: [f64; 2], r: f64) -> Vec<[f64; 2]> {
+    if (a[0] - b[0]).hypot(a[1] - b[1]) <= 1e-9 {
+        return Vec::new();
+    }
+    let cross = ta[0] * tb[1] - ta[1] * tb[0];
+    let mut pts = vec![a];
+    if r * cross > 0.0 {
+        let q = 1.0 + (a[0] * b[0] + a[1] * b[1]) / (r * r);
+        if q > 1e-3 {
+            pts.push([(a[0] + b[0]) / q, (a[1] + b[1]) / q]);
+        }
+    } else {
+        let phi = (a[0] * b[1] - a[1] * b[0]).atan2(a[0] * b[0] + a[1] * b[1]);
+        let n = (phi.abs() / COMP_CORNER_STEP).ceil().max(1.0) as usize;
+        for k in 1..n {
+            let (sn, cs) = (phi * k as f64 / n as f64).sin_cos();
+            pts.push([a[0] * cs - a[1] * sn, a[0] * sn + a[1] * cs]);
+        }
+    }
+    pts.push(b);
+    pts
+}
+
 fn push_record(
     out: &mut Interp,
     st: &State,
@@ -2209,6 +2572,7 @@ fn push_record(
         turns,
         cycle: 0,
         frame: st.frame,
+        comp: NO_COMP,
     });
 }
 

@@ -34,8 +34,20 @@ impl Program {
 
     /// Lex and interpret `src`, a program written for `dialect`.
     pub fn parse_as(src: Vec<u8>, dialect: interp::Dialect) -> Result<Self, NcError> {
+        Self::parse_with(src, dialect, Default::default())
+    }
+
+    /// Lex and interpret `src`, a program written for `dialect`, with the tool table `tools`
+    /// (tool number, diameter mm) for cutter radius compensation.
+    pub fn parse_with(
+        src: Vec<u8>,
+        dialect: interp::Dialect,
+        tools: std::sync::Arc<Vec<(u32, f64)>>,
+    ) -> Result<Self, NcError> {
         let lexed = lex::lex(&src)?;
-        let interp = interp::interpret_as(&lexed, dialect)?;
+        let interp = interp::Interpreter::with_dialect(dialect)
+            .with_tools(tools)
+            .run_all(&lexed)?;
         Ok(Program { src, lexed, interp })
     }
 

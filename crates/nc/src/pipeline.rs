@@ -40,6 +40,8 @@ pub struct Options {
     pub expand_cycles: bool,
     /// The controller the program is written for.
     pub dialect: crate::interp::Dialect,
+    /// The tool table for cutter radius compensation: (tool number, diameter mm).
+    pub tools: std::sync::Arc<Vec<(u32, f64)>>,
 }
 
 /// Figures of a finished correction.
@@ -180,6 +182,7 @@ fn read_pieces(
     piece_bytes: usize,
     style: Option<(NumberStyle, bool)>,
     dialect: crate::interp::Dialect,
+    tools: std::sync::Arc<Vec<(u32, f64)>>,
     tx: std::sync::mpsc::SyncSender<Result<Piece, NcError>>,
 ) -> Option<ReadEnd> {
     let mut stream = Stream::new(
@@ -188,7 +191,8 @@ fn read_pieces(
         style.map_or(NumberStyle::default(), |s| s.0),
         style.is_some_and(|s| s.1),
     )
-    .with_dialect(dialect);
+    .with_dialect(dialect)
+    .with_tools(tools);
     let mut assumed = style;
     let mut whole = NumberStyle::default();
     let mut counts = [0usize; 4];
@@ -307,8 +311,9 @@ impl ReadAhead {
         ahead: usize,
     ) -> Self {
         let (tx, rx) = sync_channel::<Result<Piece, NcError>>(ahead.max(2));
-        let handle =
-            std::thread::spawn(move || read_pieces(reader, piece_bytes, None, dialect, tx));
+        let handle = std::thread::spawn(move || {
+            read_pieces(reader, piece_bytes, None, dialect, Default::default(), tx)
+        });
         ReadAhead {
             rx,
             handle,
@@ -346,6 +351,7 @@ fn pass(
         let (write_tx, write_rx) = sync_channel::<Vec<u8>>(2);
         let (written_tx, written_rx) = channel::<Vec<u8>>();
         let dialect = opts.dialect;
+        let tools = opts.tools.clone();
         let (piece_rx, reading): (_, Box<dyn FnOnce() -> Option<ReadEnd>>) = match (ahead, reader) {
             (Some(a), _) => (
                 a.rx,
@@ -353,8 +359,9 @@ fn pass(
             ),
             (None, Some(reader)) => {
                 let (piece_tx, piece_rx) = sync_channel::<Result<Piece, NcError>>(2);
-                let h =
-                    scope.spawn(move || read_pieces(reader, piece_bytes, style, dialect, piece_tx));
+                let h = scope.spawn(move || {
+                    read_pieces(reader, piece_bytes, style, dialect, tools, piece_tx)
+                });
                 (
                     piece_rx,
                     Box::new(move || h.join().expect("the reading thread panicked")),
@@ -401,10 +408,28 @@ fn pass(
             }
             warnings(&piece.interp, opts.clearance, bounds, &mut report);
             if (!opts.keep_unsupported && !piece.interp.unsupported.is_empty())
-                || !field.eval(&samples.xyz, &mut disp)
+                || !field.eval(samples.eval_points(), &mut disp)
             {
                 refused = true;
                 break;
+            }
+            // cutter compensation: the field around the corners, and no X/Y displacement
+            // (refused here; the caller's second reading says why)
+            if !piece.interp.comps.is_empty() {
+                let mut cdisp = Vec::new();
+                if !field.eval(&samples.checks, &mut cdisp)
+                    || crate::sample::comp_check(
+                        &piece.interp,
+                        &samples,
+                        &disp,
+                        &cdisp,
+                        sample_opts.chord_tol,
+                    )
+                    .is_some()
+                {
+                    refused = true;
+                    break;
+                }
             }
             norms.clear();
             match opts.shift_norm {
@@ -502,7 +527,10 @@ pub fn correct_ahead(
     ahead: Option<ReadAhead>,
 ) -> Result<Outcome, NcError> {
     field.check().map_err(NcError::Usage)?;
-    let ahead = ahead.filter(|a| a.piece_bytes == opts.piece_bytes && a.dialect == opts.dialect);
+    // (a read-ahead reads without a tool table)
+    let ahead = ahead.filter(|a| {
+        a.piece_bytes == opts.piece_bytes && a.dialect == opts.dialect && opts.tools.is_empty()
+    });
     match pass(open, field, opts, None, out, progress, ahead)? {
         Ok(o) => Ok(o),
         Err(style) => {

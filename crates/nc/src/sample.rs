@@ -43,9 +43,28 @@ pub struct Samples {
     /// Arcs sampled at their end only because the grid field varies over them by no more than
     /// the chord tolerance: (record index, that variation in mm), in record order.
     pub flat: Vec<(u32, f64)>,
+    /// Where the field is evaluated for each sample (n * 3, mm) when a record of the range is
+    /// under cutter radius compensation: the tool centre ([`crate::interp::Comp`]); empty when
+    /// that is the sample itself.
+    pub at: Vec<f64>,
+    /// Tool-centre points around the corners of compensated contours (k * 3, mm), and the groups
+    /// they form: (record index, first point, count). The field must vary over a group by no
+    /// more than the chord tolerance ([`comp_check`]).
+    pub checks: Vec<f64>,
+    pub check_groups: Vec<(u32, u32, u32)>,
 }
 
 impl Samples {
+    /// The points the field is evaluated at (n * 3, mm): the tool centres ([`Samples::at`]) when
+    /// the range has compensated moves, else the samples.
+    pub fn eval_points(&self) -> &[f64] {
+        if self.at.is_empty() {
+            &self.xyz
+        } else {
+            &self.at
+        }
+    }
+
     /// First sample index and count of record `ri`.
     #[inline]
     pub fn of(&self, ri: usize) -> (usize, usize) {
@@ -194,6 +213,10 @@ pub fn sample_range(
     s.rec.clear();
     s.range.clear();
     s.flat.clear();
+    s.at.clear();
+    s.checks.clear();
+    s.check_groups.clear();
+    let any_comp = !it.comps.is_empty();
     s.rec0 = recs.start;
     let mut cuts: Vec<f64> = Vec::new();
     let (grid_x, grid_y) = (GridLines::new(&opts.grid_x), GridLines::new(&opts.grid_y));
@@ -210,16 +233,36 @@ pub fn sample_range(
         let first = s.t.len();
         let mut prev = [start[0], start[1], start[2]];
         let mut prev_t = 0.0;
+        let comp = (rec.comp != crate::interp::NO_COMP).then(|| &it.comps[rec.comp as usize]);
+        // the tool centre's offset from the programmed point at `p`, `t` along the block
+        let offset = |p: &[f64; 3], t: f64| -> [f64; 2] {
+            match comp {
+                None => [0.0; 2],
+                Some(c) if rec.motion.is_arc() => {
+                    let (x, y) = (p[0] - rec.center[0], p[1] - rec.center[1]);
+                    let l = x.hypot(y);
+                    [c.radial * x / l, c.radial * y / l]
+                }
+                Some(c) => [
+                    c.start[0] + t * (c.end[0] - c.start[0]),
+                    c.start[1] + t * (c.end[1] - c.start[1]),
+                ],
+            }
+        };
+        let mut prev_o = offset(&prev, 0.0);
         let push = |s: &mut Samples,
                     p: [f64; 3],
                     t: f64,
                     prev: &mut [f64; 3],
                     prev_t: &mut f64,
+                    prev_o: &mut [f64; 2],
                     cuts: &mut Vec<f64>| {
+            let o = offset(&p, t);
             if !opts.grid_x.is_empty() || !opts.grid_y.is_empty() {
+                // where the tool centre crosses the grid lines
                 cuts.clear();
-                crossings(&grid_x, prev[0], p[0], cuts);
-                crossings(&grid_y, prev[1], p[1], cuts);
+                crossings(&grid_x, prev[0] + prev_o[0], p[0] + o[0], cuts);
+                crossings(&grid_y, prev[1] + prev_o[1], p[1] + o[1], cuts);
                 if cuts.len() > 1 {
                     cuts.sort_by(|a, b| a.partial_cmp(b).unwrap());
                 }
@@ -236,13 +279,25 @@ pub fn sample_range(
                     ]);
                     s.t.push(*prev_t + u * (t - *prev_t));
                     s.rec.push(i as u32);
+                    if any_comp {
+                        let n = s.xyz.len();
+                        s.at.extend_from_slice(&[
+                            s.xyz[n - 3] + prev_o[0] + u * (o[0] - prev_o[0]),
+                            s.xyz[n - 2] + prev_o[1] + u * (o[1] - prev_o[1]),
+                            s.xyz[n - 1],
+                        ]);
+                    }
                 }
             }
             s.xyz.extend_from_slice(&p);
             s.t.push(t);
             s.rec.push(i as u32);
+            if any_comp {
+                s.at.extend_from_slice(&[p[0] + o[0], p[1] + o[1], p[2]]);
+            }
             *prev = p;
             *prev_t = t;
+            *prev_o = o;
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
         let end_only =
@@ -250,7 +305,7 @@ pub fn sample_range(
         // an arc over whose circle the field varies by no more than the chord tolerance, the block
         // before it corrected (so the output starts the arc where the field puts its start): it
         // stays an arc, moved along a helix to its end's displacement (the emitter keeps it)
-        let flat = (!end_only && rec.motion.is_arc())
+        let flat = (!end_only && rec.motion.is_arc() && comp.is_none())
             .then(|| flat_under(it, i, &start, opts, s))
             .flatten();
         if end_only || flat.is_some() {
@@ -259,6 +314,10 @@ pub fn sample_range(
             s.xyz.extend_from_slice(&end);
             s.t.push(1.0);
             s.rec.push(i as u32);
+            if any_comp {
+                let o = offset(&end, 1.0);
+                s.at.extend_from_slice(&[end[0] + o[0], end[1] + o[1], end[2]]);
+            }
             if let Some(range) = flat {
                 s.flat.push((i as u32, range));
             }
@@ -295,7 +354,7 @@ pub fn sample_range(
                     p[an] = start[an] + t * (rec.end[an] - start[an]);
                     p
                 };
-                push(s, p, t, &mut prev, &mut prev_t, &mut cuts);
+                push(s, p, t, &mut prev, &mut prev_t, &mut prev_o, &mut cuts);
             }
         } else {
             let len = ((end[0] - prev[0]).powi(2)
@@ -323,10 +382,20 @@ pub fn sample_range(
                         s0[2] + t * (end[2] - s0[2]),
                     ]
                 };
-                push(s, p, t, &mut prev, &mut prev_t, &mut cuts);
+                push(s, p, t, &mut prev, &mut prev_t, &mut prev_o, &mut cuts);
             }
         }
         s.range.push((first as u32, (s.t.len() - first) as u32));
+        if let Some(c) = comp {
+            if !c.corner.is_empty() && start[0].is_finite() && start[1].is_finite() {
+                s.check_groups
+                    .push((i as u32, (s.checks.len() / 3) as u32, c.corner.len() as u32));
+                for o in &c.corner {
+                    s.checks
+                        .extend_from_slice(&[start[0] + o[0], start[1] + o[1], start[2]]);
+                }
+            }
+        }
     }
     Ok(())
 }
@@ -545,4 +614,59 @@ mod tests {
         let xs: Vec<f64> = (0..s.t.len()).map(|k| s.xyz[3 * k]).collect();
         assert_eq!(xs, vec![1.0, 2.0, 3.0, 3.5]);
     }
+}
+
+/// Largest X or Y displacement (mm) a compensated move may get: the controller offsets the
+/// moved contour along its own normal, which such a displacement turns (not followed).
+pub const COMP_XY_TOL: f64 = 1e-9;
+
+/// What refuses a compensated program once the field is known: the field displacing X or Y
+/// under compensation, or varying around the tool at a corner by more than `budget` (mm; the
+/// output keeps one displacement at a corner, where the controller turns the tool). `disp` holds
+/// the displacements at the samples, `cdisp` at [`Samples::checks`]. (1-based line, message).
+pub fn comp_check(
+    it: &Interp,
+    s: &Samples,
+    disp: &[f64],
+    cdisp: &[f64],
+    budget: f64,
+) -> Option<(u32, String)> {
+    if it.comps.is_empty() {
+        return None;
+    }
+    for (k, &ri) in s.rec.iter().enumerate() {
+        let rec = &it.records[ri as usize];
+        if rec.comp != crate::interp::NO_COMP
+            && (disp[3 * k].abs() > COMP_XY_TOL || disp[3 * k + 1].abs() > COMP_XY_TOL)
+        {
+            return Some((
+                rec.line + 1,
+                format!(
+                    "the field moves X or Y ({:.4}, {:.4} mm) under cutter compensation: the controller offsets the moved contour along its own normal, which that turns; only a Z displacement is followed there",
+                    disp[3 * k], disp[3 * k + 1]
+                ),
+            ));
+        }
+    }
+    for &(ri, f, c) in &s.check_groups {
+        let d = &cdisp[3 * f as usize..3 * (f + c) as usize];
+        let mut worst = 0.0f64;
+        for q in d.chunks_exact(3).skip(1) {
+            let v = ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2) + (q[2] - d[2]).powi(2)).sqrt();
+            worst = worst.max(v);
+        }
+        if !(worst <= budget) {
+            let rec = &it.records[ri as usize];
+            let r = it.comps[rec.comp as usize].radius;
+            return Some((
+                rec.line + 1,
+                format!(
+                    "cutter compensation corner: the field varies by {:.1} µm around the tool (radius {r:.4} mm) where the controller turns it, more than the chord tolerance {budget} mm; the corrected program keeps one displacement there (raise --chord-tol to accept {:.1} µm)",
+                    worst * 1000.0,
+                    worst * 1000.0
+                ),
+            ));
+        }
+    }
+    None
 }

@@ -121,6 +121,12 @@ impl Stream {
         self
     }
 
+    /// The tool table for cutter radius compensation ([`Interpreter::with_tools`]).
+    pub fn with_tools(mut self, tools: std::sync::Arc<Vec<(u32, f64)>>) -> Self {
+        self.interp = std::mem::take(&mut self.interp).with_tools(tools);
+        self
+    }
+
     /// Lines read so far.
     pub fn lines_read(&self) -> usize {
         self.line_base

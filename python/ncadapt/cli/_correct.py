@@ -95,6 +95,17 @@ def _shift(ctx, param, value):
     "its x and y, Z and R by its z (written on the holes whose values change). Cycles in G18/G19, "
     "G87, G88 and G76, and cycles from an unknown position, are refused.",
 )
+@click.option(
+    "--tool-table",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="LinuxCNC tool table (T<n> … D<diameter>) for cutter radius compensation: G41/G42 take tool D's "
+    "radius (or the loaded tool's), and the field is evaluated where the tool centre is. Needs --tool-units.",
+)
+@click.option(
+    "--tool-units",
+    type=click.Choice(["mm", "inch"]),
+    help="Units of the tool table's numbers (the machine's; the table does not say).",
+)
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
 def correct(
@@ -112,6 +123,8 @@ def correct(
     clearance,
     dialect,
     expand_cycles,
+    tool_table,
+    tool_units,
     json_path,
 ):
     """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
@@ -122,12 +135,19 @@ def correct(
     if (field_path is None) == (shift is None):
         raise click.UsageError("give exactly one of --field FILE or --shift DX,DY,DZ")
     check_outputs({"input program": program, "field file": field_path}, {"-o": output, "--json": json_path})
+    if (tool_table is None) != (tool_units is None):
+        raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = dialects.resolve(program, dialect)
+    tools = None
+    if tool_table is not None:
+        from .. import tooltable
+
+        tools = tooltable.read(tool_table, tool_units)
     # the engine starts reading the program while numpy is imported and the field read, on the
-    # core that would wait
+    # core that would wait (without a tool table: the read-ahead reads without one)
     from .._nc import read_ahead
 
-    ahead = read_ahead(str(program), constants.PIECE_BYTES, d.name)
+    ahead = None if tools else read_ahead(str(program), constants.PIECE_BYTES, d.name)
     from .. import fields as _fields
     from .. import nc
 
@@ -151,6 +171,7 @@ def correct(
             expand_cycles=expand_cycles,
             dialect=d.name,
             read_ahead=ahead,
+            tools=tools,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
@@ -194,5 +215,7 @@ def correct(
             "clearance": clearance,
             "dialect": dialect,
             "expand_cycles": expand_cycles,
+            "tool_table": None if tool_table is None else str(tool_table),
+            "tool_units": tool_units,
         }
         write_json(json_path, payload)

@@ -1,0 +1,342 @@
+"""Cutter radius compensation (G41/G42, G41.1/G42.1): the field is evaluated where the tool
+centre is, and the corrected program keeps compensation on.
+
+The truth is LinuxCNC's own compensation: ``rs274 -t TABLE`` turns the input and the output into
+tool-centre motion, and the output's must be the input's displaced by the field (an analytic
+function here, evaluated at rs274's tool-centre points), within 5 µm both ways (a symmetric
+distance between the two paths, densely sampled).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.spatial import cKDTree
+
+import rs274
+from ncadapt import RefusedError, fields, nc, tooltable
+from ncadapt.cli import main
+from ncadapt.errors import InputError
+
+needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not installed")
+
+# rs274 without an INI file reads a tool table in inches: T1 is 1/4", T3 0.1" (radius 1.27 mm)
+TABLE_INCH = "T1 P1 D0.25 ;quarter inch\nT3 P3 D0.1\nT5 P5 D0.2\n"
+TOOLS_MM = {1: 6.35, 3: 2.54, 5: 5.08}
+
+# a contour with outside and inside corners, arcs both ways, a Z move under compensation, both
+# sides, G41.1 with its own diameter; the plunges come before compensation is turned on
+PROGRAM = """G21 G17 G90
+F300
+G0 X-5 Y-5 Z2
+G1 Z-1
+G41 D3
+G1 X10 Y0
+G1 X30 Y0
+G3 X40 Y10 R10
+G1 X40 Y30
+G3 X30 Y40 I-10 J0
+G1 X20 Y35
+G1 X10 Y40
+G1 Z-0.5
+G1 X0 Y20
+G1 X0 Y5
+G40 G1 X-6 Y-6
+G42 D5
+G1 X5 Y5
+G1 X25 Y8
+G3 X25 Y20 I0 J6
+G1 X15 Y25
+G40 G1 X0 Y30
+G41.1 D3
+G1 X10 Y45
+G1 X35 Y45
+G40 G1 X45 Y50
+M2
+"""
+
+
+def z_wave(p):
+    """A Z field of its own: 20 µm of waviness over 25 mm (|∇f| ≤ 8e-4)."""
+    p = np.asarray(p, float)
+    d = np.zeros_like(p)
+    d[:, 2] = 0.01 * np.sin(p[:, 0] / 25.0) + 0.01 * np.cos(p[:, 1] / 25.0)
+    return d
+
+
+def _dense(moves, step=0.002):
+    """Points along rs274's moves at most `step` mm apart (arcs along their length)."""
+    out = []
+    for m in moves:
+        if m.arc is None:
+            length = float(np.linalg.norm(m.end[:3] - m.start[:3]))
+        else:
+            a1, a2, an = m.axes
+            length = float(np.hypot(m.sweep * max(m.rs, m.re), m.end[an] - m.start[an]))
+        out.append(m.at(np.linspace(0.0, 1.0, int(np.ceil(length / step)) + 2)))
+    return np.concatenate(out)
+
+
+def _motion(path, table):
+    canon = rs274.canonical(path, tools=table)
+    assert canon.error is None, canon.error
+    mv = rs274.moves(canon)
+    return _dense([m for m in mv if m.kind in ("feed", "arc")])
+
+
+def _corrected(tmp_path, text, field, **options):
+    out = nc.parse(text, name="comp.ngc").correct(field, tools=TOOLS_MM, **options)
+    p = tmp_path / "out.ngc"
+    p.write_bytes(out.data)
+    return p
+
+
+@needs_rs274
+@pytest.mark.parametrize("native", [False, True])
+def test_compensated_motion_is_the_displaced_tool_path(tmp_path, native):
+    table = tmp_path / "tool.tbl"
+    table.write_text(TABLE_INCH)
+    src = tmp_path / "in.ngc"
+    src.write_text(PROGRAM)
+    if native:
+        # the engine's own bilinear grid (fine enough that it is the wave within 0.1 µm)
+        xs, ys = np.linspace(-20, 60, 321), np.linspace(-20, 70, 361)
+        X, Y = np.meshgrid(xs, ys, indexing="ij")
+        dz = z_wave(np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()])[:, 2].reshape(X.shape).T
+        field = fields.GridField(xs, ys, dz)
+        out = tmp_path / "out.ngc"
+        nc.correct_file(src, out, field, tools=TOOLS_MM, rapids=True)
+    else:
+        field = z_wave
+        out = _corrected(tmp_path, PROGRAM, field, rapids=True)
+    text = out.read_text()
+    assert len(text.splitlines()) > 3 * len(PROGRAM.splitlines())  # long moves cut in pieces
+    assert text.count("G41 D3") == 1 and "G42 D5" in text and "G41.1 D3" in text  # compensation kept on
+    before = _motion(src, table)
+    after = _motion(out, table)
+    want = before + z_wave(before)
+    # both ways: every output point is on the displaced tool path and every displaced point on
+    # the output's, within 5 µm
+    d_out = cKDTree(want).query(after)[0]
+    d_in = cKDTree(after).query(want)[0]
+    assert d_out.max() < 0.005 and d_in.max() < 0.005, (d_out.max(), d_in.max())
+    # and the correction is not nothing: the tool centre's Z moved by the field there
+    assert np.abs(after[:, 2] - before[cKDTree(before[:, :2]).query(after[:, :2])[1], 2]).max() > 0.01
+
+
+@needs_rs274
+def test_evaluated_at_the_tool_centre_not_the_contour(tmp_path):
+    """A field that changes fast across the contour: evaluated on the programmed contour, the
+    output would be off by the field's change over the tool radius (3.2 mm for T1 here)."""
+    table = tmp_path / "tool.tbl"
+    table.write_text(TABLE_INCH)
+
+    def ramp(p):  # 10 µm per mm in Y only: along the X line it is constant
+        d = np.zeros_like(p)
+        d[:, 2] = 0.01 * p[:, 1]
+        return d
+
+    text = "G21 G17 G90 F100\nG0 X-10 Y-10 Z1\nG1 Z-1\nG41 D1\nG1 X0 Y0\nG1 X40 Y0\nG40 G1 X50 Y-10\nM2\n"
+    src = tmp_path / "in.ngc"
+    src.write_text(text)
+    out = _corrected(tmp_path, text, ramp, chord_tol=0.05)
+    after = rs274.moves(rs274.canonical(out, tools=table))
+    # the tool centre runs along Y = +3.175 (left of +X): the field there is 31.75 µm
+    line = [m for m in after if m.kind == "feed" and abs(m.end[1] - 3.175) < 1e-3 and m.end[0] > 30]
+    assert line, [m.end for m in after]
+    assert line[0].end[2] == pytest.approx(-1 + 0.03175, abs=1e-4)
+
+
+@needs_rs274
+def test_zero_field_is_byte_identical(tmp_path):
+    out = nc.parse(PROGRAM).correct(fields.Shift((0, 0, 0)), tools=TOOLS_MM)
+    assert out.text == PROGRAM
+
+
+def test_steep_corner_refused_with_its_line():
+    # a slope of 5 µm/mm in X: at the first corner (line 7: the entry along (15, 5), then +X) the
+    # tool turns about the corner from the normal (-5, 15)/√250 to (0, 1), its centre moving by
+    # 1.27 × 5/√250 mm in X: 5 µm/mm × 0.4016 mm = 2.0 µm, over the 2 µm chord tolerance
+    def slope(p):
+        d = np.zeros_like(p)
+        d[:, 2] = 0.005 * p[:, 0]
+        return d
+
+    with pytest.raises(RefusedError, match=r"line 7: cutter compensation corner: the field varies by 2\.0 µm"):
+        nc.parse(PROGRAM).correct(slope, tools=TOOLS_MM, rapids=True)
+
+
+def test_xy_displacement_refused():
+    with pytest.raises(RefusedError, match="moves X or Y .* under cutter compensation"):
+        nc.parse(PROGRAM).correct(fields.Shift((0.01, 0, 0)), tools=TOOLS_MM)
+
+
+@pytest.mark.parametrize(
+    ("text", "why"),
+    [
+        ("G41 D3\nG1 X10\nG40 G1 X20\n", None),  # accepted
+        ("G41 D1\nG1 X10\nG40 G1 X20\n", "its diameter is not known; give the tool table"),
+        ("G41 D9\nG1 X10\nG40 G1 X20\n", "tool 9, which the tool table does not hold"),
+        ("G41\nG1 X10\nG40 G1 X20\n", "no D word and no tool loaded"),
+        ("G18 G41 D3\nG1 X10\nG40 G1 X20\n", "ZX or YZ plane"),
+        ("G41 D3\nG2 X10 R5\nG40 G1 X20\n", "an arc as the first move of cutter compensation"),
+        ("G41 D3\nG1 X10\nG40\nG2 X20 R5\n", "an arc as the move after G40"),
+        ("G41 D3\nG1 X1\nG40 G1 X20\n", "not longer than the tool radius"),
+        ("G41 D3\nG1 X10\nG81 X20 Y0 Z-1 R1\nG80\nG40 G1 X20\n", "a canned cycle"),
+    ],
+)
+def test_what_is_followed_and_what_is_refused(text, why):
+    p = nc.parse("G0 X0 Y0 Z1\nG1 Z0 F100\n" + text)
+    tools = None if "D1" in text else {3: 2.54}
+    if why is None:
+        out = p.correct(fields.Shift((0, 0, 0.1)), tools=tools)
+        assert out.text.splitlines()[2:] == text.splitlines()  # compensation kept, Z already moved
+        return
+    with pytest.raises(RefusedError) as e:
+        p.correct(fields.Shift((0, 0, 0.1)), tools=tools)
+    assert why in str(e.value.details)
+
+
+def test_entry_move_kept_whole():
+    """The move after G41 goes from the programmed point to the offset one: cut in two, the
+    controller would take its first piece as that move; a field that bends it is refused."""
+    text = "G21 G0 X0 Y0 Z1\nG41 D3\nG1 X10 Y0 Z-1 F100\nG1 X20\nG40 G1 X30\n"
+
+    def bump(p):
+        d = np.zeros_like(p)
+        d[:, 2] = 0.1 * np.exp(-(((p[:, 0] - 5) / 2) ** 2))
+        return d
+
+    with pytest.raises(InputError, match="must stay one move"):
+        nc.parse(text).correct(bump, tools={3: 2.54}, rapids=True)
+
+
+def test_tool_table_units_and_errors(tmp_path):
+    p = tmp_path / "t.tbl"
+    p.write_text("; a comment line\nT1 P1 D0.25 Z1.0 ;1/4\nT2 P2\nT7 P7 X0 D-0.5\n")
+    assert tooltable.read(p, "inch") == {1: 6.35, 2: 0.0, 7: -12.7}
+    assert tooltable.read(p, "mm") == {1: 0.25, 2: 0.0, 7: -0.5}
+    for bad, where in (
+        ("T1 D1\nT1 D2\n", ":2:"),
+        ("T1 D1\nP1 D2\n", ":2:"),
+        ("T1.5 D1\n", ":1:"),
+        ("T1 D1e9\n", ":1:"),
+    ):
+        p.write_text(bad)
+        with pytest.raises(InputError) as e:
+            tooltable.read(p, "mm")
+        assert where in str(e.value)
+
+
+def test_cli_tool_table(tmp_path):
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G21 G0 X0 Y0 Z1\nG1 Z0 F100\nG41 D3\nG1 X10\nG1 Y10\nG40 G1 X20\nM2\n")
+    table = tmp_path / "t.tbl"
+    table.write_text(TABLE_INCH)
+    r = CliRunner().invoke(main, ["correct", str(prog), "--shift", "0,0,0.1", "-o", str(tmp_path / "o.ngc")])
+    assert r.exit_code == 1 and "give the tool table (--tool-table)" in r.output and "line 3" in r.output
+    r = CliRunner().invoke(
+        main, ["correct", str(prog), "--shift", "0,0,0.1", "-o", str(tmp_path / "o.ngc"), "--tool-table", str(table)]
+    )
+    assert r.exit_code == 2 and "--tool-units" in r.output
+    r = CliRunner().invoke(
+        main,
+        ["correct", str(prog), "--shift", "0,0,0.1", "-o", str(tmp_path / "o.ngc")]
+        + ["--tool-table", str(table), "--tool-units", "inch"],
+    )
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "o.ngc").read_text().splitlines()[1] == "G1 Z0.1 F100"
+
+
+def _bend(p):
+    """A 40 µm bump at X15 (flat within 0.05 µm beyond X28): a straight move over it is cut in
+    pieces, the corners at X40 see no change."""
+    d = np.zeros_like(p)
+    d[:, 2] = 0.04 * np.exp(-(((p[:, 0] - 15.0) / 5.0) ** 2))
+    return d
+
+
+# G41 with a 1/4" tool (r 3.175 mm): a 40 mm move along +X, then an inside turn of 150°, where
+# the tool stops r·tan(75°) = 11.85 mm short of the corner
+SHARP = "G21 G0 X-10 Y-10 Z1\nG1 Z0 F100\nG41 D1\nG1 X0 Y0\nG1 X40 Y0\nG1 X22.6795 Y10\nG40 G1 X10 Y30\nM2\n"
+
+
+@needs_rs274
+def test_pieces_clear_of_inside_corners(tmp_path):
+    """A move cut in pieces keeps its last piece 2 tool radii long, so the controller reaches an
+    inside corner up to 126.9°; the 150° one here is refused after a cut move (rs274 would refuse
+    the corrected program), accepted after a whole one."""
+    with pytest.raises(InputError, match=r":6:1: an inside corner under cutter compensation: the tool stops 11\.849"):
+        nc.parse(SHARP).correct(_bend, tools=TOOLS_MM, chord_tol=0.01)
+    table = tmp_path / "tool.tbl"
+    table.write_text(TABLE_INCH)
+    out = tmp_path / "out.ngc"
+    out.write_bytes(nc.parse(SHARP).correct(fields.Shift((0, 0, 0.05)), tools=TOOLS_MM).data)
+    assert rs274.canonical(out, tools=table).error is None
+    # a 90° inside corner (r·tan 45° = r) after the same cut move is reached
+    square = SHARP.replace("G1 X22.6795 Y10", "G1 X40 Y20").replace("G40 G1 X10 Y30", "G40 G1 X50 Y30")
+    out.write_bytes(nc.parse(square).correct(_bend, tools=TOOLS_MM, chord_tol=0.01).data)
+    canon = rs274.canonical(out, tools=table)
+    assert canon.error is None, canon.error
+    assert out.read_text().count("\n") > square.count("\n") + 5  # the 40 mm move was cut
+
+
+# ------------------------------------------------------------------------------ real programs
+def _comp_programs():
+    import corpus
+
+    if not corpus.CORPUS.is_dir():
+        return []
+    return [e for e in corpus.manifest() if re.search(rb"\bG0*4[12](?![\d.])", e.path.read_bytes(), re.I)]
+
+
+@needs_rs274
+@pytest.mark.parametrize("entry", _comp_programs(), ids=lambda e: e.file)
+def test_corpus_compensated_contours(entry, tmp_path):
+    """The corpus programs with cutter compensation, with a 0.01" tool (a radius rs274 reaches
+    every corner of theirs with) and the corpus's gentle grid field: refused at a line, or their
+    compensated motion (rs274 -t, the moves under compensation and the move leaving it) is the
+    input's displaced by the field at rs274's tool centre, within 5 µm both ways (9 µm in inch
+    programs: rs274 prints 4 decimals of an inch)."""
+    import corpus
+    from ncadapt import dialects
+
+    diameter = 0.01
+    table = tmp_path / "tool.tbl"
+    table.write_text("".join(f"T{t} P{t} Z0 D{diameter} ;\n" for t in range(1, 100)))
+    tools = {t: diameter * 25.4 for t in range(1, 100)}
+    try:
+        prog = nc.read(entry.path, dialect=dialects.resolve(entry.path).name, tools=tools)
+    except InputError as e:
+        assert e.line > 0
+        return
+    if prog.unsupported:
+        assert all(u.line > 0 for u in prog.unsupported)
+        return
+    grid = corpus.gentle_field(prog.inspect()["extents"]["feed"])
+    try:
+        out = prog.correct(grid, rapids=True)
+    except (RefusedError, InputError) as e:
+        assert re.search(r"line \d+|:\d+:\d+:", str(e)), e
+        return
+    src = tmp_path / ("in" + entry.path.suffix)
+    src.write_bytes(corpus.adjust(entry.path.read_bytes(), list(corpus.ADJUSTMENTS)))
+    dst = tmp_path / ("out" + entry.path.suffix)
+    dst.write_bytes(corpus.adjust(out.data, list(corpus.ADJUSTMENTS)))
+
+    def comp_motion(path):
+        canon = rs274.canonical(path, tools=table)
+        assert canon.error is None, canon.error
+        mv = rs274.moves(canon)
+        sel = [m for m, c in zip(mv, canon.comp) if c and m.kind in ("feed", "arc")]
+        assert sel
+        return _dense(sel)
+
+    before, after = comp_motion(src), comp_motion(dst)
+    want = before + grid(before)
+    tol = 0.005 if prog.units == "mm" else 0.009
+    assert cKDTree(want).query(after)[0].max() < tol
+    assert cKDTree(after).query(want)[0].max() < tol
