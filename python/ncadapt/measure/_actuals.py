@@ -35,8 +35,11 @@ from ._readers import (
 @dataclass(frozen=True)
 class Actuals:
     """Actual points of a measurement file: ``points`` (n, 3) mm, the 1-based ``lines`` (n,) of the
-    file they were read from (the element's line in a QIF file), their ``ids`` (labels; None when
-    the file has none) and the file's name (``source``)."""
+    file they were read from (the element's line in a QIF file, the line of its numbers for a
+    point of a QIF point set), their ``ids`` (labels; None when the file has none) and the file's
+    name (``source``); for a file with nominals of its own, those (``nominals``, ``nominal_lines``,
+    ``from_deviation``); what a QIF point set says of the probe (``compensated``,
+    ``probe_radii``)."""
 
     points: np.ndarray
     lines: np.ndarray
@@ -302,7 +305,9 @@ def read_qif_actuals(path, units: str | None = None) -> Actuals:
 
     for el in found:
         if local_name(el) == "MeasuredPointSet":
-            owners = whole.get(el.get("id") or "", [])
+            if not el.get("id"):
+                fail("a measured point set without its id attribute", el)
+            owners = whole.get(el.get("id"), [])
             name = owners[0].get("id") if len(owners) == 1 else el.get("id")
             for p, ln, c, r in _point_set(el, k, child, text_of, fail):
                 seq[name] = seq.get(name, 0) + 1  # a feature's points numbered on across its sets
@@ -401,9 +406,10 @@ _BOOL = {"true": 1, "1": 1, "false": 0, "0": 0}
 def _point_set(ms, k: float, child, text_of, fail):
     """The points of a QIF 3 ``MeasuredPointSet``: (xyz mm, line, compensated 1/0/-1, probe radius
     mm or NaN) for each, after checking its count, units, frame and lists."""
-    count = _count(ms, fail)
-    if count is None:
+    given = _count(ms, fail)
+    if given is None:
         fail("a measured point set without its count attribute", ms)
+    count = int(given)  # type: ignore[arg-type]
     for frame in ("CoordinateSystemId", "TranformId"):
         c = child(ms, frame)
         if c is not None:

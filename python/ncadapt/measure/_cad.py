@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ._actuals import read_actuals
+from ._actuals import Actuals, read_actuals
 from ._core import Measurements, from_arrays
 
 
@@ -60,7 +60,8 @@ def project_on_cad(
     align_dof=None,
     datums=None,
 ) -> CadProjection:
-    """:func:`against_cad` with the face and the (u, v) of each point and the part itself."""
+    """:func:`against_cad` with the face and the (u, v) of each point, the part itself and the check
+    of the measurement file's own nominal points (:attr:`CadProjection.file_nominals`)."""
     from .. import cad
     from ._align import MODES, align_datums, align_to_cad, identity, read_datums
 
@@ -166,7 +167,7 @@ def _check_file_nominals(noms, nom_lines, faces, max_distance: float, aligned: b
     return {"points": len(has), "max_distance": float(d[j]), "line": int(nom_lines[has[j]])}
 
 
-def _check_compensation(actuals, probe_radius: float) -> None:
+def _check_compensation(actuals: Actuals, probe_radius: float) -> None:
     """What a measurement file says of the probe radius (a QIF point set's ``Compensated`` and
     ``ProbeRadius``) against ``probe_radius``: tip centres need it, compensated points refuse it,
     and a stated radius must be the one given."""
@@ -221,9 +222,13 @@ def against_cad(
     all by default): the nominal point is the nearest point of the nearest
     face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
     ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
-    ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
-    the length unit of a file of actual points that declares none (mm by default; DMIS and QIF
-    files declare theirs, which must agree).
+    A file with nominal points of its own (:attr:`Actuals.nominals`) gives its actual points, and
+    each of its nominals must lie within ``max_distance`` of the faces after the alignment, else it
+    is refused at the nominal's line (another frame or another part).
+    ``probe_radius``: the points are probe-tip centres (moved back along the normal; a QIF point set
+    that says its points are compensated refuses it, one that says they are not needs it, and a
+    stated probe radius must agree); ``units``: the length unit of a file that declares none (mm by
+    default; DMIS and QIF files declare theirs, which must agree).
 
     ``align``: ``"none"`` (the measurement's frame is the CAD frame), ``"bestfit"``
     (:func:`align_to_cad` on the selected faces, over the degrees of freedom ``align_dof``) or
