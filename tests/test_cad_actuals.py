@@ -177,19 +177,34 @@ def test_dmis_actuals_refused_with_their_line(plate, tmp_path, edits, at, messag
     assert not out.exists()
 
 
-def test_dmis_with_its_own_nominals_is_refused_with_a_cad_nominal(tmp_path):
+def test_dmis_with_its_own_nominals_on_the_cad_is_read_with_a_cad_nominal(plate, tmp_path):
     a = measure.read_actuals(DATA / "plate_actuals_mm.dmo")
-    nominal = a.points - E_MM[:, None] * NORMALS
-    lines = ["DMISMN/'pairs',05.0", "UNITS/MM,ANGDEC"]
-    for label, q, m, n in zip(a.ids, nominal, a.points, NORMALS):
-        lines.append(f"F({label})=FEAT/POINT,CART,{','.join(repr(float(v)) for v in (*q, *n))}")
-        lines.append(f"FA({label})=FEAT/POINT,CART,{','.join(repr(float(v)) for v in (*m, *n))}")
-    p = tmp_path / "pairs.dmo"
-    p.write_text("\n".join(lines + ["ENDFIL"]) + "\n")
+    nominal = a.points - E_MM[:, None] * NORMALS  # on the faces
+
+    def pairs(path, nominal):
+        lines = ["DMISMN/'pairs',05.0", "UNITS/MM,ANGDEC"]
+        for label, q, m, n in zip(a.ids, nominal, a.points, NORMALS):
+            lines.append(f"F({label})=FEAT/POINT,CART,{','.join(repr(float(v)) for v in (*q, *n))}")
+            lines.append(f"FA({label})=FEAT/POINT,CART,{','.join(repr(float(v)) for v in (*m, *n))}")
+        path.write_text("\n".join(lines + ["ENDFIL"]) + "\n")
+        return path
+
+    p = pairs(tmp_path / "pairs.dmo", nominal)
     np.testing.assert_allclose(measure.read(p).deviation, E_MM, atol=1e-9)  # read without --nominal
-    with pytest.raises(InputError, match="carries its own nominal points") as e:
-        measure.read_actuals(p)
-    assert e.value.line == 3
+    got = measure.read_actuals(p)
+    np.testing.assert_allclose(got.points, a.points, atol=1e-12)
+    np.testing.assert_allclose(got.nominals, nominal, atol=1e-12)
+    assert list(got.lines) == list(range(4, 28, 2)) and list(got.nominal_lines) == list(range(3, 27, 2))
+    proj = measure.project_on_cad(p, plate)
+    np.testing.assert_allclose(proj.measurements.deviation, E_MM, atol=1e-9)
+    assert proj.file_nominals["points"] == 12 and proj.file_nominals["max_distance"] < 1e-9
+    # the nominal of T5 0.5 mm above the top face: refused at its F statement's line
+    off = nominal.copy()
+    off[4, 2] += 0.5
+    bad = pairs(tmp_path / "off.dmo", off)
+    with pytest.raises(InputError, match="nominal point is 0.5 mm off the CAD") as e:
+        measure.against_cad(bad, plate, max_distance=0.3)
+    assert e.value.line == _line(bad, "F(T5)=") == 11
     # and a file of actuals only is not read without the CAD model
     with pytest.raises(InputError, match=r"actual points only \(12 FA\(label\)\): give the CAD model"):
         measure.read(DATA / "plate_actuals_mm.dmo")
@@ -236,20 +251,40 @@ def test_qif_actuals_refused_with_their_line_and_element(plate, tmp_path, edits,
     assert not out.exists()
 
 
-def test_qif_with_its_own_nominals_is_refused_with_a_cad_nominal(tmp_path):
-    text = (DATA / "plate_actuals_mm.qif").read_text()
-    noms = "".join(
-        f'<PointFeatureNominal id="{k}"><Location>0 0 0</Location></PointFeatureNominal>' for k in range(1, 13)
-    )
-    text = text.replace("<FeatureItems n=", f"<FeatureNominals>{noms}</FeatureNominals>\n    <FeatureItems n=")
-    for k in range(12):
-        text = text.replace(
-            f'<PointFeatureItem id="{11 + k}">\n',
-            f'<PointFeatureItem id="{11 + k}">\n        <FeatureNominalId>{k + 1}</FeatureNominalId>\n',
+def test_qif_with_its_own_nominals_on_the_cad_is_read_with_a_cad_nominal(plate, tmp_path):
+    a = measure.read_actuals(DATA / "plate_actuals_mm.qif")
+    nominal = a.points - E_MM[:, None] * NORMALS  # on the faces
+
+    def pairs(path, nominal):
+        noms = "".join(
+            f'<PointFeatureNominal id="{k + 1}"><Location>{" ".join(repr(float(v)) for v in q)}</Location>'
+            f"<Normal>{' '.join(str(int(v)) for v in n)}</Normal></PointFeatureNominal>\n"
+            for k, (q, n) in enumerate(zip(nominal, NORMALS))
         )
-    p = tmp_path / "pairs.qif"
-    p.write_text(text)
-    with pytest.raises(InputError, match="carries its own nominal points"):
-        measure.read_actuals(p)
-    with pytest.raises(InputError, match=r"measured points only \(12\): give the CAD model"):
+        text = (DATA / "plate_actuals_mm.qif").read_text()
+        text = text.replace("<FeatureItems n=", f"<FeatureNominals>\n{noms}</FeatureNominals>\n    <FeatureItems n=")
+        for k in range(12):
+            text = text.replace(
+                f'<PointFeatureItem id="{11 + k}">\n',
+                f'<PointFeatureItem id="{11 + k}">\n        <FeatureNominalId>{k + 1}</FeatureNominalId>\n',
+            )
+        path.write_text(text)
+        return path
+
+    p = pairs(tmp_path / "pairs.qif", nominal)
+    np.testing.assert_allclose(measure.read(p).deviation, E_MM, atol=1e-9)  # read without --nominal
+    got = measure.read_actuals(p)
+    np.testing.assert_allclose(got.nominals, nominal, atol=1e-12)
+    assert got.ids == a.ids
+    proj = measure.project_on_cad(p, plate)
+    np.testing.assert_allclose(proj.measurements.deviation, E_MM, atol=1e-9)
+    assert proj.file_nominals["points"] == 12 and proj.file_nominals["max_distance"] < 1e-9
+    # the nominal of the 4th point 0.5 mm above the top face: refused at its PointFeatureNominal
+    off = nominal.copy()
+    off[3, 2] += 0.5
+    bad = pairs(tmp_path / "off.qif", off)
+    with pytest.raises(InputError, match="nominal point is 0.5 mm off the CAD") as e:
+        measure.against_cad(bad, plate, max_distance=0.3)
+    assert e.value.line == _line(bad, '<PointFeatureNominal id="4">')
+    with pytest.raises(InputError, match=r"measured points only \(12 measured points\): give the CAD model"):
         measure.read(DATA / "plate_actuals_mm.qif")

@@ -166,9 +166,11 @@ def _cad_options(f):
         click.option(
             "--nominal",
             type=click.Path(exists=True, dir_okay=False, path_type=Path),
-            help="The CAD model (STEP or IGES) as the nominal: MEASUREMENTS are actual points only (CSV x,y,z; DMIS "
-            "FA(label)=FEAT/POINT outputs; QIF 3 PointFeatureActual), each projected onto the nearest selected face, "
-            "the deviation along its outward normal.",
+            help="The CAD model (STEP or IGES) as the nominal: the actual points of MEASUREMENTS (CSV x,y,z; DMIS "
+            "FA(label)=FEAT/POINT outputs; QIF 3 PointFeatureActual and MeasuredPointSet) are projected onto the "
+            "nearest selected face, the deviation along its outward normal. A file with nominals of its own (CSV "
+            "x,y,z,i,j,k with mx,my,mz or dev, XYZIJK, DMIS F/FA pairs, QIF nominal points) gives its actual points "
+            "(nominal + dev x normal without them), and its nominals must lie within --max-distance of the faces.",
         ),
         click.option(
             "--face",
@@ -183,7 +185,8 @@ def _cad_options(f):
             type=FiniteRange(0, constants.COORD_MAX, min_open=True),
             default=1.0,
             show_default=True,
-            help="With --nominal: refuse points farther than this from every face, mm.",
+            help="With --nominal: refuse points (and a file's own nominal points) farther than this from every "
+            "face, mm.",
         ),
     ]
     for o in reversed(opts):
@@ -201,6 +204,22 @@ def _check_align(nominal, align, align_dof, datums) -> None:
         raise click.UsageError(
             "--align datums needs --datums FILE.toml" if datums is None else "--datums needs --align datums"
         )
+
+
+def _print_file_nominals(checked, measurements) -> None:
+    """What the measurement file's own nominal points said against the CAD (nothing for a file of
+    actual points only)."""
+    if checked is None or not checked["points"]:
+        return
+    how = (
+        "the actual points are the file's nominals + deviation x normal; "
+        if checked["from_deviation"]
+        else "the actual points are used; "
+    )
+    summary(
+        f"{measurements.name} has nominal points of its own: {how}its {checked['points']:,} nominals checked against "
+        f"the CAD, the farthest {checked['max_distance']:.4g} mm from the faces (line {checked['line']})"
+    )
 
 
 def _print_alignment(al) -> None:
@@ -261,7 +280,8 @@ def analyze(
     """Deviations of MEASUREMENTS along the normals and Moran's I: is the error systematic?
 
     MEASUREMENTS: CSV (x,y,z,i,j,k and mx,my,mz or dev), DMIS, PC-DMIS XYZIJK text or QIF 3; with
-    --nominal, actual points only (CSV x,y,z, DMIS FA points, QIF measured points).
+    --nominal, actual points (CSV x,y,z, DMIS FA points, QIF measured points and point sets) or any of
+    these paired files, whose own nominals are checked against the CAD.
     """
     from .. import measure
     from ..probing import companion_inputs
@@ -307,6 +327,7 @@ def analyze(
             "faces: "
             + "; ".join(f"{_face_said(f['id'], f['name'])} ({f['n_points']:,} points)" for f in proj.faces_used())
         )
+        _print_file_nominals(proj.file_nominals, measurements)
     _print_analysis(a)
     faces = proj.faces_used() if proj is not None else None
     tol = None
@@ -331,6 +352,8 @@ def analyze(
         extra = {"alignment": meas.alignment.as_dict()} if meas.alignment is not None else {}
         if faces is not None:
             extra["faces"] = faces
+        if proj is not None and proj.file_nominals is not None:
+            extra["file_nominals"] = proj.file_nominals
         if tol is not None:
             extra["tolerance"] = tol
         write_json(json_path, {"input": str(measurements), **extra, **a.as_dict()})
@@ -793,6 +816,7 @@ def _compensate_cad(
             # the faces keep the names the STEP file gave them
             cad.write_shape(pc.part, part_path, [(pc.placed[i], proj.name_of(i)) for i in sorted(pc.placed)])
     _print_alignment(meas.alignment)
+    _print_file_nominals(proj.file_nominals, measurements)
     _print_analysis(a)
     _print_decomposition(a, d)
     for f in pc.faces:
@@ -831,6 +855,8 @@ def _compensate_cad(
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
         "correction": _cad_correction_of(pc, nominal, prev, previous),
     }
+    if proj.file_nominals is not None:
+        payload["file_nominals"] = proj.file_nominals
     predicted = meas.deviation - pf.part_moved(pc, len(meas))
     if tolerance is not None:
         payload["tolerance"] = _tolerance_of(meas.deviation, predicted, tolerance)

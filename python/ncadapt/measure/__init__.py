@@ -17,9 +17,11 @@ Readers (:func:`read` picks one from the file's contents):
   ``mx my mz``;
 - QIF 3 results: point features with nominal ``Location``/``Normal`` and measured ``Location``.
 
-With a CAD nominal (:func:`against_cad`), actual points only (:func:`read_actuals`: CSV ``x,y,z``,
-DMIS ``FA(label)=FEAT/POINT`` outputs without nominals, QIF 3 ``PointFeatureActual`` without nominal
-locations) are projected onto the part's faces and the deviation is taken along the face's outward normal. Before that the points may
+With a CAD nominal (:func:`against_cad`), actual points (:func:`read_actuals`: CSV ``x,y,z``,
+DMIS ``FA(label)=FEAT/POINT`` outputs, QIF 3 ``PointFeatureActual`` and ``MeasuredPointSet``) are
+projected onto the part's faces and the deviation is taken along the face's outward normal; a file
+with nominals of its own gives its actual points (nominal + deviation × normal when it has no
+actual coordinates) and its nominals must lie on the CAD. Before that the points may
 be aligned to the part (:class:`Alignment`): a least-squares best fit on the faces
 (:func:`align_to_cad`) or an RPS / 3-2-1 alignment on datum points (:func:`read_datums`,
 :func:`align_datums`).

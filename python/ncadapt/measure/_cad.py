@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ._actuals import read_actuals
+from ._actuals import Actuals, read_actuals
 from ._core import Measurements, from_arrays
 
 
@@ -20,7 +20,8 @@ class CadProjection:
     face each point fell on (``face`` (n,) 1-based ids), its (u, v) parameters there (``uv`` (n, 2),
     the face's own units: mm, or rad for an angle) and the part (``shape``, its ``faces`` in
     OpenCASCADE's order; ``chosen`` the ids the points were projected onto; ``names`` the CAD file's
-    names of all its faces, None for an unnamed one)."""
+    names of all its faces, None for an unnamed one; ``file_nominals`` the check of the measurement
+    file's own nominals against the CAD, None for a file of actual points only)."""
 
     measurements: Measurements
     face: np.ndarray
@@ -30,6 +31,11 @@ class CadProjection:
     chosen: tuple[int, ...]
     nominal: str
     names: tuple[str | None, ...] = ()
+    #: the measurement file's own nominal points checked against the CAD (None when it has none):
+    #: ``points`` (how many), ``max_distance`` (mm, the largest distance to the chosen faces, after
+    #: the alignment), ``line`` (the file's line of that nominal), ``from_deviation`` (the actual
+    #: points are the file's nominal + deviation × normal)
+    file_nominals: dict | None = None
 
     def name_of(self, face_id: int) -> str | None:
         """The CAD file's name of face ``face_id`` (1-based; None when it has none)."""
@@ -54,7 +60,8 @@ def project_on_cad(
     align_dof=None,
     datums=None,
 ) -> CadProjection:
-    """:func:`against_cad` with the face and the (u, v) of each point and the part itself."""
+    """:func:`against_cad` with the face and the (u, v) of each point, the part itself and the check
+    of the measurement file's own nominal points (:attr:`CadProjection.file_nominals`)."""
     from .. import cad
     from ._align import MODES, align_datums, align_to_cad, identity, read_datums
 
@@ -66,7 +73,9 @@ def project_on_cad(
     if align == "none" and align_dof is not None:
         raise InputError("--align-dof needs --align bestfit or datums", src)
     actuals = read_actuals(path, units)
+    _check_compensation(actuals, probe_radius)
     m, lines, ids = actuals.points, actuals.lines, actuals.ids
+    noms, nom_lines = actuals.nominals, actuals.nominal_lines
     part = cad.read_part(nominal)
     shape, all_faces = part.shape, list(part.faces)
     chosen = part.select(faces)
@@ -89,11 +98,19 @@ def project_on_cad(
             keep = np.ones(len(m), bool)
             keep[[ids.index(d.label) for d in named]] = False  # type: ignore[union-attr]
             m, lines = m[keep], lines[keep]
+            if noms is not None and nom_lines is not None:
+                noms, nom_lines = noms[keep], nom_lines[keep]
             ids = tuple(i for i, k in zip(ids, keep) if k)  # type: ignore[arg-type]
             if not len(m):
                 raise InputError("every point is a datum: no point is left for the deviations", src)
     if alignment is not None:
         m = alignment.apply(m)
+        if noms is not None:
+            noms = alignment.apply(noms)
+    checked = None
+    if noms is not None and nom_lines is not None:
+        checked = _check_file_nominals(noms, nom_lines, selected, max_distance, alignment is not None, src)
+        checked["from_deviation"] = actuals.from_deviation
     best_d = np.full(len(m), np.inf)
     uv = np.full((len(m), 2), np.nan)
     face_of = np.zeros(len(m), dtype=int)
@@ -121,7 +138,71 @@ def project_on_cad(
     if alignment is None:
         alignment = identity(float(np.sqrt(np.mean(meas.deviation**2))))
     meas = dataclasses.replace(meas, alignment=alignment)
-    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal), part.names)
+    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal), part.names, checked)
+
+
+def _check_file_nominals(noms, nom_lines, faces, max_distance: float, aligned: bool, src: str) -> dict:
+    """The measurement file's own nominal points (NaN rows: none) against the CAD ``faces``: each
+    must lie within ``max_distance`` mm of them, else an :class:`InputError` at its line. Returns
+    ``points``, ``max_distance`` (mm) and ``line`` (of the farthest)."""
+    from ._align import nearest_on_faces
+
+    has = np.flatnonzero(np.isfinite(noms).all(axis=1))
+    if not len(has):
+        return {"points": 0, "max_distance": None, "line": None}
+    _, _, d, _ = nearest_on_faces(faces, noms[has])
+    far = np.flatnonzero(~(d <= max_distance))
+    after = " after the alignment" if aligned else ""
+    if len(far):
+        i = int(far[0])
+        how = "on no face of the CAD" if not np.isfinite(d[i]) else f"{d[i]:.4g} mm off the CAD"
+        raise InputError(
+            f"the file's nominal point is {how}{after}: another frame or another part? ({len(far)} of the file's "
+            f"{len(has)} nominal points are farther than --max-distance {max_distance:g} mm from the chosen faces; "
+            "with --nominal the file's own nominals must lie on the CAD)",
+            src,
+            int(nom_lines[has[i]]),
+        )
+    j = int(np.argmax(d))
+    return {"points": len(has), "max_distance": float(d[j]), "line": int(nom_lines[has[j]])}
+
+
+def _check_compensation(actuals: Actuals, probe_radius: float) -> None:
+    """What a measurement file says of the probe radius (a QIF point set's ``Compensated`` and
+    ``ProbeRadius``) against ``probe_radius``: tip centres need it, compensated points refuse it,
+    and a stated radius must be the one given."""
+    src = actuals.source
+    c = actuals.compensated
+    if c is not None:
+        centres = np.flatnonzero(c == 0)
+        if len(centres) and not probe_radius:
+            i = int(centres[0])
+            r = actuals.probe_radii[i] if actuals.probe_radii is not None else np.nan
+            said = f", ProbeRadius {r:g} mm" if np.isfinite(r) else ""
+            raise InputError(
+                f"the file says this point is a probe-tip centre, not compensated for the probe radius (Compensated "
+                f"false{said}); {len(centres)} such point(s): give --probe-radius",
+                src,
+                int(actuals.lines[i]),
+            )
+        done = np.flatnonzero(c == 1)
+        if len(done) and probe_radius:
+            raise InputError(
+                f"the file says this point is already compensated for the probe radius (Compensated true); "
+                f"--probe-radius {probe_radius:g} would take it off twice: leave --probe-radius out",
+                src,
+                int(actuals.lines[int(done[0])]),
+            )
+    r = actuals.probe_radii
+    if r is not None and probe_radius:
+        off = np.flatnonzero(np.isfinite(r) & (np.abs(r - probe_radius) > 1e-6))
+        if len(off):
+            i = int(off[0])
+            raise InputError(
+                f"the file states the probe radius {r[i]:g} mm for this point; --probe-radius {probe_radius:g} disagrees",
+                src,
+                int(actuals.lines[i]),
+            )
 
 
 def against_cad(
@@ -141,9 +222,13 @@ def against_cad(
     all by default): the nominal point is the nearest point of the nearest
     face, the normal the face's outward normal there, e = (m − p)·n. A point farther than
     ``max_distance`` mm from every face (or off every face's trimmed area) is refused with its line.
-    ``probe_radius``: the points are probe-tip centres (moved back along the normal); ``units``:
-    the length unit of a file of actual points that declares none (mm by default; DMIS and QIF
-    files declare theirs, which must agree).
+    A file with nominal points of its own (:attr:`Actuals.nominals`) gives its actual points, and
+    each of its nominals must lie within ``max_distance`` of the faces after the alignment, else it
+    is refused at the nominal's line (another frame or another part).
+    ``probe_radius``: the points are probe-tip centres (moved back along the normal; a QIF point set
+    that says its points are compensated refuses it, one that says they are not needs it, and a
+    stated probe radius must agree); ``units``: the length unit of a file that declares none (mm by
+    default; DMIS and QIF files declare theirs, which must agree).
 
     ``align``: ``"none"`` (the measurement's frame is the CAD frame), ``"bestfit"``
     (:func:`align_to_cad` on the selected faces, over the degrees of freedom ``align_dof``) or

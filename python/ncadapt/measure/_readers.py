@@ -354,10 +354,12 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
         return c.text.strip() if c is not None and c.text else None
 
     nominals, items, measured = {}, {}, {}
+    point_sets = 0
     for el in root.iter():
         if not isinstance(el.tag, str):
             continue
         name = local(el)
+        point_sets += name == "MeasuredPointSet"
         if name == "PointFeatureNominal":
             nominals[el.get("id")] = (el.sourceline, vec(el, "Location", el), vec(el, "Normal", el))
         elif name == "PointFeatureItem":
@@ -368,9 +370,11 @@ def read_qif(path, probe_radius: float = 0.0, units: str | None = None) -> Measu
                 raise InputError(f"feature item {fid} measured twice", src, el.sourceline)
             measured[fid] = (el.sourceline, vec(el, "Location", el))
     if not nominals:
+        held = [f"{len(measured)} measured points"] if measured else []
+        held += [f"{point_sets} measured point sets"] if point_sets else []
         said = (
-            f"; it holds measured points only ({len(measured)}): give the CAD model as the nominal (--nominal)"
-            if measured
+            f"; it holds measured points only ({', '.join(held)}): give the CAD model as the nominal (--nominal)"
+            if held
             else ""
         )
         raise InputError(f"no PointFeatureNominal elements{said}", src)
