@@ -474,3 +474,19 @@ def test_compensate_with_feature_datums_reports_each_datum(tmp_path):
 
 def test_the_examples_run():
     assert doctest.testmod(_fit, optionflags=doctest.NORMALIZE_WHITESPACE).failed == 0
+
+
+def test_the_sample_file_of_the_docs_reads(tmp_path):
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "freeform.md").read_text()
+    block = doc.split("```toml\n# 3-2-1 on features")[1].split("```")[0]
+    (tmp_path / "d.toml").write_text("# 3-2-1 on features" + block)
+    d = measure.read_datums(tmp_path / "d.toml")
+    assert [(x.name, x.feature, x.constraints) for x in d] == [
+        ("A", "plane", 3),
+        ("B", "line", 2),
+        ("C", "point", 1),
+        ("H", "cylinder", 2),
+    ]
+    assert [x.tolerance for x in d] == [0.02, 0.02, 0.02, 0.01] and d[3].weight == 2.0 and d[3].labels[0] == "H1"

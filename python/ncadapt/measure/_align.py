@@ -634,7 +634,9 @@ def read_datums(path) -> list[Datum]:
         weight = _positive(t.get("weight", 1.0), f"datum {name!r}: weight", fail)
         tol = _positive(t.get("tolerance", default_tol), f"datum {name!r}: tolerance (mm)", fail)
         meas = t.get("measured")
-        label, labels, measured = None, (), None
+        label: str | None = None
+        labels: tuple[str, ...] = ()
+        measured = None
         if feature == "point":
             if isinstance(meas, str) and meas.strip():
                 label = meas.strip()
@@ -646,7 +648,7 @@ def read_datums(path) -> list[Datum]:
                 fail(f"{what}, got {cut(meas)}")
             if all(isinstance(v, str) and v.strip() for v in meas):
                 labels = tuple(str(v).strip() for v in meas)
-                twice = [s for s in labels if labels.count(s) > 1]
+                twice = [i for i in labels if labels.count(i) > 1]
                 if twice:
                     fail(f"datum {name!r}: measured names point {twice[0]!r} twice")
             else:
