@@ -140,7 +140,7 @@ def _align_options(f):
             show_default=True,
             help="With --nominal: move the actual points onto the CAD frame first — none (on-machine probing: the "
             "machine frame is the part's), bestfit (least squares on the distances to the faces) or datums (RPS / "
-            "3-2-1 on the datum points of --datums).",
+            "3-2-1 on the datum points and features of --datums).",
         ),
         click.option(
             "--align-dof",
@@ -152,7 +152,7 @@ def _align_options(f):
         click.option(
             "--datums",
             type=click.Path(exists=True, dir_okay=False, path_type=Path),
-            help="With --align datums: the datum points (TOML; docs/freeform.md gives the format).",
+            help="With --align datums: the datum points and features (TOML; docs/freeform.md gives the format).",
         ),
     ]
     for o in reversed(opts):
@@ -239,8 +239,23 @@ def _print_alignment(al) -> None:
             f"alignment residual rms {al.rms:.4f} mm; standard uncertainty translation (mm) "
             f"{st[0]:.5f} {st[1]:.5f} {st[2]:.5f}, rotation (deg) {st[3]:.6f} {st[4]:.6f} {st[5]:.6f}"
         )
-    else:
+    elif al.points == len(al.dof):
         summary(f"alignment residual rms {al.rms:.2g} mm (exact: one constraint per degree of freedom)")
+    else:
+        summary(
+            f"alignment residual rms {al.rms:.4f} mm (least squares: {al.points} constraints for {len(al.dof)} "
+            f"degrees of freedom); standard uncertainty translation (mm) {st[0]:.5f} {st[1]:.5f} {st[2]:.5f}, "
+            f"rotation (deg) {st[3]:.6f} {st[4]:.6f} {st[5]:.6f}"
+        )
+    for d in al.datums:
+        fit = "" if d.feature == "point" else f", {d.points} points, form rms {d.form_rms:.4f} max {d.form_max:.4f} mm"
+        size = (
+            ""
+            if d.radius is None
+            else f", radius {d.radius:.4f} mm"
+            + ("" if d.radius_nominal is None else f" (nominal {d.radius_nominal:g})")
+        )
+        summary(f"  datum {d.name} ({d.feature}, {d.constraints}): residual {d.residual:.4f} mm{fit}{size}")
 
 
 def _tolerance_option(text):

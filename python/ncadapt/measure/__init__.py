@@ -23,8 +23,8 @@ projected onto the part's faces and the deviation is taken along the face's outw
 with nominals of its own gives its actual points (nominal + deviation × normal when it has no
 actual coordinates) and its nominals must lie on the CAD. Before that the points may
 be aligned to the part (:class:`Alignment`): a least-squares best fit on the faces
-(:func:`align_to_cad`) or an RPS / 3-2-1 alignment on datum points (:func:`read_datums`,
-:func:`align_datums`).
+(:func:`align_to_cad`) or an RPS / 3-2-1 alignment on datum points and features (:func:`read_datums`,
+:func:`align_datums`; the features fitted by least squares with :func:`fit_feature`).
 
 Nothing is guessed: NaN, zero or non-unit normals (|n| off 1 by more than 1e-3), duplicate ids and
 mismatched nominal/measured sets are errors naming the file and line.
@@ -33,9 +33,10 @@ mismatched nominal/measured sets are errors naming the file and line.
 from __future__ import annotations
 
 from ._actuals import Actuals, read_actuals, read_csv_actuals, read_dmis_actuals, read_qif_actuals
-from ._align import DOF, Alignment, Datum, align_datums, align_to_cad, read_datums, rotation_matrix
+from ._align import DOF, Alignment, Datum, DatumResidual, align_datums, align_to_cad, read_datums, rotation_matrix
 from ._cad import CadProjection, against_cad, project_on_cad
 from ._core import Measurements, from_arrays
+from ._fit import FeatureFit, fit_feature
 from ._readers import read, read_csv, read_dmis, read_qif, read_xyzijk
 
 __all__ = [
@@ -44,10 +45,13 @@ __all__ = [
     "Alignment",
     "CadProjection",
     "Datum",
+    "DatumResidual",
+    "FeatureFit",
     "Measurements",
     "against_cad",
     "align_datums",
     "align_to_cad",
+    "fit_feature",
     "from_arrays",
     "project_on_cad",
     "read",

@@ -85,18 +85,19 @@ def project_on_cad(
         alignment = align_to_cad(m, selected, dof=align_dof, probe_radius=probe_radius, source=src)
     elif align == "datums":
         rps = read_datums(datums)
-        named = [d for d in rps if d.label is not None]
+        named = [d for d in rps if d.ids]
         if named and probe_radius:
             raise InputError(
                 f"datum {named[0].name!r} names a measured point, which is a probe-tip centre with "
-                "--probe-radius; give the datum's surface coordinates as measured = [x, y, z]",
+                "--probe-radius; give the datum's surface coordinates as measured = [x, y, z] (a feature: "
+                "a list of them)",
                 str(datums),
                 named[0].line,
             )
         alignment = align_datums(rps, points=m, ids=ids, dof=align_dof, source=str(datums))
         if named:
             keep = np.ones(len(m), bool)
-            keep[[ids.index(d.label) for d in named]] = False  # type: ignore[union-attr]
+            keep[[ids.index(i) for d in named for i in d.ids]] = False  # type: ignore[union-attr]
             m, lines = m[keep], lines[keep]
             if noms is not None and nom_lines is not None:
                 noms, nom_lines = noms[keep], nom_lines[keep]
