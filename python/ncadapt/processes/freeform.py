@@ -477,7 +477,12 @@ class FaceCompensation:
     error there (inside the measured hull: interpolated linearly; outside: carried by ``border``);
     ``measured_region``, ``in_face`` (nu, nv) bool; ``compensated`` the B-spline surface through
     P − dF·n (the face's (u, v)); ``rebuild_error`` mm its largest distance from P − dF·n at the
-    grid cells' centres, dF there the bicubic spline through ``df_grid`` (:meth:`df`)."""
+    grid cells' centres, dF there the bicubic spline through ``df_grid`` (:meth:`df`).
+
+    A face of a face set (``face_set``, :class:`FaceSet`): ``analysis`` is that of its points in the
+    set's (u, v), ``decomposition`` the set's at its points, ``df_grid`` the set's field at the
+    nodes, ``measured_region`` the nodes inside the set's measured hull; ``coords`` and ``scale``
+    stay the face's own."""
 
     face: int
     points: np.ndarray  # indices of the face's measurements
