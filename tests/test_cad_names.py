@@ -140,7 +140,7 @@ def test_analyze_and_compensate_choose_a_face_by_name(named_block, tmp_path):
     )
     assert r.exit_code == 0, r.output
     j = json.loads(out.read_text())
-    assert j["faces"] == [{"id": top, "name": "top", "n_points": len(e), "face_set": None}]
+    assert j["faces"] == [{"id": top, "name": "top", "n_points": len(e)}]
     assert j["deviation"]["mean"] == pytest.approx(e.mean(), abs=1e-9)
     assert f"face {top} 'top'" in r.output
     out = tmp_path / "c.json"

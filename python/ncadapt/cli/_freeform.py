@@ -359,8 +359,9 @@ def analyze(
     faces = proj.faces_used() if proj is not None else None
     if proj is not None:
         _face_sets_said(sets, proj)
-        for f in faces or []:
-            f["face_set"] = proj.face_set_of(f["id"])
+        if proj.sets:
+            for f in faces or []:
+                f["face_set"] = proj.face_set_of(f["id"])
     tol = None
     if tolerance is not None:
         import numpy as np
@@ -886,7 +887,10 @@ def _compensate_cad(
         # the faces used: their ids, and their names from the STEP file (None where unnamed)
         "faces": list(pc.ids),
         "face_names": [proj.name_of(i) for i in pc.ids],
-        "by_face": [{"face": f.face, "name": proj.name_of(f.face)} | f.as_dict() for f in pc.faces],
+        "by_face": [
+            {"face": f.face, "name": proj.name_of(f.face)} | f.as_dict() | ({"face_set": f.face_set} if pc.sets else {})
+            for f in pc.faces
+        ],
         "face_sets": _face_sets_json(pc.sets, proj),
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
         "correction": _cad_correction_of(pc, nominal, prev, previous),

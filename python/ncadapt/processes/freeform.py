@@ -529,7 +529,6 @@ class FaceCompensation:
                 "max_abs_df": float(np.abs(self.df_grid[strip]).max()) if strip.any() else 0.0,
             },
             "rebuild_error": self.rebuild_error,
-            "face_set": self.face_set,
         }
 
 
