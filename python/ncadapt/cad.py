@@ -762,3 +762,20 @@ def signed_distances(face, points, normals) -> tuple[np.ndarray, np.ndarray]:
     along = np.einsum("ij,ij->i", d, nn)
     across = np.linalg.norm(d - along[:, None] * nn, axis=1)
     return along, across
+
+
+def line_crossings(shape, points, direction, reach: float) -> list[np.ndarray]:
+    """Where the lines P + t·d through ``points`` (n, 3) along the unit ``direction`` (3,) cross the
+    faces of ``shape`` within |t| ≤ ``reach`` mm: for each point, the parameters t (mm) of its
+    crossings (OpenCASCADE's ``IntCurvesFace_ShapeIntersector``)."""
+    from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
+    from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
+
+    it = IntCurvesFace_ShapeIntersector()
+    it.Load(shape, 1e-9)
+    d = gp_Dir(*map(float, direction))
+    out = []
+    for p in np.asarray(points, float).reshape(-1, 3):
+        it.Perform(gp_Lin(gp_Pnt(*map(float, p)), d), -float(reach), float(reach))
+        out.append(np.array([it.WParameter(i) for i in range(1, it.NbPnt() + 1)]))
+    return out

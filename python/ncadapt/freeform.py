@@ -48,6 +48,7 @@ def run(
     output=None,
     tool_radius: float | None = None,
     faces: list[int | str] | None = None,
+    face_sets: list[list[int | str]] | None = None,
     max_distance: float = 1.0,
     align: str = "none",
     align_dof=None,
@@ -79,7 +80,8 @@ def run(
     nominal : path, optional
         The CAD model (STEP/IGES): each face compensated in its own (u, v); ``faces`` (1-based ids
         or the STEP file's face names), ``max_distance`` mm, ``align`` ("none", "bestfit", "datums"),
-        ``align_dof``, ``datums`` as :func:`ncadapt.measure.project_on_cad`. Without it the nominal is fitted through the measured
+        ``align_dof``, ``datums``, ``face_sets`` (faces decomposed together in one (u, v),
+        :func:`ncadapt.processes.freeform.compensate_cad`) as :func:`ncadapt.measure.project_on_cad`. Without it the nominal is fitted through the measured
         nominal points over the frame of their normals (the frame is chosen here).
     program : path, optional
         An NC program corrected by −dF·n into ``output`` (required with it), the tool a ball end of
@@ -121,6 +123,7 @@ def run(
             align=align,
             align_dof=align_dof,
             datums=datums,
+            face_sets=face_sets,
         )
         meas = proj.measurements
         if prev is not None:
@@ -151,8 +154,8 @@ def run(
             cad.write_shape(comp.part, part)
             files["part"] = Path(part)
     else:
-        if part is not None or faces or align != "none" or datums is not None or align_dof is not None:
-            raise InputError("part, faces, align, align_dof and datums need a CAD nominal")
+        if part is not None or faces or face_sets or align != "none" or datums is not None or align_dof is not None:
+            raise InputError("part, faces, face_sets, align, align_dof and datums need a CAD nominal")
         meas = measure.read(measurements, probe_radius=probe_radius, units=units)
         frame = pf.frame_of(meas)
         if prev is not None:

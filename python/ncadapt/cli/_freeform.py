@@ -181,6 +181,17 @@ def _cad_options(f):
             "(ADVANCED_FACE name); repeat for several; default: all.",
         ),
         click.option(
+            "--face-set",
+            "face_sets",
+            metavar="IDS",
+            multiple=True,
+            callback=_face_set_value,
+            help="Faces of --nominal (ids or names, comma-separated) analysed and decomposed together in one (u, v), "
+            "that of the plane their normals fit, so the correction is continuous across their common edges "
+            "(refused if the set is not a height field over it); repeat for several sets; faces in no set keep "
+            "their own (u, v).",
+        ),
+        click.option(
             "--max-distance",
             type=FiniteRange(0, constants.COORD_MAX, min_open=True),
             default=1.0,
@@ -192,6 +203,37 @@ def _cad_options(f):
     for o in reversed(opts):
         f = o(f)
     return f
+
+
+def _face_set_value(ctx, param, value):  # noqa: ARG001 - a click callback's signature
+    """A click callback: each ``--face-set`` as a list of face ids or names (comma-separated)."""
+    out = []
+    for text in value:
+        ids = [w.strip() for w in text.split(",")]
+        if not all(ids):
+            raise click.BadParameter(f"expected face ids or names separated by commas (1,2), got {text!r}")
+        out.append(ids)
+    return tuple(out)
+
+
+def _face_sets_said(sets, proj) -> None:
+    """One summary line per face set."""
+    for fs in sets:
+        a = fs.analysis
+        line = (
+            f"face set {', '.join(_face_said(f, proj.name_of(f)).removeprefix('face ') for f in fs.faces)}: {len(fs.points):,} points in "
+            f"one (u, v) across w ({', '.join(f'{c:+.3f}' for c in fs.frame.axes[2])}); Moran's I {a.moran.I:.4f}, "
+            f"systematic: {'yes' if a.systematic else 'no'}"
+        )
+        if fs.decomposition is not None:
+            sd = fs.decomposition.as_dict()
+            line += f"; systematic rms {sd['systematic']['rms']:.4f} mm, random std {sd['random']['std']:.4f} mm"
+        summary(line)
+
+
+def _face_sets_json(sets, proj) -> list[dict]:
+    """The ``face_sets`` JSON list: each set's faces, their names, its figures."""
+    return [{"faces": list(fs.faces), "names": [proj.name_of(f) for f in fs.faces]} | fs.as_dict() for fs in sets]
 
 
 def _check_align(nominal, align, align_dof, datums) -> None:
@@ -277,6 +319,7 @@ def analyze(
     measurements,
     nominal,
     face_ids,
+    face_sets,
     max_distance,
     align,
     align_dof,
@@ -308,7 +351,10 @@ def analyze(
     )
     if face_ids and nominal is None:
         raise click.UsageError("--face needs --nominal")
+    if face_sets and nominal is None:
+        raise click.UsageError("--face-set needs --nominal")
     _check_align(nominal, align, align_dof, datums)
+    sets = []
     with progress() as say:
         say(f"reading {measurements}")
         if nominal is not None:
@@ -323,8 +369,10 @@ def analyze(
                 align=align,
                 align_dof=align_dof,
                 datums=datums,
+                face_sets=[list(ids) for ids in face_sets] or None,
             )
             meas = proj.measurements
+            sets = pf.analyze_face_sets(proj, **_moran_kw(weights, power, threshold, neighbors, alpha))
         else:
             proj = None
             meas = measure.read(measurements, probe_radius=probe_radius, units=units)
@@ -345,6 +393,11 @@ def analyze(
         _print_file_nominals(proj.file_nominals, measurements)
     _print_analysis(a)
     faces = proj.faces_used() if proj is not None else None
+    if proj is not None:
+        _face_sets_said(sets, proj)
+        if proj.sets:
+            for f in faces or []:
+                f["face_set"] = proj.face_set_of(f["id"])
     tol = None
     if tolerance is not None:
         import numpy as np
@@ -367,6 +420,7 @@ def analyze(
         extra = {"alignment": meas.alignment.as_dict()} if meas.alignment is not None else {}
         if faces is not None:
             extra["faces"] = faces
+            extra["face_sets"] = _face_sets_json(sets, proj)
         if proj is not None and proj.file_nominals is not None:
             extra["file_nominals"] = proj.file_nominals
         if tol is not None:
@@ -522,6 +576,7 @@ def compensate(
     points_out,
     nominal,
     face_ids,
+    face_sets,
     max_distance,
     part_path,
     tolerance,
@@ -571,7 +626,7 @@ def compensate(
         },
     )
     if nominal is None:
-        for name, given in (("--face", face_ids), ("--part", part_path)):
+        for name, given in (("--face", face_ids), ("--face-set", face_sets), ("--part", part_path)):
             if given:
                 raise click.UsageError(f"{name} needs --nominal")
     else:
@@ -606,6 +661,7 @@ def compensate(
             measurements,
             nominal,
             list(face_ids) or None,
+            [list(ids) for ids in face_sets] or None,
             max_distance,
             dict(method=method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, border=border),
             kw,
@@ -766,6 +822,7 @@ def _compensate_cad(
     measurements,
     nominal,
     face_ids,
+    face_sets,
     max_distance,
     options,
     kw,
@@ -787,7 +844,8 @@ def _compensate_cad(
     tolerance=None,
     section_lines=(),
 ):
-    """``compensate --nominal``: each measured face compensated in its own (u, v) and put in the part."""
+    """``compensate --nominal``: each measured face compensated in its own (u, v), or in its face
+    set's, and put in the part."""
     from .. import cad, measure
     from .. import nc as ncmod
     from ..processes import freeform as pf
@@ -802,6 +860,7 @@ def _compensate_cad(
             max_distance=max_distance,
             probe_radius=probe_radius,
             units=units,
+            face_sets=face_sets,
             **align,
         )
         meas = proj.measurements
@@ -839,8 +898,9 @@ def _compensate_cad(
         summary(
             f"{_face_said(f.face, proj.name_of(f.face))}: {fd['n_points']:,} points, systematic rms {fd['systematic']['rms']:.4f} mm, random std "
             f"{fd['random']['std']:.4f} mm; measured hull {fd['cover']:.0%} of the face, the rest ({_border_said(f)}) "
-            f"up to {fd['border']['max_abs_df']:.4f} mm"
+            f"up to {fd['border']['max_abs_df']:.4f} mm" + ("" if f.face_set is None else " (in its face set's (u, v))")
         )
+    _face_sets_said(pc.sets, proj)
     summary(
         f"part: {pc.summary['faces']} faces, {len(pc.faces)} compensated, valid (BRepCheck); the compensated faces lie "
         f"-dF from the nominal within {pc.check_error * 1000:.3f} µm at {pc.check_points} points; widest edge gap "
@@ -866,7 +926,11 @@ def _compensate_cad(
         # the faces used: their ids, and their names from the STEP file (None where unnamed)
         "faces": list(pc.ids),
         "face_names": [proj.name_of(i) for i in pc.ids],
-        "by_face": [{"face": f.face, "name": proj.name_of(f.face)} | f.as_dict() for f in pc.faces],
+        "by_face": [
+            {"face": f.face, "name": proj.name_of(f.face)} | f.as_dict() | ({"face_set": f.face_set} if pc.sets else {})
+            for f in pc.faces
+        ],
+        "face_sets": _face_sets_json(pc.sets, proj),
         "part": {"output": str(part_path) if part_path else None, **pc.as_dict()},
         "correction": _cad_correction_of(pc, nominal, prev, previous),
     }

@@ -21,7 +21,8 @@ class CadProjection:
     the face's own units: mm, or rad for an angle) and the part (``shape``, its ``faces`` in
     OpenCASCADE's order; ``chosen`` the ids the points were projected onto; ``names`` the CAD file's
     names of all its faces, None for an unnamed one; ``file_nominals`` the check of the measurement
-    file's own nominals against the CAD, None for a file of actual points only)."""
+    file's own nominals against the CAD, None for a file of actual points only; ``sets`` the face
+    sets, each the ids of faces analysed and decomposed together in one (u, v), no face in two)."""
 
     measurements: Measurements
     face: np.ndarray
@@ -36,6 +37,11 @@ class CadProjection:
     #: the alignment), ``line`` (the file's line of that nominal), ``from_deviation`` (the actual
     #: points are the file's nominal + deviation × normal)
     file_nominals: dict | None = None
+    sets: tuple[tuple[int, ...], ...] = ()
+
+    def face_set_of(self, face_id: int) -> int | None:
+        """The index in ``sets`` of the set face ``face_id`` belongs to (None for a face on its own)."""
+        return next((k for k, ids in enumerate(self.sets) if face_id in ids), None)
 
     def name_of(self, face_id: int) -> str | None:
         """The CAD file's name of face ``face_id`` (1-based; None when it has none)."""
@@ -59,9 +65,14 @@ def project_on_cad(
     align: str = "none",
     align_dof=None,
     datums=None,
+    face_sets: list[list[int | str]] | None = None,
 ) -> CadProjection:
     """:func:`against_cad` with the face and the (u, v) of each point, the part itself and the check
-    of the measurement file's own nominal points (:attr:`CadProjection.file_nominals`)."""
+    of the measurement file's own nominal points (:attr:`CadProjection.file_nominals`).
+
+    ``face_sets``: lists of faces (ids or names, as ``faces``) each analysed and decomposed together
+    in one (u, v) (:func:`ncadapt.processes.freeform.compensate_cad`); their faces are projected onto
+    besides ``faces``. Refused: an empty set, a face in two sets."""
     from .. import cad
     from ._align import MODES, align_datums, align_to_cad, identity, read_datums
 
@@ -79,6 +90,9 @@ def project_on_cad(
     part = cad.read_part(nominal)
     shape, all_faces = part.shape, list(part.faces)
     chosen = part.select(faces)
+    sets = _face_sets(part, face_sets or [])
+    if faces:
+        chosen += [f for ids in sets for f in ids if f not in chosen]
     selected = [all_faces[f - 1] for f in chosen]
     alignment = None
     if align == "bestfit":
@@ -139,7 +153,9 @@ def project_on_cad(
     if alignment is None:
         alignment = identity(float(np.sqrt(np.mean(meas.deviation**2))))
     meas = dataclasses.replace(meas, alignment=alignment)
-    return CadProjection(meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal), part.names, checked)
+    return CadProjection(
+        meas, face_of, uv, shape, tuple(all_faces), tuple(chosen), str(nominal), part.names, checked, sets
+    )
 
 
 def _check_file_nominals(noms, nom_lines, faces, max_distance: float, aligned: bool, src: str) -> dict:
@@ -204,6 +220,25 @@ def _check_compensation(actuals: Actuals, probe_radius: float) -> None:
                 src,
                 int(actuals.lines[i]),
             )
+
+
+def _face_sets(part, face_sets) -> tuple[tuple[int, ...], ...]:
+    """The face sets as ids (:meth:`ncadapt.cad.Part.select`), a face in at most one."""
+    out: list[tuple[int, ...]] = []
+    for wanted in face_sets:
+        if not wanted:
+            raise InputError("--face-set: an empty set of faces", part.source)
+        ids = tuple(part.select(list(wanted), "--face-set"))
+        for f in ids:
+            other = next((o for o in out if f in o), None)
+            if other is not None:
+                raise InputError(
+                    f"--face-set: face {f} is in two sets ({','.join(map(str, other))} and "
+                    f"{','.join(map(str, ids))}); a face is decomposed in one (u, v)",
+                    part.source,
+                )
+        out.append(ids)
+    return tuple(out)
 
 
 def against_cad(

@@ -477,7 +477,12 @@ class FaceCompensation:
     error there (inside the measured hull: interpolated linearly; outside: carried by ``border``);
     ``measured_region``, ``in_face`` (nu, nv) bool; ``compensated`` the B-spline surface through
     P − dF·n (the face's (u, v)); ``rebuild_error`` mm its largest distance from P − dF·n at the
-    grid cells' centres, dF there the bicubic spline through ``df_grid`` (:meth:`df`)."""
+    grid cells' centres, dF there the bicubic spline through ``df_grid`` (:meth:`df`).
+
+    A face of a face set (``face_set``, :class:`FaceSet`): ``analysis`` is that of its points in the
+    set's (u, v), ``decomposition`` the set's at its points, ``df_grid`` the set's field at the
+    nodes, ``measured_region`` the nodes inside the set's measured hull; ``coords`` and ``scale``
+    stay the face's own."""
 
     face: int
     points: np.ndarray  # indices of the face's measurements
@@ -495,6 +500,7 @@ class FaceCompensation:
     rebuild_error: float
     border: str
     gain: float = 1.0  # rounds: this round's effective gain on the face's systematic part
+    face_set: int | None = None  # the index of the face's set in ``PartCompensation.sets``, None on its own
 
     def df(self, u, v) -> np.ndarray:
         """dF (mm) at face parameters (u, v): the bicubic spline through ``df_grid``."""
@@ -543,6 +549,7 @@ class PartCompensation:
     check_error: float
     check_points: int
     nominal_faces: dict  # {face id: the nominal face}
+    sets: tuple[FaceSet, ...] = ()  # the face sets, decomposed each in one (u, v)
 
     @property
     def ids(self) -> list[int]:
@@ -600,25 +607,34 @@ def compensate_cad(
     **moran_options,
 ) -> PartCompensation:
     """Compensate the faces of a CAD part that the measured points fell on
-    (:func:`ncadapt.measure.project_on_cad`), each in its own (u, v), and put them in the part.
+    (:func:`ncadapt.measure.project_on_cad`), each in its own (u, v) or with its face set in the
+    set's, and put them in the part.
 
-    For each face: the points' (u, v) scaled to mm (:func:`face_scale`) carry the analysis and the
-    decomposition (:func:`analyze`, :func:`decompose`); the systematic part is interpolated onto a
-    grid over the face's whole (u, v) box and carried beyond the measured hull by ``border``
-    (:func:`~ncadapt.surfaces.extrapolate_border`: dF is extrapolated, never the nominal, which is
-    the face's own surface); the compensated face P_c = P − dF·n is a bicubic B-spline through the
-    grid, bounded by the face's own trimming curves, and replaces the face in the part
-    (:func:`ncadapt.cad.replace_faces`).
+    For each face on its own: the points' (u, v) scaled to mm (:func:`face_scale`) carry the
+    analysis and the decomposition (:func:`analyze`, :func:`decompose`); the systematic part is
+    interpolated onto a grid over the face's whole (u, v) box and carried beyond the measured hull
+    by ``border`` (:func:`~ncadapt.surfaces.extrapolate_border`: dF is extrapolated, never the
+    nominal, which is the face's own surface); the compensated face P_c = P − dF·n is a bicubic
+    B-spline through the grid, bounded by the face's own trimming curves, and replaces the face in
+    the part (:func:`ncadapt.cad.replace_faces`).
+
+    For a face set (``proj.sets``): the points of all its faces are analysed and decomposed together
+    in the (u, v) of the plane the set's normals fit (:func:`face_set_frame`; refused when the set
+    is not a height field over it); each face's grid node P takes dF from the set's field at P's
+    place in that plane (inside the set's measured hull: interpolated linearly; outside: carried by
+    ``border`` over a grid of the plane), so dF is one function of the place across the set's common
+    edges. Each face is then rebuilt and checked as a face on its own; its own entry
+    (:class:`FaceCompensation`) holds the analysis of its points and the set's decomposition there.
 
     Refused (:class:`~ncadapt.InputError`, nothing made): a chosen face without points, a face with
-    fewer than :data:`MIN_POINTS` points or whose points' hull covers less than :data:`MIN_COVER` of
-    it, a face that cannot be rebuilt as one B-spline (a seam or a pole) or whose B-spline misses
-    P − dF·n by more than :data:`REBUILD_TOL`, a part not valid after the replacement, or a
-    compensated face off −dF by more than :data:`CHECK_TOL` in the part.
+    fewer than :data:`MIN_POINTS` points or whose points' hull (its set's, for a face in a set)
+    covers less than :data:`MIN_COVER` of it, a face that cannot be rebuilt as one B-spline (a seam
+    or a pole) or whose B-spline misses P − dF·n by more than :data:`REBUILD_TOL`, a part not valid
+    after the replacement, or a compensated face off −dF by more than :data:`CHECK_TOL` in the part.
 
     A later round (:mod:`ncadapt.processes.rounds`): ``previous`` {face id: its previous dF, a
     callable of the face's (u, v) returning mm}; on each face dF = previous + ``gain`` × w × the
-    systematic part, w the face's :func:`~ncadapt.processes.rounds.damping`.
+    systematic part, w the face's (or its set's) :func:`~ncadapt.processes.rounds.damping`.
     """
     from .. import cad
 
@@ -629,35 +645,61 @@ def compensate_cad(
         empty = [f for f in proj.chosen if f not in used]
         if empty:
             raise InputError(f"face {empty[0]}: no measured point is nearest to it", src)
+    for fid in used:
+        n = int((proj.face == fid).sum())
+        if n < MIN_POINTS:
+            raise InputError(
+                f"face {fid}: {n} measured point(s) fell on it, the decomposition needs at least "
+                f"{MIN_POINTS}; measure it or leave it out with --face",
+                src,
+            )
+        why = cad.face_rebuild_problem(proj.faces[fid - 1])
+        if why:
+            raise InputError(f"face {fid} cannot be rebuilt as a compensated B-spline: {why}", src)
+    split = dict(method=method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, alpha=alpha, **moran_options)
+    sets, fields = [], []
+    for ids in proj.sets:
+        frame, idx, xy = face_set_points(proj, ids)
+        sub = _subset(meas, idx)
+        a = analyze(sub, coords=xy, alpha=alpha, **moran_options)
+        d = decompose(sub, coords=xy, **split)  # type: ignore[arg-type]
+        g = 1.0
+        if previous is not None:
+            from .rounds import damping
+
+            g = gain * damping(method, xy, d.systematic, d.parameters)
+        fs = FaceSet(tuple(ids), frame, idx, xy, a, d, g)
+        sets.append(fs)
+        fields.append(_set_field(fs, [proj.faces[f - 1] for f in ids], border, src))
     out = []
     for fid in used:
         face = proj.faces[fid - 1]
         idx = np.flatnonzero(proj.face == fid)
-        if len(idx) < MIN_POINTS:
-            raise InputError(
-                f"face {fid}: {len(idx)} measured point(s) fell on it, the decomposition needs at least "
-                f"{MIN_POINTS}; measure it or leave it out with --face",
-                src,
-            )
-        why = cad.face_rebuild_problem(face)
-        if why:
-            raise InputError(f"face {fid} cannot be rebuilt as a compensated B-spline: {why}", src)
         scale = face_scale(face)
-        xy = proj.uv[idx] * scale
+        own = proj.uv[idx] * scale
         sub = _subset(meas, idx)
-        require_area(xy, f"{meas.source} (face {fid})")
-        a = analyze(sub, coords=xy, alpha=alpha, **moran_options)
-        d = decompose(
-            sub, method, sigma_c=sigma_c, sigma_s=sigma_s, p=p, auto=auto, coords=xy, alpha=alpha, **moran_options
-        )
-        base, g = None, 1.0
-        if previous is not None:
-            from .rounds import damping
+        k = proj.face_set_of(fid)
+        if k is None:
+            require_area(own, f"{meas.source} (face {fid})")
+            a = analyze(sub, coords=own, alpha=alpha, **moran_options)
+            d = decompose(sub, coords=own, **split)  # type: ignore[arg-type]
+            field, h = _own_field(own, d.systematic, scale, border), spacing(own)
+            g = 1.0
+            if previous is not None:
+                from .rounds import damping
 
-            base = previous.get(fid)
-            g = gain * damping(method, xy, d.systematic, d.parameters)
-            base = base or (lambda U, V: np.zeros(np.shape(U)))
-        out.append(_face_grid(fid, face, idx, scale, xy, a, d, border, src, base, g))
+                g = gain * damping(method, own, d.systematic, d.parameters)
+        else:
+            fs = sets[k]
+            at = np.searchsorted(fs.points, idx)  # the face's points among the set's (both in order)
+            xy = fs.coords[at]
+            a = analyze(sub, coords=xy, alpha=alpha, **moran_options)
+            d = _restricted(fs.decomposition, at, xy, alpha=alpha, **moran_options)  # type: ignore[arg-type]
+            field, h, g = fields[k], spacing(fs.coords), fs.gain
+        base = None
+        if previous is not None:
+            base = previous.get(fid) or (lambda U, V: np.zeros(np.shape(U)))
+        out.append(_face_grid(fid, face, idx, scale, own, a, d, field, h, border, src, base, g, k))
     new = {f.face: cad.face_on_surface(proj.faces[f.face - 1], f.compensated) for f in out}
     before = cad.part_summary(proj.shape)
     tol = 2.0 * max(float(np.abs(f.df_grid).max()) for f in out) + 1e-3
@@ -685,7 +727,9 @@ def compensate_cad(
             )
         worst, count = max(worst, off), count + k
     nominal = {f.face: proj.faces[f.face - 1] for f in out}
-    return PartCompensation(tuple(out), part, placed, after, cad.max_tolerance(part), worst, count, nominal)
+    return PartCompensation(
+        tuple(out), part, placed, after, cad.max_tolerance(part), worst, count, nominal, tuple(sets)
+    )
 
 
 def _subset(meas: Measurements, idx) -> Measurements:
@@ -702,14 +746,38 @@ def _subset(meas: Measurements, idx) -> Measurements:
     )
 
 
-def _face_grid(fid, face, idx, scale, xy, a, d, border, src, base=None, gain=1.0) -> FaceCompensation:
-    """The compensation grid of one face, refined until its B-spline reproduces P − dF·n."""
+def _restricted(d: Decomposition, at, xy, **moran_options) -> Decomposition:
+    """A set's decomposition at some of its points (``at``), its random part checked over ``xy``."""
+    r = d.random[at]
+    return Decomposition(d.systematic[at], r, d.method, d.parameters, stats.noise(xy, r, **moran_options), d.auto)
+
+
+def _own_field(xy, systematic, scale, border):
+    """dF of a face on its own: (measured, carried) callables of its grid (see :func:`_face_grid`)."""
+
+    def measured(U, V, P):  # noqa: ARG001 - the face's own (u, v) place the nodes
+        return _linear_onto(xy, systematic, U * scale[0], V * scale[1])
+
+    def carried(u, v, inside, known, P):  # noqa: ARG001
+        return extrapolate_border(u, v, np.where(known, inside, 0.0), known, mode=border)
+
+    return measured, carried
+
+
+def _face_grid(
+    fid, face, idx, scale, coords, a, d, field, h, border, src, base=None, gain=1.0, face_set=None
+) -> FaceCompensation:
+    """The compensation grid of one face, refined until its B-spline reproduces P − dF·n.
+
+    ``field`` (measured, carried): ``measured(U, V, P)`` the systematic part at the grid nodes (face
+    parameters U, V; points P (nu, nv, 3)), NaN outside the measured hull; ``carried(u, v, inside,
+    known, P)`` dF over the whole grid, ``inside`` where ``known``. ``h`` mm: the points' spacing."""
     from scipy.interpolate import RectBivariateSpline
 
     from .. import cad
 
+    measured, carried = field
     u0, u1, v0, v1 = cad.face_uv_bounds(face)
-    h = spacing(xy)
     nu, nv = (
         int(np.clip(round(span / h) + 1, MIN_FACE_NODES, MAX_FACE_NODES))
         for span in ((u1 - u0) * scale[0], (v1 - v0) * scale[1])
@@ -721,17 +789,18 @@ def _face_grid(fid, face, idx, scale, xy, a, d, border, src, base=None, gain=1.0
         P, N = P.reshape(nu, nv, 3), N.reshape(nu, nv, 3)
         if not np.isfinite(N).all():
             raise InputError(f"face {fid} has points without a normal (a singular point of its surface)", src)
-        inside = _linear_onto(xy, d.systematic, U * scale[0], V * scale[1])
+        inside = measured(U, V, P)
         known = np.isfinite(inside)
         in_face = cad.face_inside(face, U, V, edges=True).reshape(nu, nv)
         cover = float((known & in_face).sum() / max(in_face.sum(), 1))
         if cover < MIN_COVER or known.sum() < 16:
+            hull = "their hull in its (u, v)" if face_set is None else "the hull of its face set's points"
             raise InputError(
-                f"face {fid}: the measured points cover {cover:.0%} of it (their hull in its (u, v)); at least "
+                f"face {fid}: the measured points cover {cover:.0%} of it ({hull}); at least "
                 f"{MIN_COVER:.0%} is needed to compensate it",
                 src,
             )
-        df = extrapolate_border(u, v, np.where(known, inside, 0.0), known, mode=border)
+        df = carried(u, v, inside, known, P)
         if base is not None:
             df = base(U, V) + gain * df
         surf = Surface(u, v, P - df[..., None] * N)
@@ -749,7 +818,193 @@ def _face_grid(fid, face, idx, scale, xy, a, d, border, src, base=None, gain=1.0
                 src,
             )
         nu, nv = min(2 * nu - 1, MAX_FACE_NODES), min(2 * nv - 1, MAX_FACE_NODES)
-    return FaceCompensation(fid, idx, xy, scale, a, d, u, v, df, known, in_face, N, surf, err, border, gain)
+    return FaceCompensation(
+        fid, idx, coords, scale, a, d, u, v, df, known, in_face, N, surf, err, border, gain, face_set
+    )
+
+
+# ------------------------------------------------------------------------ face sets
+# a face of a set may turn its normal this far from the direction the set is seen along, deg: the
+# set's plane then shortens lengths on it to no less than cos 45° ≈ 0.71 of theirs along the face (a
+# filter's σ_c reaches at most √2 as far along the face as across the plane)
+SET_MAX_TILT_DEG = 45.0
+# cells a side of the grid each face of a set is sampled on (cell centres) for the set's viewing
+# direction (the area-weighted mean normal) and the folding check
+SET_SAMPLES = 24
+# a line along the viewing direction through a sample of the set that crosses the set's faces again
+# farther than this from the sample, mm, shows the set folding over its plane
+FOLD_TOL = 1e-3
+# most nodes of the grid over a set's plane that carries dF beyond the set's measured hull
+MAX_SET_GRID_NODES = 1_000_000
+
+
+@dataclass(frozen=True)
+class FaceSet:
+    """Faces of a CAD part analysed and decomposed together in one (u, v): that of the plane their
+    normals fit (``frame``, :func:`face_set_frame`).
+
+    ``faces`` their 1-based ids; ``points`` (k,) the indices of their measurements (in order);
+    ``coords`` (k, 2) mm those points' (u, v) in ``frame`` (the nominal points projected on its
+    plane); ``analysis`` and ``decomposition`` (None from :func:`analyze_face_sets`) over those
+    coordinates; ``gain`` this round's effective gain on the set's systematic part (rounds)."""
+
+    faces: tuple[int, ...]
+    frame: Frame
+    points: np.ndarray
+    coords: np.ndarray
+    analysis: Analysis
+    decomposition: Decomposition | None = None
+    gain: float = 1.0
+
+    def as_dict(self) -> dict:
+        d = {
+            "faces": list(self.faces),
+            "n_points": len(self.points),
+            "frame": self.frame.axes.tolist(),
+            **self.analysis.as_dict(),
+        }
+        if self.decomposition is not None:
+            d |= self.decomposition.as_dict()
+        return d
+
+
+def _set_said(ids) -> str:
+    return "face set " + ",".join(map(str, ids))
+
+
+def face_set_frame(faces: dict, source: str | None = None) -> Frame:
+    """The frame whose (u, v) a face set ({face id: face}) is decomposed in: w the area-weighted
+    mean of the faces' outward normals (sampled at the centres of a :data:`SET_SAMPLES`² grid of each
+    face's (u, v) box, inside the face), or the machine axis nearest to it within
+    :data:`~ncadapt.surfaces.AXIS_SNAP_DEG` (:class:`~ncadapt.surfaces.Frame`).
+
+    Refused (:class:`~ncadapt.InputError` naming the faces): the normals cancel out; a normal of a
+    face more than :data:`SET_MAX_TILT_DEG` from w; the set folding over the plane — a line along
+    w through a sample crosses the set's faces again more than :data:`FOLD_TOL` from it (two
+    places of the set over one place of the plane)."""
+    from .. import cad
+    from ..surfaces import AXIS_SNAP_DEG
+
+    said = _set_said(list(faces))
+    pts, nrm, wts, owner = [], [], [], []
+    for fid, face in faces.items():
+        u0, u1, v0, v1 = cad.face_uv_bounds(face)
+        u, v = np.linspace(u0, u1, SET_SAMPLES + 1), np.linspace(v0, v1, SET_SAMPLES + 1)
+        C = cad.face_evaluate(face, *np.meshgrid(u, v, indexing="ij"))[0].reshape(len(u), len(v), 3)
+        area = 0.5 * np.linalg.norm(np.cross(C[1:, 1:] - C[:-1, :-1], C[:-1, 1:] - C[1:, :-1]), axis=2)
+        U, V = np.meshgrid((u[1:] + u[:-1]) / 2, (v[1:] + v[:-1]) / 2, indexing="ij")
+        P, N, _ = cad.face_evaluate(face, U, V)
+        keep = cad.face_inside(face, U, V) & np.isfinite(N).all(axis=1)
+        pts.append(P[keep])
+        nrm.append(N[keep])
+        wts.append(area.ravel()[keep])
+        owner.append(np.full(int(keep.sum()), fid))
+    p, n, w8, who = np.concatenate(pts), np.concatenate(nrm), np.concatenate(wts), np.concatenate(owner)
+    m = (w8[:, None] * n).sum(axis=0)
+    if np.linalg.norm(m) < 1e-9 * max(float(w8.sum()), 1e-12):
+        raise InputError(f"{said}: the faces' normals cancel out: the set is not a height field over one plane", source)
+    m /= np.linalg.norm(m)
+    k = int(np.argmax(np.abs(m)))
+    w = m if abs(m[k]) < np.cos(np.radians(AXIS_SNAP_DEG)) else np.sign(m[k]) * np.eye(3)[k]
+    tilt = np.degrees(np.arccos(np.clip(n @ w, -1.0, 1.0)))
+    if tilt.max() > SET_MAX_TILT_DEG:
+        steep = [int(f) for f in faces if (who == f).any() and tilt[who == f].max() > SET_MAX_TILT_DEG]
+        worst = int(who[int(np.argmax(tilt))])
+        turn = (
+            f"face {worst} turn up to {tilt.max():.0f}°"
+            if len(steep) == 1
+            else f"faces {','.join(map(str, steep))} turn up to {tilt.max():.0f}° (face {worst})"
+        )
+        raise InputError(
+            f"{said}: the normals of {turn} from the direction the set is seen along "
+            f"({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}), more than {SET_MAX_TILT_DEG:g}°: the set is not a height "
+            "field over one plane; decompose its faces in their own (u, v) (leave the steep ones out of the set)",
+            source,
+        )
+    reach = 2.0 * float(np.ptp(p, axis=0).max()) + 1.0
+    hits = cad.line_crossings(cad.compound(list(faces.values())), p, w, reach)
+    for j, t in enumerate(hits):
+        far = t[np.abs(t) > FOLD_TOL]
+        if len(far):
+            q = p[j] + far[0] * w
+            other = min(faces, key=lambda f: float(cad.face_parameters(faces[f], q[None])[1][0]))
+            raise InputError(
+                f"{said} folds over its plane: the line along the direction it is seen along "
+                f"({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}) through ({p[j][0]:.3f}, {p[j][1]:.3f}, {p[j][2]:.3f}) on "
+                f"face {who[j]} crosses face {other} again {abs(far[0]):.4g} mm away: the set is not a height field "
+                "over one plane; split it",
+                source,
+            )
+    return Frame.along(w)
+
+
+def face_set_points(proj, ids) -> tuple[Frame, np.ndarray, np.ndarray]:
+    """(frame, indices (k,), coordinates (k, 2) mm): the frame of a face set of ``proj`` (a
+    :class:`~ncadapt.measure.CadProjection`; :func:`face_set_frame`), the indices of the
+    measurements on its faces and their nominal points' (u, v) in it. Refused: a face of the set
+    that no point fell on; the points along one line (:func:`require_area`)."""
+    src = proj.nominal
+    for f in ids:
+        if not (proj.face == f).any():
+            raise InputError(f"{_set_said(ids)}: no measured point fell on face {f}", src)
+    frame = face_set_frame({f: proj.faces[f - 1] for f in ids}, src)
+    idx = np.flatnonzero(np.isin(proj.face, ids))
+    xy = frame.uv(proj.measurements.nominal[idx])
+    require_area(xy, f"{proj.measurements.source} ({_set_said(ids)})")
+    return frame, idx, xy
+
+
+def analyze_face_sets(proj, *, alpha: float = 0.05, **moran_options) -> list[FaceSet]:
+    """The gate (:func:`analyze`) over each face set of ``proj`` (``proj.sets``) in the set's
+    (u, v) (:func:`face_set_points`)."""
+    out = []
+    for ids in proj.sets:
+        frame, idx, xy = face_set_points(proj, ids)
+        a = analyze(_subset(proj.measurements, idx), coords=xy, alpha=alpha, **moran_options)
+        out.append(FaceSet(tuple(ids), frame, idx, xy, a))
+    return out
+
+
+def _set_field(fs: FaceSet, faces, border: str, src):
+    """dF of a face set over its faces: (measured, carried) callables of a face's grid (see
+    :func:`_face_grid`), both functions of a node's place P in the set's plane. Beyond the set's
+    measured hull the systematic part is carried by ``border`` over a grid of the plane covering
+    the faces' (u, v) boxes, at the points' spacing (coarser if it would exceed
+    :data:`MAX_SET_GRID_NODES`), and read bilinearly from it."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from .. import cad
+
+    frame, xy, s = fs.frame, fs.coords, fs.decomposition.systematic  # type: ignore[union-attr]
+    box = []
+    for face in faces:
+        u0, u1, v0, v1 = cad.face_uv_bounds(face)
+        U, V = np.meshgrid(np.linspace(u0, u1, 33), np.linspace(v0, v1, 33), indexing="ij")
+        box.append(frame.uv(cad.face_evaluate(face, U, V)[0]))
+    q = np.concatenate([*box, xy])
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    step = max(spacing(xy), float(np.sqrt(np.prod(hi - lo) / MAX_SET_GRID_NODES)))
+    gu, gv = (np.linspace(a, b, max(4, int(np.ceil((b - a) / step)) + 1)) for a, b in zip(lo, hi))
+    GU, GV = np.meshgrid(gu, gv, indexing="ij")
+    inside = _linear_onto(xy, s, GU, GV)
+    known = np.isfinite(inside)
+    if known.sum() < 16:
+        raise InputError(
+            f"{_set_said(fs.faces)}: its measured points cover fewer than 16 nodes of its plane's grid", src
+        )
+    carry = RegularGridInterpolator(
+        (gu, gv), extrapolate_border(gu, gv, np.where(known, inside, 0.0), known, mode=border)
+    )
+
+    def measured(U, V, P):  # noqa: ARG001 - the node's place P in the set's plane places it
+        c = frame.uv(P.reshape(-1, 3))
+        return _linear_onto(xy, s, c[:, 0], c[:, 1]).reshape(np.shape(U))
+
+    def carried(u, v, inside, known, P):  # noqa: ARG001
+        c = np.clip(frame.uv(P.reshape(-1, 3)), lo, hi)
+        return np.where(known, inside, carry(c).reshape(known.shape))
+
+    return measured, carried
 
 
 def _check_face(f: FaceCompensation, nominal_face, placed) -> tuple[float, int]:
