@@ -328,3 +328,57 @@ def test_face_set_needs_a_nominal(crest):
     for cmd in ("analyze", "compensate"):
         r = CliRunner().invoke(main, [cmd, str(csv), "--face-set", "1,3"])
         assert r.exit_code == 2 and "--face-set needs --nominal" in r.output, r.output
+
+
+def test_the_report_outlines_the_sets_hull(crest):
+    """A face of a set is extrapolated beyond the hull of the set's points (x within ±29 mm, y
+    within −36…−4 mm on the top), not its own: the farthest strip node of each face is its outer
+    corner (θ = 70° or 110°, y = 0 or −40), 100 mm × (acos 0.29 − 70°) = 5.48 mm along the arc and
+    4 mm along y from that hull's corner: 6.79 mm (the report measures it to the nearest grid node
+    inside the hull, at most a cell farther)."""
+    from ncadapt.report import cad_maps
+
+    step, csv, right, left, d = crest
+    pc = pf.compensate_cad(measure.project_on_cad(csv, step, face_sets=[[right, left]]))
+    want = math.hypot(RB * (math.acos(0.29) - math.radians(70.0)), 4.0)
+    for fc in cad_maps.face_corrections(pc):
+        cell = math.hypot(np.diff(fc.u_mm).max(), np.diff(fc.v_mm).max())
+        assert fc.in_set and want - 1e-3 <= fc.strip_distance <= want + cell, (fc.strip_distance, want, cell)
+    r = CliRunner().invoke(
+        main,
+        ["compensate", str(csv), "--nominal", str(step), "--face-set", f"{right},{left}", "--report", str(d / "r.html")],
+    )
+    assert r.exit_code == 0, r.output
+    assert "hatched strip" in (d / "r.html").read_text()
+
+
+def test_a_second_round_with_a_set(crest, tmp_path):
+    """Round 2 measures the part cut with round 1's compensation: its error is E − dF₁ (the testbed's
+    truth). The total dF = dF₁ + the new systematic part comes nearer E than dF₁ alone, and both
+    faces still give one dF on their common edge."""
+    step, csv, right, left, _ = crest
+    proj1 = measure.project_on_cad(csv, step, face_sets=[[right, left]])
+    pc1 = pf.compensate_cad(proj1)
+    x, y = np.meshgrid(np.arange(-29.0, 29.1, 2.0), np.arange(-36.0, -3.9, 2.0), indexing="ij")
+    p, n = _on_top(x.ravel(), y.ravel())
+    df1 = np.empty(len(p))
+    side = p[:, 0] > 0
+    df1[side] = _df_at(pc1, proj1, right, p[side])
+    df1[~side] = _df_at(pc1, proj1, left, p[~side])
+    m2 = p + (E(p) - df1 + NOISE * np.random.default_rng(2).normal(size=len(p)))[:, None] * n
+    proj2 = measure.project_on_cad(_csv(tmp_path / "round2.csv", m2), step, face_sets=[[right, left]])
+    pc2 = pf.compensate_cad(proj2, previous={f.face: f.df for f in pc1.faces}, gain=1.0)
+    assert [f.face_set for f in pc2.faces] == [0, 0]
+    xs, ys = np.meshgrid(np.linspace(-28.5, 28.5, 40), np.linspace(-35.5, -4.5, 20), indexing="ij")
+    q, _ = _on_top(xs.ravel(), ys.ravel())
+    r = q[:, 0] > 0
+
+    def err(pc, proj):
+        df = np.empty(len(q))
+        df[r] = _df_at(pc, proj, right, q[r])
+        df[~r] = _df_at(pc, proj, left, q[~r])
+        return _rms(df - E(q))
+
+    assert err(pc2, proj2) < err(pc1, proj1)
+    e, _ = _edge(np.linspace(-34.0, -6.0, 29), 0.0)
+    assert np.abs(_df_at(pc2, proj2, right, e) - _df_at(pc2, proj2, left, e)).max() <= 0.001

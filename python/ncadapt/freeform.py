@@ -75,14 +75,15 @@ def run(
     Parameters
     ----------
     measurements : path
-        The measurement file (as ``ncadapt compensate``; with ``nominal``, actual points only: CSV
-        x, y, z, DMIS ``FA`` points or QIF measured points, :func:`ncadapt.measure.read_actuals`).
+        The measurement file (as ``ncadapt compensate``; with ``nominal``, actual points: CSV
+        x, y, z, DMIS ``FA`` points, QIF measured points and point sets, or a paired file whose own
+        nominals are checked against the CAD, :func:`ncadapt.measure.read_actuals`).
     nominal : path, optional
         The CAD model (STEP/IGES): each face compensated in its own (u, v); ``faces`` (1-based ids
         or the STEP file's face names), ``max_distance`` mm, ``align`` ("none", "bestfit", "datums"),
         ``align_dof``, ``datums``, ``face_sets`` (faces decomposed together in one (u, v),
-        :func:`ncadapt.processes.freeform.compensate_cad`) as :func:`ncadapt.measure.project_on_cad`. Without it the nominal is fitted through the measured
-        nominal points over the frame of their normals (the frame is chosen here).
+        :func:`ncadapt.processes.freeform.compensate_cad`) as :func:`ncadapt.measure.project_on_cad`.
+        Without it the nominal is fitted through the measured nominal points over the frame of their normals (the frame is chosen here).
     program : path, optional
         An NC program corrected by −dF·n into ``output`` (required with it), the tool a ball end of
         ``tool_radius`` mm (required; 0: the programmed point is the contact point); ``outside``,

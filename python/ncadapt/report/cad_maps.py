@@ -56,7 +56,10 @@ class FaceCorrection:
     points' hull, where dF is extrapolated (``border``: held or cubic); ``hull`` (k, 2) mm: the
     measured points' convex hull in (u_mm, v_mm), counter-clockwise; ``strip_fraction`` the strip's
     share of the face's nodes; ``strip_distance`` mm the farthest strip node from the hull (0 without
-    a strip); ``inside`` and ``in_strip``: (min, max) of the correction there, mm (None when empty)."""
+    a strip); ``inside`` and ``in_strip``: (min, max) of the correction there, mm (None when empty).
+    A face of a face set (``in_set``) is extrapolated beyond the hull of the set's points, not its
+    own: its outline is the edge of the grid nodes inside that hull (``measured``, (nu, nv) bool) and
+    ``strip_distance`` the farthest strip node from the nearest of them."""
 
     face: int
     u: np.ndarray
@@ -71,6 +74,8 @@ class FaceCorrection:
     inside: tuple[float, float]
     in_strip: tuple[float, float] | None
     border: str
+    in_set: bool = False
+    measured: np.ndarray | None = None
 
 
 def _distance_to_polygon(q, poly) -> np.ndarray:
@@ -99,9 +104,16 @@ def face_corrections(part) -> list[FaceCorrection]:
         inner = f.in_face & f.measured_region
         hull = f.coords[ConvexHull(f.coords).vertices]
         dist = 0.0
+        in_set = getattr(f, "face_set", None) is not None
         if strip.any():
             U, V = np.meshgrid(f.u * su, f.v * sv, indexing="ij")
-            dist = float(_distance_to_polygon(np.column_stack([U[strip], V[strip]]), hull).max())
+            q = np.column_stack([U[strip], V[strip]])
+            if in_set:
+                from scipy.spatial import cKDTree
+
+                dist = float(cKDTree(np.column_stack([U[inner], V[inner]])).query(q)[0].max())
+            else:
+                dist = float(_distance_to_polygon(q, hull).max())
         out.append(
             FaceCorrection(
                 f.face,
@@ -117,6 +129,8 @@ def face_corrections(part) -> list[FaceCorrection]:
                 (float(c[inner].min()), float(c[inner].max())),
                 (float(c[strip].min()), float(c[strip].max())) if strip.any() else None,
                 f.border,
+                in_set,
+                inner,
             )
         )
     return out
@@ -143,7 +157,10 @@ def _correction_panels(cad: CadReport, corrections, callouts):
         handles = []
         if fc.strip.any():
             ax.contourf(U, V, fc.strip.astype(float), levels=[0.5, 1.5], colors="none", hatches=["////"])
-            ax.plot(*np.vstack([fc.hull, fc.hull[:1]]).T, "k-", lw=1.2)
+            if fc.in_set:  # the set's hull, where it crosses the face
+                ax.contour(U, V, fc.measured.astype(float), levels=[0.5], colors="k", linewidths=1.2)
+            else:
+                ax.plot(*np.vstack([fc.hull, fc.hull[:1]]).T, "k-", lw=1.2)
             handles.append(Patch(facecolor="none", edgecolor="k", hatch="////", label="dF extrapolated (not measured)"))
         ax.scatter(f.coords[:, 0], f.coords[:, 1], s=1.5, c="k", alpha=0.5)
         handles.append(Line2D([], [], marker="o", ls="", ms=3, color="k", alpha=0.5, label="measured points"))
