@@ -20,6 +20,7 @@ written by other people and their tools. For each program:
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import re
 import sys
@@ -35,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from ncadapt import dialects, fields, nc  # noqa: E402
 from ncadapt.errors import InputError, RefusedError  # noqa: E402
+from ncadapt.flatten import flatten  # noqa: E402
 from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
 
 CORPUS = Path(__file__).resolve().parents[1].parent / "shared" / "corpus" / "nc"
@@ -57,10 +59,12 @@ class Entry:
     dialect: str
     source: str
     lines: int
+    #: the folder the file is in (the corpus's by default; a flattened copy's for --expand)
+    root: Path | None = None
 
     @property
     def path(self) -> Path:
-        return CORPUS / self.file
+        return (self.root or CORPUS) / self.file
 
 
 def manifest() -> list[Entry]:
@@ -335,7 +339,7 @@ def compare_motion(
     ie6, oe6 = inp.ends, out.ends
     oe, okind, tgt = out.ends[:, :3].tolist(), out.kinds, target.tolist()
     istart = np.vstack([np.zeros((1, 3)), inp.ends[:-1, :3]])
-    zero_len = (np.abs(inp.ends[:, :3] - istart).max(axis=1) == 0) & np.array([k == "feed" for k in inp.kinds])
+    zero_len = (np.abs(inp.ends[:, :3] - istart).max(axis=1) == 0) & np.array([k == "feed" for k in inp.kinds], dtype=bool)
 
     # 1. the sequence: rapids one for one, each cutting move a run of output moves ending at its target
     problems: list[str] = []
@@ -581,7 +585,7 @@ class Result:
     file: str
     dialect: str
     lines: int
-    outcome: str = ""  # "accepted", "refused: line N: why", "error: ..."
+    outcome: str = ""  # "accepted", "accepted (--expand)", "refused: line N: why", "error: ..."
     reason: str = ""  # the refusal without its numbers, for the summary
     refusal_line: int | None = None
     units: str = ""
@@ -595,7 +599,7 @@ class Result:
 
     @property
     def accepted(self) -> bool:
-        return self.outcome == "accepted"
+        return self.outcome.startswith("accepted")
 
     @property
     def refused(self) -> bool:
@@ -659,6 +663,22 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.reason, r.refusal_line = _generic(e.message), e.line
         return
     r.units = prog.units
+    flow = ("O-word", "parameters or expressions")
+    if uns and entry.root is None and dialect == "linuxcnc" and any(u.construct.startswith(flow) for u in uns):
+        # as `ncadapt correct --expand`: the flattened program is what is corrected and checked
+        try:
+            flat = flatten(entry.path.read_bytes(), entry.file)
+        except InputError as e:
+            r.outcome = f"refused: line {e.line}: {e.message} (--expand)"
+            r.reason, r.refusal_line = _generic(e.message) + " (--expand)", e.line
+            return
+        folder = work / "flat"
+        folder.mkdir(exist_ok=True)
+        (folder / entry.file).write_bytes(flat.data)
+        _run(dataclasses.replace(entry, root=folder), work, r)
+        if r.outcome == "accepted":
+            r.outcome = "accepted (--expand)"
+        return
     if uns:
         u = uns[0]
         r.outcome = f"refused: line {u.line}: {u.construct}" + (f" (+{len(uns) - 1} more)" if len(uns) > 1 else "")

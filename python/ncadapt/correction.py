@@ -56,6 +56,9 @@ class Correction:
     warnings: tuple[str, ...] = ()
     #: Remarks on blocks kept but not corrected (G53 moves, G28/G30 returns): (line, message).
     notes: tuple[tuple[int, str], ...] = ()
+    #: The program was flattened first (``expand``): ``lines_in`` its lines, ``blocks`` the
+    #: flattened program's, ``blocks_run`` the blocks it ran (flow lines included); None otherwise.
+    expanded: dict | None = None
 
     def as_dict(self) -> dict:
         """The figures as plain JSON-ready values (no arrays)."""
@@ -79,10 +82,13 @@ def _engine(fn, name):
 
 
 def _unsupported_error(name, uns) -> RefusedError:
+    flow = any(u.construct.startswith(("O-word", "parameters or expressions")) for u in uns)
     return RefusedError(
         f"{name}: {len(uns)} unsupported construct(s); nothing written "
         "(--keep-unsupported, keep_unsupported=True in Python, copies those blocks unchanged and corrects the "
-        "rest)",
+        "rest"
+        + ("; --expand, expand=True in Python, flattens parameters and O-word flow into straight G-code" if flow else "")
+        + ")",
         [asdict(u) for u in uns],
     )
 

@@ -18,6 +18,7 @@ G1 X2
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
@@ -41,7 +42,7 @@ from .correction import (
     _unsupported_error,
     check_sampling,
 )
-from .errors import InputError
+from .errors import InputError, RefusedError
 
 __all__ = [
     "Program",
@@ -153,6 +154,7 @@ def correct_file(
     *,
     dialect: str = "linuxcnc",
     read_ahead=None,
+    expand: bool = False,
     **options,
 ) -> Correction:
     """Correct the program in file ``path`` and write it to ``output``, reading and writing it
@@ -161,24 +163,67 @@ def correct_file(
     Takes the options of :meth:`Program.correct`, and the program's ``dialect`` (one of
     :data:`DIALECTS`; ``ncadapt.dialects.resolve`` detects it). ``read_ahead``: a
     ``ncadapt._nc.read_ahead(path, constants.PIECE_BYTES, dialect)`` started earlier on the same
-    file (the command line starts one before its imports), whose pieces the engine takes. The output is written atomically: when a check
+    file (the command line starts one before its imports), whose pieces the engine takes.
+    ``expand``: the program's parameters, expressions and O-word flow (LinuxCNC's) are first
+    flattened into straight G-code (:func:`ncadapt.flatten.flatten`), which is corrected and
+    written; ``Correction.expanded`` then says how many blocks. The output is written atomically: when a check
     refuses (an unsupported construct, a displacement over the limit, a point outside the field),
     nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
     """
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
+    flat = None
+    if expand:
+        if dialect != "linuxcnc":
+            raise ValueError(f"expand reads LinuxCNC's parameters and O-words; the dialect is {dialect}")
+        if read_ahead is not None:
+            read_ahead.cancel()
+            read_ahead = None
+        from .flatten import flatten
+
+        try:
+            data = p.read_bytes()
+        except OSError as e:
+            raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+        flat = flatten(data, str(p))
     with atomic_open(out) as f, _BackgroundWriter(f) as w:
-        return _correct(
-            str(p),
-            str(p),
-            w.write,
-            field,
-            keep_points=False,
-            out_file=f,
-            dialect=_check_dialect(dialect),
-            read_ahead=read_ahead,
-            **options,
-        )
+        try:
+            c = _correct(
+                str(p) if flat is None else flat.data,
+                str(p),
+                w.write,
+                field,
+                keep_points=False,
+                out_file=f,
+                dialect=_check_dialect(dialect),
+                read_ahead=read_ahead,
+                **options,
+            )
+        except (InputError, RefusedError) as e:
+            raise e if flat is None else _flat_error(e, flat, str(p)) from None
+    if flat is not None:
+        expanded = {"lines_in": len(data.splitlines()), "blocks": len(flat.lines), "blocks_run": flat.blocks_run}
+        c = dataclasses.replace(c, expanded=expanded)
+    return c
+
+
+def _flat_error(e, flat, name):
+    """An error of the flattened program, located at the original line its block comes from."""
+    if isinstance(e, InputError):
+        k = e.line
+        if 1 <= k <= len(flat.lines):
+            return InputError(f"{e.message} (block {k} of the flattened program)", name, int(flat.lines[k - 1]))
+        return e
+    details = []
+    for d in e.details:
+        if isinstance(d, dict) and isinstance(d.get("line"), int) and 1 <= d["line"] <= len(flat.lines):
+            d = {**d, "line": int(flat.lines[d["line"] - 1]), "flat_line": d["line"]}
+        details.append(d)
+    return RefusedError(
+        f"{e.message} (the program was flattened with --expand: line numbers in this message are of the flattened "
+        "program; the details give the original lines)",
+        details,
+    )
 
 
 def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:

@@ -96,6 +96,13 @@ def _shift(ctx, param, value):
     "G87, G88 and G76, and cycles from an unknown position, are refused.",
 )
 @click.option(
+    "--expand",
+    is_flag=True,
+    help="Flatten the program's parameters, expressions and O-word flow (LinuxCNC's: o-word subroutines, "
+    "if/while/repeat) into straight G-code as LinuxCNC runs them, and correct and write that. Without it such "
+    "programs are refused.",
+)
+@click.option(
     "--tool-table",
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="LinuxCNC tool table (T<n> … D<diameter>) for cutter radius compensation: G41/G42 take tool D's "
@@ -123,6 +130,7 @@ def correct(
     clearance,
     dialect,
     expand_cycles,
+    expand,
     tool_table,
     tool_units,
     json_path,
@@ -138,6 +146,10 @@ def correct(
     if (tool_table is None) != (tool_units is None):
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = dialects.resolve(program, dialect)
+    if expand and d.name != "linuxcnc":
+        raise click.UsageError(
+            f"--expand flattens LinuxCNC's parameters and O-words; this program is read as {d.describe()}"
+        )
     tools = None
     if tool_table is not None:
         from .. import tooltable
@@ -147,7 +159,7 @@ def correct(
     # core that would wait (without a tool table: the read-ahead reads without one)
     from .._nc import read_ahead
 
-    ahead = None if tools else read_ahead(str(program), constants.PIECE_BYTES, d.name)
+    ahead = None if tools or expand else read_ahead(str(program), constants.PIECE_BYTES, d.name)
     from .. import fields as _fields
     from .. import nc
 
@@ -172,10 +184,17 @@ def correct(
             dialect=d.name,
             read_ahead=ahead,
             tools=tools,
+            expand=expand,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
     summary(f"  field: {field.describe()}")
+    if c.expanded is not None:
+        e = c.expanded
+        summary(
+            f"  flattened (--expand): {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; the corrected program is "
+            f"written flat, {e['blocks']:,} blocks"
+        )
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
         f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"
@@ -215,6 +234,7 @@ def correct(
             "clearance": clearance,
             "dialect": dialect,
             "expand_cycles": expand_cycles,
+            "expand": expand,
             "tool_table": None if tool_table is None else str(tool_table),
             "tool_units": tool_units,
         }

@@ -1,0 +1,546 @@
+"""Flatten an RS274NGC program: parameters, expressions and O-word flow evaluated into straight
+G-code, as LinuxCNC's interpreter runs them.
+
+``ncadapt correct --expand`` corrects the flattened program: every block the program runs, in the
+order it runs them, with its words' values computed (``X[2*#1]`` → ``X8``), numbered, named and
+global parameters set, ``o… sub/endsub/call/return``, ``if/elseif/else/endif``,
+``while/endwhile``, ``do/while``, ``repeat/endrepeat``, ``break`` and ``continue`` followed.
+Lines that only set parameters or steer the flow are left out; comments stay with their block.
+
+Refused, at their line (:class:`~ncadapt.InputError`): what only the machine knows (parameters
+#5000 and up and LinuxCNC's predefined named parameters such as ``#<_x>`` or ``#<_value>`` before
+a ``return`` sets it: positions, offsets, probe results, tool data), a subroutine in another file,
+an undefined named parameter, LinuxCNC's errors (division by zero, the square root of a negative
+number, an O-word without its match), and a program that runs more than :data:`MAX_BLOCKS` blocks
+(a loop that does not end).
+
+The rules are LinuxCNC 2.9's (its documentation, "O Codes" and "Numbered Parameters" /
+"Expressions"): parameters set on a line take effect after the line is read, so its other words
+see the old values; EQ and NE compare within 0.0001; MOD's result takes the divisor's sign;
+ROUND rounds halves away from zero; FIX and FUP are floor and ceiling; trigonometry in degrees;
+#1–#30 are a subroutine's arguments and locals, named parameters without a leading underscore
+local to their subroutine.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+#: Most blocks a flattened program may hold: a loop that runs more is taken as one that does not end.
+MAX_BLOCKS = 5_000_000
+#: Deepest subroutine nesting (LinuxCNC's is 10).
+MAX_DEPTH = 10
+#: Numbered parameters the program may use; from #5000 up they hold the machine's state.
+MACHINE_PARAMETERS = 5000
+#: EQ and NE compare within this (LinuxCNC's TOLERANCE_EQUAL).
+TOLERANCE_EQUAL = 0.0001
+
+_FUNCS = {
+    "abs": abs,
+    "acos": lambda x: math.degrees(math.acos(x)),
+    "asin": lambda x: math.degrees(math.asin(x)),
+    "cos": lambda x: math.cos(math.radians(x)),
+    "sin": lambda x: math.sin(math.radians(x)),
+    "tan": lambda x: math.tan(math.radians(x)),
+    "exp": math.exp,
+    "fix": math.floor,
+    "fup": math.ceil,
+    "ln": math.log,
+    "round": lambda x: float(math.floor(abs(x) + 0.5)) * (1.0 if x >= 0 else -1.0),
+    "sqrt": math.sqrt,
+}
+# binary operators by precedence, lowest first (LinuxCNC: ** > * / MOD > + - > comparisons > logic)
+_LEVELS = [("and", "or", "xor"), ("eq", "ne", "gt", "ge", "lt", "le"), ("+", "-"), ("*", "/", "mod"), ("**",)]
+_OPS = sorted({op for lv in _LEVELS for op in lv}, key=len, reverse=True)
+# G codes (× 10) after which the machine's parameters (#5000 up) hold what the machine did: probing
+# G38.x, offsets G10, G52, G54-G59.3, G92-G92.3, stored positions G28.1/G30.1, tool lengths G43/G49
+_MACHINE_CODES = {100, 382, 383, 384, 385, 520, 540, 550, 560, 570, 580, 590, 591, 592, 593, 920, 921, 922, 923, 281, 301}
+_MACHINE_CODES |= {430, 431, 432, 490}
+_NUMBER = re.compile(r"[0-9]*\.?[0-9]*")
+_KEYWORDS = ("sub", "endsub", "call", "return", "if", "elseif", "else", "endif")
+_KEYWORDS += ("while", "endwhile", "do", "repeat", "endrepeat", "break", "continue")
+
+
+@dataclass(frozen=True)
+class Flat:
+    """A flattened program: ``data`` the straight G-code (bytes, one block a line), ``lines`` (n,)
+    the 1-based line of the original program each of its lines comes from, ``blocks_run`` how many
+    blocks the program ran (its flow lines included)."""
+
+    data: bytes
+    lines: np.ndarray
+    blocks_run: int
+
+
+class _Error(Exception):
+    def __init__(self, message: str, col: int = 0):
+        super().__init__(message)
+        self.message, self.col = message, col
+
+
+# ----------------------------------------------------------------------------------- reading lines
+def _strip(raw: str) -> tuple[str, list[str]]:
+    """A line without its comments (lower case, no spaces) and its comments as written."""
+    out, comments, k = [], [], 0
+    while k < len(raw):
+        c = raw[k]
+        if c == "(":
+            end = raw.find(")", k)
+            if end < 0:
+                raise _Error("comment not closed", k + 1)
+            comments.append(raw[k : end + 1])
+            k = end + 1
+        elif c == ";":
+            comments.append("(" + raw[k + 1 :].strip().replace("(", "[").replace(")", "]") + ")")
+            break
+        else:
+            if not c.isspace():
+                out.append(c.lower())
+            k += 1
+    return "".join(out), comments
+
+
+class _Parser:
+    """Reads the words of one line (without comments, lower case) against the parameters `read`."""
+
+    def __init__(self, text: str, read):
+        self.s, self.k, self.read = text, 0, read
+
+    def peek(self, n: int = 1) -> str:
+        return self.s[self.k : self.k + n]
+
+    def take(self, lit: str) -> bool:
+        if self.s.startswith(lit, self.k):
+            self.k += len(lit)
+            return True
+        return False
+
+    def need(self, lit: str) -> None:
+        if not self.take(lit):
+            raise _Error(f"expected '{lit}'", self.k + 1)
+
+    def number(self) -> float:
+        m = _NUMBER.match(self.s, self.k)
+        text = m.group(0) if m else ""
+        if text in ("", "."):
+            raise _Error("expected a number", self.k + 1)
+        self.k += len(text)
+        return float(text)
+
+    def value(self) -> float:
+        """A real value: a number, [expression], #parameter, a function, or a signed one of these."""
+        c = self.peek()
+        if c == "-":
+            self.k += 1
+            return -self.value()
+        if c == "+":
+            self.k += 1
+            return self.value()
+        if c == "[":
+            self.k += 1
+            v = self.expr()
+            self.need("]")
+            return v
+        if c == "#":
+            return self.read(self.param_ref())
+        if c.isalpha():
+            m = re.compile(r"[a-z]+").match(self.s, self.k)
+            name = m.group(0) if m else ""
+            at = self.k
+            if name == "atan":
+                self.k += 4
+                self.need("[")
+                a = self.expr()
+                self.need("]")
+                self.need("/")
+                self.need("[")
+                b = self.expr()
+                self.need("]")
+                return math.degrees(math.atan2(a, b))
+            if name == "exists":
+                self.k += 6
+                self.need("[")
+                ref = self.param_ref()
+                self.need("]")
+                return 1.0 if self.read(ref, exists=True) else 0.0
+            if name in _FUNCS:
+                self.k += len(name)
+                self.need("[")
+                x = self.expr()
+                self.need("]")
+                try:
+                    return float(_FUNCS[name](x))
+                except (ValueError, OverflowError):
+                    raise _Error(f"{name.upper()}[{x:g}] has no value", at + 1) from None
+            raise _Error(f"unknown function or word '{name}' in a value", at + 1)
+        return self.number()
+
+    def param_ref(self):
+        """The parameter after '#': its number (int) or its name (str, lower case)."""
+        self.need("#")
+        if self.take("<"):
+            end = self.s.find(">", self.k)
+            if end < 0:
+                raise _Error("named parameter not closed with '>'", self.k + 1)
+            name = self.s[self.k : end]
+            self.k = end + 1
+            return name
+        at = self.k
+        v = self.read(self.param_ref()) if self.peek() == "#" else self.value()
+        if v != int(v) or not 1 <= v <= 5602:
+            raise _Error(f"parameter number {v:g} is not a whole number from 1 to 5602", at + 1)
+        return int(v)
+
+    def expr(self, level: int = 0) -> float:
+        if level == len(_LEVELS):
+            return self.value()
+        left = self.expr(level + 1)
+        while True:
+            op = next((o for o in _OPS if self.s.startswith(o, self.k)), None)
+            if op is None or op not in _LEVELS[level]:
+                return left
+            at = self.k
+            self.k += len(op)
+            right = self.expr(level + 1)
+            left = _binary(op, left, right, at)
+
+
+def _binary(op: str, a: float, b: float, at: int) -> float:
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "/":
+        if b == 0:
+            raise _Error("division by zero", at + 1)
+        return a / b
+    if op == "mod":
+        if b == 0:
+            raise _Error("MOD by zero", at + 1)
+        r = math.fmod(a, b)
+        return r + abs(b) if r < 0 else r
+    if op == "**":
+        try:
+            return float(a**b)
+        except (ZeroDivisionError, OverflowError):
+            raise _Error(f"{a:g} ** {b:g} has no value", at + 1) from None
+    if op in ("eq", "ne"):
+        same = abs(a - b) < TOLERANCE_EQUAL
+        return float(same if op == "eq" else not same)
+    if op in ("gt", "ge", "lt", "le"):
+        return float({"gt": a > b, "ge": a >= b, "lt": a < b, "le": a <= b}[op])
+    x, y = a != 0.0, b != 0.0
+    return float({"and": x and y, "or": x or y, "xor": x != y}[op])
+
+
+def _fmt(v: float, letter: str) -> str:
+    if letter in "gm":
+        return f"{v:.4f}".rstrip("0").rstrip(".")
+    t = f"{v:.6f}".rstrip("0").rstrip(".")
+    return "0" if t in ("-0", "") else t
+
+
+# ----------------------------------------------------------------------------------- the program
+@dataclass
+class _Line:
+    text: str  # without comments, lower case
+    comments: list[str]
+    label: str | None = None  # an O-word's label
+    keyword: str | None = None
+    rest: str = ""  # after the keyword
+
+
+def _read(text: str, src: str) -> list[_Line]:
+    out = []
+    for n, raw in enumerate(text.splitlines(), 1):
+        try:
+            body, comments = _strip(raw)
+        except _Error as e:
+            raise InputError(e.message, src, n, e.col) from None
+        if body.startswith("/"):
+            body = body[1:]
+        line = _Line(body, comments)
+        m = re.match(r"(?:n\d+)?o(<[^>]*>|\d+)([a-z]+)(.*)$", body)
+        if m and body.lstrip("n0123456789").startswith("o"):
+            line.label, kw, line.rest = m.group(1), m.group(2), m.group(3)
+            key = next((k for k in sorted(_KEYWORDS, key=len, reverse=True) if kw.startswith(k)), None)
+            if key is None:
+                raise InputError(f"unknown O-word keyword '{kw}'", src, n)
+            line.keyword, line.rest = key, kw[len(key) :] + line.rest
+        out.append(line)
+    return out
+
+
+def _match(lines: list[_Line], src: str) -> tuple[dict, dict]:
+    """The O-word structure: for each flow line, the lines it jumps to; the subroutines by label."""
+    jumps: dict[int, dict] = {}
+    subs: dict[str, int] = {}
+    stack: list[tuple[str, str, int, list[int]]] = []  # (label, kind, line, branch lines)
+    for i, ln in enumerate(lines):
+        kw, lab = ln.keyword, ln.label
+        if kw is None:
+            continue
+
+        def fail(msg, i=i):
+            raise InputError(msg, src, i + 1)
+
+        if kw == "sub":
+            if stack:
+                fail(f"o{lab} sub inside o{stack[-1][0]} {stack[-1][1]}")
+            if lab in subs:
+                fail(f"subroutine o{lab} defined twice (first at line {subs[lab] + 1})")
+            stack.append((lab, "sub", i, []))
+        elif kw in ("if", "repeat", "do") or (
+            kw == "while" and not (stack and stack[-1][0] == lab and stack[-1][1] == "do")
+        ):
+            stack.append((lab, kw, i, []))
+        elif kw in ("elseif", "else"):
+            if not stack or stack[-1][:2] != (lab, "if"):
+                fail(f"o{lab} {kw} without its o{lab} if")
+            stack[-1][3].append(i)
+        elif kw in ("break", "continue"):
+            loop = next((s for s in reversed(stack) if s[0] == lab and s[1] in ("while", "do", "repeat")), None)
+            if loop is None:
+                fail(f"o{lab} {kw} outside an o{lab} loop")
+            loop[3].append(i)
+        elif kw == "return":
+            if not any(s[1] == "sub" for s in stack):
+                fail(f"o{lab} return outside a subroutine")
+            jumps[i] = {}
+        elif kw == "call":
+            jumps[i] = {}
+        else:
+            closes = {"endsub": "sub", "endif": "if", "endwhile": "while", "endrepeat": "repeat", "while": "do"}[kw]
+            if not stack or stack[-1][:2] != (lab, closes):
+                fail(f"o{lab} {kw} without its o{lab} {closes}")
+            _, kind, start, branches = stack.pop()
+            if kind == "sub":
+                subs[lab] = start
+                jumps[start] = {"end": i}
+                jumps[i] = {}
+            elif kind == "if":
+                chain = [start] + [b for b in branches if lines[b].keyword in ("elseif", "else")] + [i]
+                for a, b in zip(chain, chain[1:]):
+                    jumps[a] = {"next": b, "end": i}
+                jumps[i] = {}
+            else:
+                for b in [start, *branches, i]:
+                    jumps[b] = {"start": start, "end": i}
+    if stack:
+        lab, kind, start, _ = stack[-1]
+        raise InputError(f"o{lab} {kind} without its end", src, start + 1)
+    return jumps, subs
+
+
+class _Machine:
+    """Runs the flattened program and holds its parameters."""
+
+    def __init__(self, src: str):
+        self.src = src
+        self.numbered = np.zeros(5603)
+        self.set_numbered = np.zeros(5603, bool)
+        self.globals: dict[str, float] = {}
+        self.frames: list[dict[str, float]] = [{}]
+
+    def read(self, ref, exists: bool = False):
+        if isinstance(ref, int):
+            if exists:
+                return True
+            if ref >= MACHINE_PARAMETERS and not self.set_numbered[ref]:
+                raise _Error(
+                    f"parameter #{ref} holds the machine's state (offsets, probe results, tool data), which the "
+                    "program does not give"
+                )
+            return float(self.numbered[ref])
+        scope = self.globals if ref.startswith("_") else self.frames[-1]
+        if ref in scope:
+            return True if exists else scope[ref]
+        if exists:
+            return False
+        if ref.startswith("_"):
+            raise _Error(
+                f"#<{ref}> is not set by the program: LinuxCNC's predefined parameters hold the machine's state"
+            )
+        raise _Error(f"named parameter #<{ref}> is not defined")
+
+    def write(self, ref, v: float) -> None:
+        if isinstance(ref, int):
+            self.numbered[ref], self.set_numbered[ref] = v, True
+        elif ref.startswith("_"):
+            self.globals[ref] = v
+        else:
+            self.frames[-1][ref] = v
+
+
+def flatten(data: bytes, name: str = "<program>") -> Flat:
+    """The straight G-code that an RS274NGC program runs (see the module's text).
+
+    Examples
+    --------
+    >>> prog = b"#1 = 2\\no100 repeat [2]\\nG1 X[#1 * 3] F100 (cut)\\n#1 = [#1 + 1]\\no100 endrepeat\\nM2\\n"
+    >>> print(flatten(prog).data.decode())
+    G1 X6 F100 (cut)
+    G1 X9 F100 (cut)
+    M2
+    <BLANKLINE>
+    """
+    text = data.decode("utf-8", "surrogateescape")
+    lines = _read(text, name)
+    jumps, subs = _match(lines, name)
+    mac = _Machine(name)
+    out: list[str] = []
+    origin: list[int] = []
+    # the call stack: (line to return to, saved #1-#30, loop counters)
+    calls: list[tuple[int, np.ndarray, dict]] = []
+    counters: dict[int, int] = {}
+    i, run = 0, 0
+    while i < len(lines):
+        run += 1
+        if run > MAX_BLOCKS:
+            raise InputError(f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", name, i + 1)
+        ln = lines[i]
+        try:
+            nxt = _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin)
+        except _Error as e:
+            raise InputError(e.message, name, i + 1, e.col) from None
+        if nxt is None:
+            break
+        i = nxt
+    body = "".join(s + "\n" for s in out)
+    return Flat(body.encode("utf-8", "surrogateescape"), np.asarray(origin, dtype=np.int64) + 1, run)
+
+
+def _cond(ln: _Line, mac: _Machine) -> float:
+    """The [condition] (or count) after an O-word keyword."""
+    p = _Parser(ln.rest, mac.read)
+    if not p.peek():
+        raise _Error(f"o{ln.label} {ln.keyword} needs [a condition]")
+    v = p.value()
+    if p.peek():
+        raise _Error(f"unexpected '{p.s[p.k:]}' after o{ln.label} {ln.keyword}", p.k + 1)
+    return v
+
+
+def _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin):
+    """Run line i; the next line's index, or None at the program's end."""
+    kw = ln.keyword
+    if kw is None:
+        return _block(ln, i, mac, out, origin)
+    j = jumps.get(i, {})
+    if kw == "sub":
+        return j["end"] + 1  # a definition: skipped where it stands
+    if kw in ("endsub", "return"):
+        p = _Parser(ln.rest, mac.read)
+        if p.peek():
+            mac.globals["_value"] = p.value()
+            mac.globals["_value_returned"] = 1.0
+        if not calls:
+            raise _Error(f"o{ln.label} {kw} outside a call")
+        back, saved, saved_counters = calls.pop()
+        mac.numbered[1:31] = saved
+        mac.frames.pop()
+        counters.clear()
+        counters.update(saved_counters)
+        return back
+    if kw == "call":
+        if ln.label not in subs:
+            raise _Error(f"subroutine o{ln.label} is not in this file (a subroutine file of the machine's)")
+        if len(calls) >= MAX_DEPTH:
+            raise _Error(f"subroutines nested deeper than {MAX_DEPTH}")
+        p = _Parser(ln.rest, mac.read)
+        args = []
+        while p.peek():
+            if p.peek() != "[":
+                raise _Error("call arguments are [expressions]", p.k + 1)
+            args.append(p.value())
+        if len(args) > 30:
+            raise _Error("more than 30 call arguments")
+        calls.append((i + 1, mac.numbered[1:31].copy(), dict(counters)))
+        mac.numbered[1:31] = 0.0
+        mac.numbered[1 : 1 + len(args)] = args
+        mac.frames.append({})
+        mac.globals["_value_returned"] = 0.0
+        counters.clear()
+        return subs[ln.label] + 1
+    if kw == "if":
+        # the first branch whose condition holds (an else's when none does), else past the endif
+        k = i
+        while lines[k].keyword in ("if", "elseif"):
+            if _cond(lines[k], mac) != 0.0:
+                return k + 1
+            k = jumps[k]["next"]
+        return k + 1
+    if kw in ("elseif", "else"):
+        return j["end"] + 1  # reached at the end of the branch taken
+    if kw == "endif":
+        return i + 1
+    if kw == "while" and lines[j["start"]].keyword == "do" and j["end"] == i:
+        return j["start"] + 1 if _cond(ln, mac) != 0.0 else i + 1
+    if kw == "while":
+        return i + 1 if _cond(ln, mac) != 0.0 else j["end"] + 1
+    if kw == "do":
+        return i + 1
+    if kw == "endwhile":
+        return j["start"]
+    if kw == "repeat":
+        counters[i] = int(_cond(ln, mac))
+        return i + 1 if counters[i] > 0 else j["end"] + 1
+    if kw == "endrepeat":
+        s = j["start"]
+        counters[s] = counters.get(s, 0) - 1
+        return s + 1 if counters[s] > 0 else i + 1
+    if kw == "break":
+        return j["end"] + 1
+    if kw == "continue":
+        start, end = j["start"], j["end"]
+        return end if lines[start].keyword in ("repeat", "do") else start
+    raise _Error(f"o{ln.label} {kw}: not followed")
+
+
+def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list):
+    """A block of words and parameter settings: written with its values, the settings applied
+    after the line is read (as LinuxCNC does)."""
+    if ln.text == "%":
+        out.append("%")
+        origin.append(i)
+        return i + 1
+    p = _Parser(ln.text, mac.read)
+    words: list[tuple[str, float]] = []
+    sets = []
+    while p.peek():
+        c = p.peek()
+        if c == "#":
+            ref = p.param_ref()
+            p.need("=")
+            sets.append((ref, p.value()))
+        elif c.isalpha() or c in "@^":
+            p.k += 1
+            v = p.value()
+            if c != "n":
+                words.append((c, v))
+        else:
+            raise _Error(f"unexpected '{c}'", p.k + 1)
+    for ref, v in sets:
+        mac.write(ref, v)
+    ms = [round(v) for c, v in words if c == "m"]
+    gs = [round(v * 10) for c, v in words if c == "g"]
+    if any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms):
+        # probing, offsets, stored positions, tool data: the machine sets its parameters again
+        mac.set_numbered[MACHINE_PARAMETERS:] = False
+    if any(m in (98, 99) for m in ms):
+        raise _Error("M98/M99 subprograms (Fanuc's) are not flattened; LinuxCNC's O-word subroutines are")
+    if words or ln.comments:
+        text = " ".join(f"{c.upper()}{_fmt(v, c)}" for c, v in words)
+        out.append(" ".join(t for t in (text, *ln.comments) if t))
+        origin.append(i)
+    if len(out) > MAX_BLOCKS:
+        raise _Error(f"the flattened program has more than {MAX_BLOCKS:,} blocks")
+    return None if any(m in (2, 30) for m in ms) else i + 1
