@@ -339,7 +339,9 @@ def compare_motion(
     ie6, oe6 = inp.ends, out.ends
     oe, okind, tgt = out.ends[:, :3].tolist(), out.kinds, target.tolist()
     istart = np.vstack([np.zeros((1, 3)), inp.ends[:-1, :3]])
-    zero_len = (np.abs(inp.ends[:, :3] - istart).max(axis=1) == 0) & np.array([k == "feed" for k in inp.kinds], dtype=bool)
+    zero_len = (np.abs(inp.ends[:, :3] - istart).max(axis=1) == 0) & np.array(
+        [k == "feed" for k in inp.kinds], dtype=bool
+    )
 
     # 1. the sequence: rapids one for one, each cutting move a run of output moves ending at its target
     problems: list[str] = []

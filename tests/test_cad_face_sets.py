@@ -346,7 +346,16 @@ def test_the_report_outlines_the_sets_hull(crest):
         assert fc.in_set and want - 1e-3 <= fc.strip_distance <= want + cell, (fc.strip_distance, want, cell)
     r = CliRunner().invoke(
         main,
-        ["compensate", str(csv), "--nominal", str(step), "--face-set", f"{right},{left}", "--report", str(d / "r.html")],
+        [
+            "compensate",
+            str(csv),
+            "--nominal",
+            str(step),
+            "--face-set",
+            f"{right},{left}",
+            "--report",
+            str(d / "r.html"),
+        ],
     )
     assert r.exit_code == 0, r.output
     assert "hatched strip" in (d / "r.html").read_text()

@@ -59,8 +59,16 @@ def test_errors_name_line_and_column(text, line, col, message):
             "canned cycle G88 (the operator retracts by hand: the position after it is unknown)",
         ),
         ("G0 X0 Y0 Z0\nG76 P0.05 Z-1 I-.075 J0.008 K0.045 Q29.5 L2 E0.045\n", 2, "threading cycle G76"),
-        ("G0 X0 Y0 Z0\nG41 D1 G1 X5\n", 2, "cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table)"),
-        ("G0 X0 Y0 Z0\nG18 G42.1 D2 G1 X5\n", 2, "cutter compensation G42.1 in the ZX or YZ plane (a lathe's nose radius): not treated"),
+        (
+            "G0 X0 Y0 Z0\nG41 D1 G1 X5\n",
+            2,
+            "cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table)",
+        ),
+        (
+            "G0 X0 Y0 Z0\nG18 G42.1 D2 G1 X5\n",
+            2,
+            "cutter compensation G42.1 in the ZX or YZ plane (a lathe's nose radius): not treated",
+        ),
         ("G0 X0 Y0 Z0\nG10 L2 P1 X1 R30\n", 2, "offset setting G10 L2"),
         ("G0 X0 Y0 Z0\nG10 L10 P1 Z5\n", 2, "offset setting G10 L10"),
         ("G0 X0 Y0 Z0\nG68 X0 Y0 R30\n", 2, "coordinate rotation G68"),

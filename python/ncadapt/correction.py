@@ -57,7 +57,9 @@ class Correction:
     #: Remarks on blocks kept but not corrected (G53 moves, G28/G30 returns): (line, message).
     notes: tuple[tuple[int, str], ...] = ()
     #: The program was flattened first (``expand``): ``lines_in`` its lines, ``blocks`` the
-    #: flattened program's, ``blocks_run`` the blocks it ran (flow lines included); None otherwise.
+    #: flattened program's, ``blocks_run`` the blocks it ran (flow lines included), ``kept`` no
+    #: block changed and the program was written as it is; None otherwise. The other figures are
+    #: those of the flattened program.
     expanded: dict | None = None
 
     def as_dict(self) -> dict:
@@ -87,7 +89,11 @@ def _unsupported_error(name, uns) -> RefusedError:
         f"{name}: {len(uns)} unsupported construct(s); nothing written "
         "(--keep-unsupported, keep_unsupported=True in Python, copies those blocks unchanged and corrects the "
         "rest"
-        + ("; --expand, expand=True in Python, flattens parameters and O-word flow into straight G-code" if flow else "")
+        + (
+            "; --expand, expand=True in Python, flattens parameters and O-word flow into straight G-code"
+            if flow
+            else ""
+        )
         + ")",
         [asdict(u) for u in uns],
     )

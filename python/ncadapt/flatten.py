@@ -60,7 +60,29 @@ _LEVELS = [("and", "or", "xor"), ("eq", "ne", "gt", "ge", "lt", "le"), ("+", "-"
 _OPS = sorted({op for lv in _LEVELS for op in lv}, key=len, reverse=True)
 # G codes (× 10) after which the machine's parameters (#5000 up) hold what the machine did: probing
 # G38.x, offsets G10, G52, G54-G59.3, G92-G92.3, stored positions G28.1/G30.1, tool lengths G43/G49
-_MACHINE_CODES = {100, 382, 383, 384, 385, 520, 540, 550, 560, 570, 580, 590, 591, 592, 593, 920, 921, 922, 923, 281, 301}
+_MACHINE_CODES = {
+    100,
+    382,
+    383,
+    384,
+    385,
+    520,
+    540,
+    550,
+    560,
+    570,
+    580,
+    590,
+    591,
+    592,
+    593,
+    920,
+    921,
+    922,
+    923,
+    281,
+    301,
+}
 _MACHINE_CODES |= {430, 431, 432, 490}
 _NUMBER = re.compile(r"[0-9]*\.?[0-9]*")
 _KEYWORDS = ("sub", "endsub", "call", "return", "if", "elseif", "else", "endif")
@@ -405,7 +427,9 @@ def flatten(data: bytes, name: str = "<program>") -> Flat:
     while i < len(lines):
         run += 1
         if run > MAX_BLOCKS:
-            raise InputError(f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", name, i + 1)
+            raise InputError(
+                f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", name, i + 1
+            )
         ln = lines[i]
         try:
             nxt = _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin)
@@ -425,7 +449,7 @@ def _cond(ln: _Line, mac: _Machine) -> float:
         raise _Error(f"o{ln.label} {ln.keyword} needs [a condition]")
     v = p.value()
     if p.peek():
-        raise _Error(f"unexpected '{p.s[p.k:]}' after o{ln.label} {ln.keyword}", p.k + 1)
+        raise _Error(f"unexpected '{p.s[p.k :]}' after o{ln.label} {ln.keyword}", p.k + 1)
     return v
 
 
@@ -532,6 +556,8 @@ def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list):
         mac.write(ref, v)
     ms = [round(v) for c, v in words if c == "m"]
     gs = [round(v * 10) for c, v in words if c == "g"]
+    if any(g in (700, 710, 711, 720, 721) for g in gs):
+        raise _Error("lathe cycles G70-G72 take their contour from the program's subroutines: not flattened")
     if any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms):
         # probing, offsets, stored positions, tool data: the machine sets its parameters again
         mac.set_numbered[MACHINE_PARAMETERS:] = False

@@ -186,24 +186,33 @@ def correct_file(
         except OSError as e:
             raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
         flat = flatten(data, str(p))
-    with atomic_open(out) as f, _BackgroundWriter(f) as w:
-        try:
-            c = _correct(
-                str(p) if flat is None else flat.data,
-                str(p),
-                w.write,
-                field,
-                keep_points=False,
-                out_file=f,
-                dialect=_check_dialect(dialect),
-                read_ahead=read_ahead,
-                **options,
-            )
-        except (InputError, RefusedError) as e:
-            raise e if flat is None else _flat_error(e, flat, str(p)) from None
-    if flat is not None:
-        expanded = {"lines_in": len(data.splitlines()), "blocks": len(flat.lines), "blocks_run": flat.blocks_run}
-        c = dataclasses.replace(c, expanded=expanded)
+    with atomic_open(out) as f:
+        with _BackgroundWriter(f) as w:
+            try:
+                c = _correct(
+                    str(p) if flat is None else flat.data,
+                    str(p),
+                    w.write,
+                    field,
+                    keep_points=False,
+                    out_file=f,
+                    dialect=_check_dialect(dialect),
+                    read_ahead=read_ahead,
+                    **options,
+                )
+            except (InputError, RefusedError) as e:
+                raise e if flat is None else _flat_error(e, flat, str(p)) from None
+        if flat is not None:
+            # a correction that changes no block of the flattened program (a zero field) keeps the
+            # program as it is written, its parameters and O-words with it
+            kept = c.blocks_changed == 0 and c.lines_added == 0
+            if kept:
+                f.seek(0)
+                f.truncate()
+                f.write(data)
+            n = len(data.splitlines())
+            expanded = {"lines_in": n, "blocks": len(flat.lines), "blocks_run": flat.blocks_run, "kept": kept}
+            c = dataclasses.replace(c, expanded=expanded)
     return c
 
 

@@ -1764,7 +1764,11 @@ fn unused_word(
         ),
         (
             b'Q',
-            cycle(&[730, 830]) || g(640) || other || user_m || m(|c| matches!(c, 19 | 61 | 66..=68)),
+            cycle(&[730, 830])
+                || g(640)
+                || other
+                || user_m
+                || m(|c| matches!(c, 19 | 61 | 66..=68)),
             "G64, G73, G83 or M code",
         ),
         (

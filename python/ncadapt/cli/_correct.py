@@ -192,8 +192,12 @@ def correct(
     if c.expanded is not None:
         e = c.expanded
         summary(
-            f"  flattened (--expand): {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; the corrected program is "
-            f"written flat, {e['blocks']:,} blocks"
+            f"  flattened (--expand): {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; "
+            + (
+                "no block changed: the program is written as it is"
+                if e["kept"]
+                else f"the corrected program is written flat, {e['blocks']:,} blocks"
+            )
         )
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "

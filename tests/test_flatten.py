@@ -1,0 +1,224 @@
+"""Flattening RS274NGC programs (parameters, expressions, O-word flow) into straight G-code.
+
+The truth is LinuxCNC's interpreter: rs274 runs the original program and the flattened one, and
+their canonical motion must be the same move for move (to rs274's printed resolution). The rules
+the evaluation follows are also checked one by one against their closed forms.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import rs274
+from ncadapt import flatten as fl
+from ncadapt import nc
+from ncadapt.cli import main
+from ncadapt.errors import InputError, RefusedError
+
+NC_FILES = Path("/usr/share/linuxcnc/ncfiles")
+CORPUS = Path(__file__).resolve().parents[1].parent / "shared" / "corpus" / "nc"
+needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not installed")
+
+
+def run(text: str) -> list[str]:
+    return fl.flatten(text.encode()).data.decode().splitlines()
+
+
+def value(expr: str) -> float:
+    (line,) = run(f"#1 = {expr}\nG0 X#1\n")
+    return float(line.split("X")[1])
+
+
+@pytest.mark.parametrize(
+    ("expr", "want"),
+    [
+        ("[2 + 3 * 4 ** 2]", 50.0),  # ** before * before +
+        ("[2 ** 3 ** 2]", 64.0),  # left to right
+        ("[10 - 4 - 3]", 3.0),
+        ("[-7 MOD 3]", 2.0),  # the divisor's sign
+        ("[7 MOD -3]", 1.0),
+        ("[1 EQ 1.00005]", 1.0),  # within 0.0001
+        ("[1 EQ 1.0002]", 0.0),
+        ("[1 NE 1.00005]", 0.0),
+        ("[2 GT 1 AND 0]", 0.0),  # comparisons before logic
+        ("[0 OR 3 XOR 1]", 0.0),
+        ("ROUND[2.5]", 3.0),
+        ("ROUND[-2.5]", -3.0),  # halves away from zero
+        ("FIX[-2.5]", -3.0),
+        ("FUP[-2.5]", -2.0),
+        ("ATAN[1]/[-1]", 135.0),  # degrees, by quadrant
+        ("SIN[30]", 0.5),
+        ("ACOS[0]", 90.0),
+        ("SQRT[2]", round(math.sqrt(2), 6)),
+        ("[ABS[-3] + EXP[0]]", 4.0),
+        ("[LN[EXP[2]]]", 2.0),
+        ("-[2]", -2.0),
+    ],
+)
+def test_expressions(expr, want):
+    assert value(expr) == pytest.approx(want, abs=1e-6)
+
+
+def test_parameters_set_on_a_line_take_effect_after_it():
+    # LinuxCNC: the line's other words, and the settings on it, see the values before the line
+    assert run("#1 = 5\n#1 = 7 #2 = #1 G0 X#1\nG0 Y#2\n") == ["G0 X5", "G0 Y5"]
+    assert run("#<a> = 2\n#<_g> = [#<a> * 3]\nG0 X#<_g>\n") == ["G0 X6"]
+    assert run("#3 = 2\n#2 = 9\nG0 X##3\n") == ["G0 X9"]  # indirection
+
+
+def test_subroutines_arguments_locals_and_return_values():
+    prog = """o<area> sub
+#<r> = #1
+o<area> return [#<r> * #<r> * 3]
+o<area> endsub
+#1 = 11
+#<r> = 99
+o<area> call [2]
+G0 X#<_value> Y#1 Z#<r>
+M2
+"""
+    # the call's #1 and named locals are its own; the caller's come back
+    assert run(prog) == ["G0 X12 Y11 Z99", "M2"]
+
+
+def test_recursion_and_flow():
+    prog = """o<fact> sub
+o1 if [#1 LE 1]
+o<fact> return [1]
+o1 endif
+o<fact> call [#1 - 1]
+o<fact> return [#1 * #<_value>]
+o<fact> endsub
+o<fact> call [5]
+G0 X#<_value>
+#1 = 0
+o2 while [#1 LT 10]
+#1 = [#1 + 1]
+o3 if [[#1 MOD 2] EQ 0]
+o2 continue
+o3 elseif [#1 GT 6]
+o2 break
+o3 else
+G1 X#1
+o3 endif
+o2 endwhile
+#2 = 0
+o4 do
+#2 = [#2 + 1]
+o4 while [#2 LT 0]
+G0 Z#2
+o5 repeat [0]
+G0 Y1
+o5 endrepeat
+o6 repeat [2]
+G0 Y2
+o6 endrepeat
+"""
+    assert run(prog) == ["G0 X120", "G1 X1", "G1 X3", "G1 X5", "G0 Z1", "G0 Y2", "G0 Y2"]
+
+
+@pytest.mark.parametrize(
+    ("prog", "line", "message"),
+    [
+        ("G0 X#<nope>\n", 1, "named parameter #<nope> is not defined"),
+        ("G0 X#<_x>\n", 1, "predefined parameters hold the machine's state"),
+        ("G38.2 Z-5 F10\nG0 Z#5063\n", 2, "#5063 holds the machine's state"),
+        ("#5063 = 1\nG0 Z#5063\n", None, None),  # set by the program: its value
+        ("#5063 = 1\nG38.2 Z-5 F10\nG0 Z#5063\n", 3, "#5063 holds the machine's state"),  # a probe sets it again
+        ("G0 X[1/0]\n", 1, "division by zero"),
+        ("G0 X SQRT[-1]\n", 1, "has no value"),
+        ("o<elsewhere> call\n", 1, "not in this file"),
+        ("o1 if [1]\nG0 X1\n", 1, "o1 if without its end"),
+        ("o1 endif\n", 1, "without its o1 if"),
+        ("M98 P100\n", 1, "M98/M99"),
+        ("o1 while [1]\nG0 X1\no1 endwhile\n", 3, "more than 50 blocks"),
+    ],
+)
+def test_refused_at_their_line(prog, line, message, monkeypatch):
+    monkeypatch.setattr(fl, "MAX_BLOCKS", 50)
+    if line is None:
+        assert run(prog) == ["G0 Z1"]
+        return
+    with pytest.raises(InputError) as e:
+        fl.flatten(prog.encode(), "p.ngc")
+    assert e.value.line == line and message in e.value.message
+
+
+def _programs():
+    out = []
+    for folder in (NC_FILES, CORPUS):
+        if folder.is_dir():
+            out += sorted(p for p in folder.glob("*.ngc") if b"o" in p.read_bytes().lower() or b"#" in p.read_bytes())
+    return [p for p in out if any(k in p.read_bytes().lower() for k in (b"#", b" sub", b"call", b"while", b"repeat"))]
+
+
+@needs_rs274
+@pytest.mark.parametrize("path", _programs(), ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_same_motion_as_rs274(path, tmp_path):
+    """Where rs274 runs a program (with a tool table of tools 1–99), it runs the flattened one to
+    the same motion; where the flattening refuses, it says where."""
+    table = tmp_path / "tools.tbl"
+    table.write_text("".join(f"T{t} P{t} Z0 D0 ;\n" for t in range(1, 100)))
+    before = rs274.canonical(path, tools=table)
+    try:
+        flat = fl.flatten(path.read_bytes(), path.name)
+    except InputError as e:
+        assert e.line > 0
+        return
+    if before.error is not None:
+        pytest.skip(f"rs274 does not run the program: {before.error.splitlines()[0]}")
+    q = tmp_path / path.name
+    q.write_bytes(flat.data)
+    after = rs274.canonical(q, tools=table)
+    assert after.error is None, after.error
+    assert after.kinds == before.kinds
+    # the same to the printed resolution (4 decimals of the program's unit, one unit of rounding)
+    tol = 2 * max(before.resolution_mm, 1e-4) + 1e-9
+    np.testing.assert_allclose(after.ends, before.ends, atol=tol, rtol=0)
+    assert len(flat.lines) == len(flat.data.splitlines()) and flat.lines.min() >= 1
+
+
+SPIRAL = """G21 G90 G64
+G0 Z1
+G0 X2 Y0
+G1 Z-0.1 F100
+o100 repeat [40]
+G91 G1 @-.05 ^9
+o100 endrepeat
+G90 G0 Z1
+M2
+"""
+
+
+@needs_rs274
+def test_cli_expand(tmp_path):
+    src = tmp_path / "spiral.ngc"
+    src.write_text(SPIRAL)
+    out = tmp_path / "out.ngc"
+    r = CliRunner().invoke(main, ["correct", str(src), "--shift", "0,0,0.05", "-o", str(out)])
+    assert r.exit_code == 1 and "--expand" in r.output
+    r = CliRunner().invoke(main, ["correct", str(src), "--shift", "0,0,0.05", "-o", str(out), "--expand"])
+    assert r.exit_code == 0, r.output
+    # 4 blocks, the repeat, 40 × (the move and the endrepeat), 2 blocks; 4 + 40 + 2 written
+    assert "9 lines ran 87 blocks; the corrected program is written flat, 46 blocks" in r.output
+    a, b = rs274.canonical(src), rs274.canonical(out)
+    assert a.error is None and b.error is None and a.kinds == b.kinds
+    feed = np.array([k != "traverse" for k in a.kinds])
+    np.testing.assert_allclose(b.ends[feed, 2], a.ends[feed, 2] + 0.05, atol=1e-4)
+    np.testing.assert_allclose(b.ends[:, :2], a.ends[:, :2], atol=1e-4)
+    # a zero field changes no block: the program is written as it is
+    r = CliRunner().invoke(main, ["correct", str(src), "--shift", "0,0,0", "-o", str(tmp_path / "z.ngc"), "--expand"])
+    assert r.exit_code == 0 and (tmp_path / "z.ngc").read_bytes() == src.read_bytes()
+
+
+def test_errors_of_the_flat_program_name_the_original_line(tmp_path):
+    src = tmp_path / "p.ngc"
+    src.write_text("G21 G0 X0 Y0 Z0\n#1 = 3\no1 repeat [2]\nG1 X#1 F100\nG5.1 X1 I1 J1 P1 Q1\no1 endrepeat\nM2\n")
+    with pytest.raises(RefusedError) as e:
+        nc.correct_file(src, tmp_path / "o.ngc", lambda p: 0 * p, expand=True)
+    assert e.value.details[0]["line"] == 5 and "flattened" in e.value.message
