@@ -440,6 +440,17 @@ def test_tool_lengths_move_the_tip_coordinates_as_rs274(tmp_path):
     _corrected_matches(tmp_path, TOOL_LENGTHS, _Tilt(0.002), name="u.ngc")
 
 
+def test_a_tool_length_before_the_first_move_is_no_move(tmp_path):
+    """G43.1's axis words are lengths, not a move in the work system: a G55 after it and before the
+    first move is the system the moves are in (it used to count as a change after a move)."""
+    src = "G21 G43.1 Z1.5\nG55\nG0 X0 Y0 Z5\nG1 Z0 F100\nG1 X10\nM2\n"
+    (tmp_path / "l.ngc").write_text(src)
+    prog = nc.read(tmp_path / "l.ngc")
+    assert not prog.unsupported
+    _compare_endpoints(prog, tmp_path / "l.ngc")
+    _corrected_matches(tmp_path, src, _Tilt(0.002), name="lo.ngc")
+
+
 def test_a_tool_table_length_leaves_the_tip_height_unknown():
     """G43 H takes the length from the tool table, which the program does not give: the tip's
     height is unknown until a move sets Z (a G91 Z move after it is left as written, with the

@@ -1189,12 +1189,13 @@ impl Interpreter {
             } else {
                 out.summary.mm_lines += 1;
             }
-            // (axis words of G28/G30, G53 or G10/G92 are no move in a work system)
+            // (axis words of G28/G30, G53, G10/G92 or G43.1 are no move in a work system)
             if st.wcs_moves.is_none()
                 && (named != 0 || motion_word.is_some())
                 && home.is_none()
                 && nonmodal_axis_user.is_none()
                 && frame_code.is_none()
+                && tool_length != Some(431)
                 && !g53
             {
                 st.wcs_moves = Some(st.wcs);
