@@ -665,11 +665,16 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.reason, r.refusal_line = _generic(e.message), e.line
         return
     r.units = prog.units
-    flow = ("O-word", "parameters or expressions")
-    if uns and entry.root is None and dialect == "linuxcnc" and any(u.construct.startswith(flow) for u in uns):
+    flow = ("O-word", "parameters or expressions", "subprogram M")
+    if (
+        uns
+        and entry.root is None
+        and dialect in ("linuxcnc", "fanuc")
+        and any(u.construct.startswith(flow) for u in uns)
+    ):
         # as `ncadapt correct --expand`: the flattened program is what is corrected and checked
         try:
-            flat = flatten(entry.path.read_bytes(), entry.file)
+            flat = flatten(entry.path.read_bytes(), entry.file, dialect)
         except InputError as e:
             r.outcome = f"refused: line {e.line}: {e.message} (--expand)"
             r.reason, r.refusal_line = _generic(e.message) + " (--expand)", e.line

@@ -135,7 +135,7 @@ o6 endrepeat
         ("o<elsewhere> call\n", 1, "not in this file"),
         ("o1 if [1]\nG0 X1\n", 1, "o1 if without its end"),
         ("o1 endif\n", 1, "without its o1 if"),
-        ("M98 P100\n", 1, "M98/M99"),
+        ("M98 P100\n", 1, "program O100 is not in this file"),
         ("o1 while [1]\nG0 X1\no1 endwhile\n", 3, "more than 50 blocks"),
     ],
 )
@@ -222,3 +222,71 @@ def test_errors_of_the_flat_program_name_the_original_line(tmp_path):
     with pytest.raises(RefusedError) as e:
         nc.correct_file(src, tmp_path / "o.ngc", lambda p: 0 * p, expand=True)
     assert e.value.details[0]["line"] == 5 and "flattened" in e.value.message
+
+
+FANUC_SUBS = """%
+O1000 (MAIN)
+G21 G90 G17
+G0 X0. Y0. Z5.
+M98 P2000 L3
+G0 Z5.
+M98 P3000
+M30
+O2000 (A STEP: ONE SLOT)
+G91 G1 Z-6. F100.
+X10.
+Z6.
+G90
+M99
+O3000 (NESTED)
+M98 P2000
+M99
+%
+"""
+
+
+@needs_rs274
+def test_m98_subprograms_as_rs274_runs_them(tmp_path):
+    """M98 P… L… runs program O… of the file L times, M99 ends a pass; rs274 (which reads Fanuc-style
+    subprograms) runs the original and the flattened program to the same motion."""
+    src = tmp_path / "subs.nc"
+    src.write_text(FANUC_SUBS)
+    flat = fl.flatten(src.read_bytes(), "subs.nc", "fanuc")
+    lines = flat.data.decode().splitlines()
+    assert lines.count("G91 G1 Z-6. F100.") == 4 and "O2000" not in flat.data.decode()
+    q = tmp_path / "flat.nc"
+    q.write_bytes(flat.data)
+    a, b = rs274.canonical(src), rs274.canonical(q)
+    assert a.error is None and b.error is None and a.kinds == b.kinds
+    np.testing.assert_allclose(b.ends, a.ends, atol=1e-6)
+    # the flattened program is corrected in the Fanuc dialect (its numbers keep their points)
+    out = tmp_path / "out.nc"
+    c = nc.correct_file(src, out, lambda p: np.c_[0 * p[:, :2], 0.05 + 0 * p[:, 2]], dialect="fanuc", expand=True)
+    assert c.expanded["blocks"] == len(lines)
+    d = rs274.canonical(out)
+    feed = np.array([k != "traverse" for k in a.kinds])
+    np.testing.assert_allclose(d.ends[feed, 2], a.ends[feed, 2] + 0.05, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("prog", "line", "message"),
+    [
+        ("G0 X0\nM99\n", 2, "M99 outside a subprogram call"),
+        ("M98 P12\nM30\n", 1, "program O12 is not in this file"),
+        ("M98 P30012\nM30\nO12\nM99\n", 1, "a longer P that counts passes"),
+        ("M98 P1 X2.\nM30\nO1\nM99\n", 1, "with a X word"),
+        ("O1\nM98 P2\nM30\nO2\nM99 P5\n", 5, "M99 with P or L"),
+        ("#100 = 2.\nG0 X#100\n", 1, "Fanuc Macro B"),
+        ("G65 P9010 A1.\n", 1, "Fanuc Macro B"),
+        ("WHILE [1 LT 2] DO1\nEND1\n", 1, "Fanuc Macro B"),
+    ],
+)
+def test_subprogram_refusals(prog, line, message):
+    with pytest.raises(InputError) as e:
+        fl.flatten(prog.encode(), "p.nc", "fanuc")
+    assert e.value.line == line and message in e.value.message
+
+
+def test_fanuc_numbers_keep_their_points():
+    # a number without a decimal point stays as written, for the Fanuc reader to refuse
+    assert fl.flatten(b"O1\nG0 X10 Y2.5\nM30\n", "p", "fanuc").data == b"G0 X10 Y2.5\nM30\n"

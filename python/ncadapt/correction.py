@@ -84,7 +84,7 @@ def _engine(fn, name):
 
 
 def _unsupported_error(name, uns) -> RefusedError:
-    flow = any(u.construct.startswith(("O-word", "parameters or expressions")) for u in uns)
+    flow = any(u.construct.startswith(("O-word", "parameters or expressions", "subprogram M")) for u in uns)
     return RefusedError(
         f"{name}: {len(uns)} unsupported construct(s); nothing written "
         "(--keep-unsupported, keep_unsupported=True in Python, copies those blocks unchanged and corrects the "

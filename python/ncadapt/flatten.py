@@ -85,6 +85,7 @@ _MACHINE_CODES = {
 }
 _MACHINE_CODES |= {430, 431, 432, 490}
 _NUMBER = re.compile(r"[0-9]*\.?[0-9]*")
+_LITERAL = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)")
 _KEYWORDS = ("sub", "endsub", "call", "return", "if", "elseif", "else", "endif")
 _KEYWORDS += ("while", "endwhile", "do", "repeat", "endrepeat", "break", "continue")
 
@@ -290,6 +291,11 @@ def _read(text: str, src: str) -> list[_Line]:
         if body.startswith("/"):
             body = body[1:]
         line = _Line(body, comments)
+        prog = re.fullmatch(r"(?:n\d+)?o(\d+)", body)
+        if prog:  # a program number (Fanuc's O1234; M98 P1234 calls it)
+            line.label, line.keyword = str(int(prog.group(1))), "program"
+            out.append(line)
+            continue
         m = re.match(r"(?:n\d+)?o(<[^>]*>|\d+)([a-z]+)(.*)$", body)
         if m and body.lstrip("n0123456789").startswith("o"):
             line.label, kw, line.rest = m.group(1), m.group(2), m.group(3)
@@ -305,6 +311,7 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict]:
     """The O-word structure: for each flow line, the lines it jumps to; the subroutines by label."""
     jumps: dict[int, dict] = {}
     subs: dict[str, int] = {}
+    programs: dict[int, int] = {}
     stack: list[tuple[str, str, int, list[int]]] = []  # (label, kind, line, branch lines)
     for i, ln in enumerate(lines):
         kw, lab = ln.keyword, ln.label
@@ -314,6 +321,11 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict]:
         def fail(msg, i=i):
             raise InputError(msg, src, i + 1)
 
+        if kw == "program":
+            if int(lab) in programs:
+                fail(f"program O{lab} given twice (first at line {programs[int(lab)] + 1})")
+            programs[int(lab)] = i
+            continue
         if kw == "sub":
             if stack:
                 fail(f"o{lab} sub inside o{stack[-1][0]} {stack[-1][1]}")
@@ -359,6 +371,7 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict]:
     if stack:
         lab, kind, start, _ = stack[-1]
         raise InputError(f"o{lab} {kind} without its end", src, start + 1)
+    subs.update({f"#{k}": v for k, v in programs.items()})  # (M98 P…: not an O-word label)
     return jumps, subs
 
 
@@ -367,6 +380,7 @@ class _Machine:
 
     def __init__(self, src: str):
         self.src = src
+        self.fanuc = False
         self.numbered = np.zeros(5603)
         self.set_numbered = np.zeros(5603, bool)
         self.globals: dict[str, float] = {}
@@ -402,8 +416,11 @@ class _Machine:
             self.frames[-1][ref] = v
 
 
-def flatten(data: bytes, name: str = "<program>") -> Flat:
-    """The straight G-code that an RS274NGC program runs (see the module's text).
+def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> Flat:
+    """The straight G-code that an RS274NGC program runs (see the module's text); in the ``fanuc``
+    dialect its M98/M99 subprograms (Macro B variables and flow are refused). Words written as
+    numbers are written as they are; computed values with six decimals (and a decimal point in the
+    Fanuc dialect, where a number without one counts least input increments).
 
     Examples
     --------
@@ -417,11 +434,15 @@ def flatten(data: bytes, name: str = "<program>") -> Flat:
     text = data.decode("utf-8", "surrogateescape")
     lines = _read(text, name)
     jumps, subs = _match(lines, name)
+    if dialect not in ("linuxcnc", "fanuc"):
+        raise ValueError(f"flatten reads LinuxCNC's and Fanuc's programs, not {dialect}")
     mac = _Machine(name)
+    mac.fanuc = dialect == "fanuc"
     out: list[str] = []
     origin: list[int] = []
-    # the call stack: (line to return to, saved #1-#30, loop counters)
-    calls: list[tuple[int, np.ndarray, dict]] = []
+    # the call stack: ("o", line to return to, saved #1-#30, loop counters) for an O-word call,
+    # ("m98", line to return to, the subprogram's first line, passes left) for M98
+    calls: list[tuple] = []
     counters: dict[int, int] = {}
     i, run = 0, 0
     while i < len(lines):
@@ -432,6 +453,12 @@ def flatten(data: bytes, name: str = "<program>") -> Flat:
             )
         ln = lines[i]
         try:
+            if mac.fanuc and (
+                "#" in ln.text
+                or ln.keyword not in (None, "program")
+                or re.search(r"g0*65(?![\d.])|\bif\[|while\[|goto|\bend\d", ln.text)
+            ):
+                raise _Error("Fanuc Macro B (# variables, G65, IF/GOTO, WHILE/DO/END): not flattened")
             nxt = _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin)
         except _Error as e:
             raise InputError(e.message, name, i + 1, e.col) from None
@@ -440,6 +467,41 @@ def flatten(data: bytes, name: str = "<program>") -> Flat:
         i = nxt
     body = "".join(s + "\n" for s in out)
     return Flat(body.encode("utf-8", "surrogateescape"), np.asarray(origin, dtype=np.int64) + 1, run)
+
+
+def _subprogram(words, i: int, calls: list, subs: dict) -> int:
+    """M98 P<program> [L<passes>] calls program O<program> of the file; M99 ends a pass of it."""
+    got = dict(words)
+    other = sorted(set(got) - {"m", "p", "l"})
+    if other:
+        raise _Error(f"M98/M99 with a {other[0].upper()} word: not flattened")
+    if round(got["m"]) == 99:
+        if "p" in got or "l" in got:
+            raise _Error("M99 with P or L (a jump within the program): not flattened")
+        if not calls or calls[-1][0] != "m98":
+            raise _Error("M99 outside a subprogram call (a main program's M99 repeats it without end)")
+        _, back, start, left = calls.pop()
+        if left > 1:
+            calls.append(("m98", back, start, left - 1))
+            return start
+        return back
+    pv, lv = got.get("p"), got.get("l", 1.0)
+    if pv is None or pv != int(pv) or not 0 <= pv <= 9999:
+        raise _Error(
+            "M98 needs P, the number of a program in this file (0-9999; a longer P that counts passes in its "
+            "first digits, as some Fanuc controls read it, is not flattened: give the passes as L)"
+        )
+    if lv != int(lv) or lv < 0:
+        raise _Error(f"M98 L{lv:g}: the passes are a whole number >= 0")
+    key = f"#{int(pv)}"
+    if key not in subs:
+        raise _Error(f"M98 P{int(pv)}: program O{int(pv)} is not in this file (a program in the control's memory)")
+    if len(calls) >= MAX_DEPTH:
+        raise _Error(f"subprograms nested deeper than {MAX_DEPTH}")
+    if lv == 0:
+        return i + 1
+    calls.append(("m98", i + 1, subs[key] + 1, int(lv)))
+    return subs[key] + 1
 
 
 def _cond(ln: _Line, mac: _Machine) -> float:
@@ -457,7 +519,9 @@ def _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin):
     """Run line i; the next line's index, or None at the program's end."""
     kw = ln.keyword
     if kw is None:
-        return _block(ln, i, mac, out, origin)
+        return _block(ln, i, mac, out, origin, calls, subs)
+    if kw == "program":
+        return i + 1  # a program number: where M98 enters, no block
     j = jumps.get(i, {})
     if kw == "sub":
         return j["end"] + 1  # a definition: skipped where it stands
@@ -466,9 +530,9 @@ def _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin):
         if p.peek():
             mac.globals["_value"] = p.value()
             mac.globals["_value_returned"] = 1.0
-        if not calls:
+        if not calls or calls[-1][0] != "o":
             raise _Error(f"o{ln.label} {kw} outside a call")
-        back, saved, saved_counters = calls.pop()
+        _, back, saved, saved_counters = calls.pop()
         mac.numbered[1:31] = saved
         mac.frames.pop()
         counters.clear()
@@ -487,7 +551,7 @@ def _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin):
             args.append(p.value())
         if len(args) > 30:
             raise _Error("more than 30 call arguments")
-        calls.append((i + 1, mac.numbered[1:31].copy(), dict(counters)))
+        calls.append(("o", i + 1, mac.numbered[1:31].copy(), dict(counters)))
         mac.numbered[1:31] = 0.0
         mac.numbered[1 : 1 + len(args)] = args
         mac.frames.append({})
@@ -529,15 +593,16 @@ def _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin):
     raise _Error(f"o{ln.label} {kw}: not followed")
 
 
-def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list):
+def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list, calls: list, subs: dict):
     """A block of words and parameter settings: written with its values, the settings applied
-    after the line is read (as LinuxCNC does)."""
+    after the line is read (as LinuxCNC does); M98/M99 call and end subprograms."""
     if ln.text == "%":
         out.append("%")
         origin.append(i)
         return i + 1
     p = _Parser(ln.text, mac.read)
     words: list[tuple[str, float]] = []
+    texts: list[str] = []
     sets = []
     while p.peek():
         c = p.peek()
@@ -547,9 +612,16 @@ def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list):
             sets.append((ref, p.value()))
         elif c.isalpha() or c in "@^":
             p.k += 1
+            at = p.k
             v = p.value()
             if c != "n":
                 words.append((c, v))
+                written = p.s[at : p.k]
+                if not _LITERAL.fullmatch(written):
+                    written = _fmt(v, c)
+                    if mac.fanuc and c not in "gmnopst" and "." not in written:
+                        written += "."
+                texts.append(c.upper() + written)
         else:
             raise _Error(f"unexpected '{c}'", p.k + 1)
     for ref, v in sets:
@@ -562,10 +634,9 @@ def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list):
         # probing, offsets, stored positions, tool data: the machine sets its parameters again
         mac.set_numbered[MACHINE_PARAMETERS:] = False
     if any(m in (98, 99) for m in ms):
-        raise _Error("M98/M99 subprograms (Fanuc's) are not flattened; LinuxCNC's O-word subroutines are")
+        return _subprogram(words, i, calls, subs)
     if words or ln.comments:
-        text = " ".join(f"{c.upper()}{_fmt(v, c)}" for c, v in words)
-        out.append(" ".join(t for t in (text, *ln.comments) if t))
+        out.append(" ".join(t for t in (" ".join(texts), *ln.comments) if t))
         origin.append(i)
     if len(out) > MAX_BLOCKS:
         raise _Error(f"the flattened program has more than {MAX_BLOCKS:,} blocks")

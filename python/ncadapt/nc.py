@@ -164,8 +164,8 @@ def correct_file(
     :data:`DIALECTS`; ``ncadapt.dialects.resolve`` detects it). ``read_ahead``: a
     ``ncadapt._nc.read_ahead(path, constants.PIECE_BYTES, dialect)`` started earlier on the same
     file (the command line starts one before its imports), whose pieces the engine takes.
-    ``expand``: the program's parameters, expressions and O-word flow (LinuxCNC's) are first
-    flattened into straight G-code (:func:`ncadapt.flatten.flatten`), which is corrected and
+    ``expand``: the program's parameters, expressions and O-word flow (LinuxCNC's), and its M98/M99
+    subprograms (LinuxCNC's and Fanuc's), are first flattened into straight G-code (:func:`ncadapt.flatten.flatten`), which is corrected and
     written; ``Correction.expanded`` then says how many blocks. The output is written atomically: when a check
     refuses (an unsupported construct, a displacement over the limit, a point outside the field),
     nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
@@ -174,8 +174,8 @@ def correct_file(
     _refuse_overwrite(out, p)
     flat = None
     if expand:
-        if dialect != "linuxcnc":
-            raise ValueError(f"expand reads LinuxCNC's parameters and O-words; the dialect is {dialect}")
+        if dialect not in ("linuxcnc", "fanuc"):
+            raise ValueError(f"expand reads LinuxCNC's and Fanuc's programs; the dialect is {dialect}")
         if read_ahead is not None:
             read_ahead.cancel()
             read_ahead = None
@@ -185,7 +185,7 @@ def correct_file(
             data = p.read_bytes()
         except OSError as e:
             raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
-        flat = flatten(data, str(p))
+        flat = flatten(data, str(p), dialect)
     with atomic_open(out) as f:
         with _BackgroundWriter(f) as w:
             try:

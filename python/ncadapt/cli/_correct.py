@@ -99,8 +99,8 @@ def _shift(ctx, param, value):
     "--expand",
     is_flag=True,
     help="Flatten the program's parameters, expressions and O-word flow (LinuxCNC's: o-word subroutines, "
-    "if/while/repeat) into straight G-code as LinuxCNC runs them, and correct and write that. Without it such "
-    "programs are refused.",
+    "if/while/repeat) and its M98/M99 subprograms (LinuxCNC's and Fanuc's) into straight G-code as the control "
+    "runs them, and correct and write that. Without it such programs are refused.",
 )
 @click.option(
     "--tool-table",
@@ -146,9 +146,9 @@ def correct(
     if (tool_table is None) != (tool_units is None):
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = dialects.resolve(program, dialect)
-    if expand and d.name != "linuxcnc":
+    if expand and d.name not in ("linuxcnc", "fanuc"):
         raise click.UsageError(
-            f"--expand flattens LinuxCNC's parameters and O-words; this program is read as {d.describe()}"
+            f"--expand flattens LinuxCNC's and Fanuc's programs; this program is read as {d.describe()}"
         )
     tools = None
     if tool_table is not None:
