@@ -118,3 +118,29 @@ def match_moves(predicted: np.ndarray, mv: list[Move], tol: float, tol_arc: floa
             f"{m.dist(predicted[min(j, n - 1)]):.6f} mm off the move)"
         )
     assert j == n, f"{n - j} predicted point(s) not reached by rs274's motion, first {predicted[j].round(5)}"
+
+
+# ------------------------------------------------------------------------------ CAD parts
+def along(shape, points, normals, reach=1.0):
+    """The signed distance from each point along its normal to the nearest crossing of the shape."""
+    from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
+    from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
+
+    it = IntCurvesFace_ShapeIntersector()
+    it.Load(shape, 1e-9)
+    out = np.full(len(points), np.nan)
+    for k, (p, n) in enumerate(zip(points, normals)):
+        it.Perform(gp_Lin(gp_Pnt(*map(float, p)), gp_Dir(*map(float, n))), -reach, reach)
+        ts = [it.WParameter(i) for i in range(1, it.NbPnt() + 1)]
+        if ts:
+            out[k] = min(ts, key=abs)
+    return out
+
+
+def xyz_csv(path, pts):
+    path.write_text("x,y,z\n" + "".join(f"{float(x)!r},{float(y)!r},{float(z)!r}\n" for x, y, z in pts))
+    return path
+
+
+def rms(a) -> float:
+    return float(np.sqrt(np.mean(np.square(a))))

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from helpers import along, rms, xyz_csv
 from ncadapt import measure
 from ncadapt.cli import main
 from ncadapt.processes import freeform as pf
@@ -62,32 +63,6 @@ def _count(shape, kind) -> int:
     return n
 
 
-def _along(shape, points, normals, reach=1.0):
-    """For each point, the signed distance along its normal to the nearest crossing of the shape's
-    faces within ±reach mm (NaN if none)."""
-    from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
-    from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
-
-    it = IntCurvesFace_ShapeIntersector()
-    it.Load(shape, 1e-9)
-    out = np.full(len(points), np.nan)
-    for k, (p, n) in enumerate(zip(points, normals)):
-        it.Perform(gp_Lin(gp_Pnt(*map(float, p)), gp_Dir(*map(float, n))), -reach, reach)
-        ts = [it.WParameter(i) for i in range(1, it.NbPnt() + 1)]
-        if ts:
-            out[k] = min(ts, key=abs)
-    return out
-
-
-def _csv(path, pts):
-    path.write_text("x,y,z\n" + "".join(f"{float(x)!r},{float(y)!r},{float(z)!r}\n" for x, y, z in pts))
-    return path
-
-
-def _rms(a) -> float:
-    return float(np.sqrt(np.mean(np.square(a))))
-
-
 # --------------------------------------------------------------------------------- the parts
 R, H, ANGLE = 40.0, 50.0, 60.0  # the cylinder segment: radius, height mm, opening deg
 
@@ -118,7 +93,7 @@ def _cylinder_case(tmp_path, seed=7):
     step = _write_step(_cylinder_solid(), tmp_path / "cyl.step")
     th, z = np.meshgrid(np.arange(6, 54.1, 1.5), np.arange(5, 45.1, 1.5), indexing="ij")
     _, _, m = _cylinder_points(th.ravel(), z.ravel(), np.random.default_rng(seed))
-    return step, _csv(tmp_path / "cyl.csv", m)
+    return step, xyz_csv(tmp_path / "cyl.csv", m)
 
 
 def _cylinder_samples(n=1500, seed=3):
@@ -133,9 +108,9 @@ def _cylinder_samples(n=1500, seed=3):
 def _truth_figures(truth, t, measured):
     left = truth + t  # the systematic error after compensation: E − dF
     return {
-        "inside": _rms(left[measured]) / _rms(truth[measured]),
-        "border": _rms(left[~measured]) / _rms(truth[~measured]),
-        "inside_rms": _rms(left[measured]),
+        "inside": rms(left[measured]) / rms(truth[measured]),
+        "border": rms(left[~measured]) / rms(truth[~measured]),
+        "inside_rms": rms(left[measured]),
     }
 
 
@@ -154,7 +129,7 @@ def test_a_cylinder_segment_is_compensated_in_its_own_uv(tmp_path):
 
     assert _valid(back) and _count(back, TopAbs_SOLID) == 1 and _count(back, TopAbs_FACE) == 5
     p, n, th, z, measured = _cylinder_samples()
-    t = _along(back, p, n)
+    t = along(back, p, n)
     assert np.isfinite(t).all()
     # the written face lies −dF from the nominal along its normal, within 1 µm
     np.testing.assert_allclose(t, -pc.faces[0].df(th, z), atol=1e-3)
@@ -212,7 +187,7 @@ def test_a_blade_like_bspline_patch(tmp_path):
     p, n = _patch_eval(face, uu.ravel(), vv.ravel())
     rng = np.random.default_rng(11)
     m = p + (_patch_error(p) + NOISE * rng.normal(size=len(p)))[:, None] * n
-    csv = _csv(tmp_path / "patch.csv", m)
+    csv = xyz_csv(tmp_path / "patch.csv", m)
     # the normals turn through 195°: not a height field over one plane
     r = CliRunner().invoke(main, ["analyze", str(csv), "--nominal", str(step)])
     assert r.exit_code == 2 and "not a height field" in r.output, r.output
@@ -233,7 +208,7 @@ def test_a_blade_like_bspline_patch(tmp_path):
     rs = np.random.default_rng(5)
     su, sv = rs.uniform(u0, u1, 1200), rs.uniform(v0, v1, 1200)
     ps, ns = _patch_eval(face, su, sv)
-    t = _along(back, ps, ns)
+    t = along(back, ps, ns)
     ok = np.isfinite(t)
     assert ok.mean() > 0.99  # a line through the very edge may miss the face
     measured = (su >= lo_u) & (su <= hi_u) & (sv >= lo_v) & (sv <= hi_v)
@@ -259,7 +234,7 @@ def test_a_two_face_part_names_its_faces(tmp_path):
     top = top_p + np.column_stack(
         [0 * top_p[:, 0], 0 * top_p[:, 0], top_error(top_p) + NOISE * rng.normal(size=len(top_p))]
     )
-    csv = _csv(tmp_path / "two.csv", np.vstack([side, top]))
+    csv = xyz_csv(tmp_path / "two.csv", np.vstack([side, top]))
     out, surf, js = tmp_path / "two_c.step", tmp_path / "faces.igs", tmp_path / "two.json"
     r = CliRunner().invoke(
         main,
@@ -273,13 +248,13 @@ def test_a_two_face_part_names_its_faces(tmp_path):
     assert _valid(back) and _count(back, TopAbs_SOLID) == 1 and _count(back, TopAbs_FACE) == 5
     # the side, as for the cylinder alone
     p, n, _, _, measured = _cylinder_samples(600)
-    f = _truth_figures(_cylinder_error(p), _along(back, p, n), measured)
+    f = _truth_figures(_cylinder_error(p), along(back, p, n), measured)
     assert f["inside"] <= 0.10 and f["border"] <= 0.20 and f["inside_rms"] <= 0.002, f
     # the top: normal +z; the measured area r 4…36 mm, 6…54°
     rs = np.random.default_rng(4)
     r_, a_ = rs.uniform(0.5, R - 0.5, 600), np.radians(rs.uniform(0.5, ANGLE - 0.5, 600))
     p = np.column_stack([r_ * np.cos(a_), r_ * np.sin(a_), np.full(600, H)])
-    t = _along(back, p, np.tile([0.0, 0.0, 1.0], (600, 1)))
+    t = along(back, p, np.tile([0.0, 0.0, 1.0], (600, 1)))
     measured = (r_ >= 4) & (r_ <= 36) & (a_ >= np.radians(6)) & (a_ <= np.radians(54))
     f = _truth_figures(top_error(p), t, measured)
     assert f["inside"] <= 0.10 and f["border"] <= 0.20 and f["inside_rms"] <= 0.002, f
@@ -306,12 +281,12 @@ def test_refusals(tmp_path, monkeypatch):
     rng = np.random.default_rng(2)
     side = np.loadtxt(csv, delimiter=",", skiprows=1)
     # a few points on the top face as well: too few to decompose it
-    few = _csv(tmp_path / "few.csv", np.vstack([side, [[10.0 + k, 5.0, H + 0.01] for k in range(4)]]))
+    few = xyz_csv(tmp_path / "few.csv", np.vstack([side, [[10.0 + k, 5.0, H + 0.01] for k in range(4)]]))
     _refused(tmp_path, [few, "--nominal", step], "face 2: 4 measured point(s)")
     # points over a small corner of the face: too little of it to compensate
     th, z = np.meshgrid(np.arange(2, 14.1, 1.0), np.arange(2, 12.1, 1.0), indexing="ij")
     _, _, m = _cylinder_points(th.ravel(), z.ravel(), rng)
-    _refused(tmp_path, [_csv(tmp_path / "corner.csv", m), "--nominal", step], "the measured points cover")
+    _refused(tmp_path, [xyz_csv(tmp_path / "corner.csv", m), "--nominal", step], "the measured points cover")
     # a full turn (a seam edge): no B-spline face keeps its trimming
     full = _write_step(_cylinder_solid(360.0), tmp_path / "full.step")
     _refused(tmp_path, [csv, "--nominal", full], "closes on itself")
@@ -346,7 +321,7 @@ def test_a_program_is_corrected_from_a_cad_nominal(tmp_path):
     x, y = np.meshgrid(np.arange(2.0, 58.1, 1.5), np.arange(2.0, 38.1, 1.5), indexing="ij")
     x, y = x.ravel(), y.ravel()
     e = 0.02 + 0.0005 * x
-    csv = _csv(
+    csv = xyz_csv(
         tmp_path / "a.csv", np.column_stack([x, y, 5.0 + e + NOISE * np.random.default_rng(3).normal(size=x.size)])
     )
     prog = tmp_path / "p.ngc"

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from helpers import along, rms, xyz_csv
 from ncadapt import cad, measure
 from ncadapt.cli import main
 from ncadapt.errors import InputError
@@ -52,31 +53,6 @@ def _read_step(path):
     assert r.ReadFile(str(path)) == IFSelect_RetDone
     r.TransferRoots()
     return r.OneShape()
-
-
-def _along(shape, points, normals, reach=1.0):
-    """The signed distance from each point along its normal to the nearest crossing of the shape."""
-    from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
-    from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
-
-    it = IntCurvesFace_ShapeIntersector()
-    it.Load(shape, 1e-9)
-    out = np.full(len(points), np.nan)
-    for k, (p, n) in enumerate(zip(points, normals)):
-        it.Perform(gp_Lin(gp_Pnt(*map(float, p)), gp_Dir(*map(float, n))), -reach, reach)
-        ts = [it.WParameter(i) for i in range(1, it.NbPnt() + 1)]
-        if ts:
-            out[k] = min(ts, key=abs)
-    return out
-
-
-def _csv(path, pts):
-    path.write_text("x,y,z\n" + "".join(f"{float(x)!r},{float(y)!r},{float(z)!r}\n" for x, y, z in pts))
-    return path
-
-
-def _rms(a) -> float:
-    return float(np.sqrt(np.mean(np.square(a))))
 
 
 def _on_top(x, y):
@@ -113,7 +89,7 @@ def crest(tmp_path_factory):
     x, y = np.meshgrid(np.arange(-29.0, 29.1, 2.0), np.arange(-36.0, -3.9, 2.0), indexing="ij")
     p, n = _on_top(x.ravel(), y.ravel())
     m = p + (E(p) + NOISE * np.random.default_rng(1).normal(size=len(p)))[:, None] * n
-    return step, _csv(d / "crest.csv", m), top["right"], top["left"], d
+    return step, xyz_csv(d / "crest.csv", m), top["right"], top["left"], d
 
 
 def _edge(ys, side):
@@ -156,7 +132,7 @@ def test_a_set_carries_one_field_across_the_common_edge(crest):
             for dx in (0.0, 0.5, 1.0):
                 q, _ = _edge(ys, sign * dx)
                 err.append(_df_at(c, proj, fid, q) - E(q))
-        errors[name] = _rms(np.concatenate(err))
+        errors[name] = rms(np.concatenate(err))
     # along the common edge (within 1 mm of it), the set's dF is nearer the truth than the faces' own
     # (2.5 against 5.0 µm RMS)
     assert errors["set"] < 0.7 * errors["own"] and errors["set"] <= 0.003, errors
@@ -165,7 +141,7 @@ def test_a_set_carries_one_field_across_the_common_edge(crest):
     q, _ = _edge(ys, 0.0)
     a, b = _df_at(pc, proj, right, q), _df_at(pc, proj, left, q)
     assert np.abs(a - b).max() <= 0.001
-    assert _rms(a - E(q)) <= 0.003 and np.abs(a - E(q)).max() <= 0.0075
+    assert rms(a - E(q)) <= 0.003 and np.abs(a - E(q)).max() <= 0.0075
     a_own, b_own = _df_at(own, proj, right, q), _df_at(own, proj, left, q)
     assert np.abs(a_own - b_own).max() > 0.005  # each face on its own: a step at the edge
     # over the whole measured area the set compensates as well as the faces on their own
@@ -175,7 +151,7 @@ def test_a_set_carries_one_field_across_the_common_edge(crest):
     df = np.zeros(len(q))
     df[right_side] = _df_at(pc, proj, right, q[right_side])
     df[~right_side] = _df_at(pc, proj, left, q[~right_side])
-    assert _rms(df - E(q)) <= 0.1 * _rms(E(q)) and _rms(df - E(q)) <= 0.003
+    assert rms(df - E(q)) <= 0.1 * rms(E(q)) and rms(df - E(q)) <= 0.003
 
 
 def test_the_written_part_lies_minus_df_from_the_nominal(crest):
@@ -217,7 +193,7 @@ def test_the_written_part_lies_minus_df_from_the_nominal(crest):
     for fid, xs in ((right, (0.05, 1.0, 15.0, 33.0)), (left, (-0.05, -1.0, -15.0, -33.0))):
         for x in xs:
             q, n = _edge(ys, x)
-            np.testing.assert_allclose(_along(back, q, n), -_df_at(pc, proj, fid, q), atol=1e-3)
+            np.testing.assert_allclose(along(back, q, n), -_df_at(pc, proj, fid, q), atol=1e-3)
 
 
 def test_analyze_gives_the_sets_statistics(crest):
@@ -250,7 +226,7 @@ def _cylinder_with_cap(tmp_path):
     top = np.column_stack([(rr * np.cos(tt)).ravel(), (rr * np.sin(tt)).ravel(), np.full(rr.size, 50.0)])
     n = np.vstack([side * [1 / 40, 1 / 40, 0], np.tile([0.0, 0.0, 1.0], (len(top), 1))])
     e = 0.02 + NOISE * np.random.default_rng(6).normal(size=len(n))
-    return step, _csv(tmp_path / "cyl.csv", np.vstack([side, top]) + e[:, None] * n)
+    return step, xyz_csv(tmp_path / "cyl.csv", np.vstack([side, top]) + e[:, None] * n)
 
 
 def test_a_cylinder_and_its_cap_are_not_one_height_field(tmp_path):
@@ -375,7 +351,7 @@ def test_a_second_round_with_a_set(crest, tmp_path):
     df1[side] = _df_at(pc1, proj1, right, p[side])
     df1[~side] = _df_at(pc1, proj1, left, p[~side])
     m2 = p + (E(p) - df1 + NOISE * np.random.default_rng(2).normal(size=len(p)))[:, None] * n
-    proj2 = measure.project_on_cad(_csv(tmp_path / "round2.csv", m2), step, face_sets=[[right, left]])
+    proj2 = measure.project_on_cad(xyz_csv(tmp_path / "round2.csv", m2), step, face_sets=[[right, left]])
     pc2 = pf.compensate_cad(proj2, previous={f.face: f.df for f in pc1.faces}, gain=1.0)
     assert [f.face_set for f in pc2.faces] == [0, 0]
     xs, ys = np.meshgrid(np.linspace(-28.5, 28.5, 40), np.linspace(-35.5, -4.5, 20), indexing="ij")
@@ -386,7 +362,7 @@ def test_a_second_round_with_a_set(crest, tmp_path):
         df = np.empty(len(q))
         df[r] = _df_at(pc, proj, right, q[r])
         df[~r] = _df_at(pc, proj, left, q[~r])
-        return _rms(df - E(q))
+        return rms(df - E(q))
 
     assert err(pc2, proj2) < err(pc1, proj1)
     e, _ = _edge(np.linspace(-34.0, -6.0, 29), 0.0)
