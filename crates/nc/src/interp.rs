@@ -2626,11 +2626,47 @@ mod tests {
             .iter()
             .map(|u| (u.line, u.construct.clone(), u.blocks))
             .collect();
-        assert_eq!(names[0], (1, "cutter compensation G41".to_string(), 2));
+        assert_eq!(
+            names[0],
+            (
+                1,
+                "cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table)"
+                    .to_string(),
+                2
+            )
+        );
         assert_eq!(names[1].0, 4);
         assert!(names[1].1.starts_with("canned cycle G88"), "{names:?}");
         assert_eq!(names[1].2, 2);
         assert!(it.records[3].supported);
+    }
+
+    #[test]
+    fn cutter_compensation_offsets_and_inside_corner() {
+        // G41 with a 2 mm tool (r = 1): the first move ends 1 mm left of +X; the left turn to +Y
+        // is an inside corner, where the offset paths meet at (-1, 1) from the corner, r·tan 45° = 1
+        // mm short of both offset ends
+        let lx =
+            lex(b"G21 G0 X0 Y0 Z0\nG41 D1\nG1 X10 F100\nG1 Y10\nG2 X20 Y20 I10 J0\nG40 G1 X30\n")
+                .unwrap();
+        let it = Interpreter::new()
+            .with_tools(std::sync::Arc::new(vec![(1, 2.0)]))
+            .run_all(&lx)
+            .unwrap();
+        assert!(it.unsupported.is_empty(), "{:?}", it.unsupported);
+        let comp = |k: usize| &it.comps[it.records[k].comp as usize];
+        assert_eq!(it.records[0].comp, NO_COMP);
+        assert_eq!((comp(1).start, comp(1).end), ([0.0, 0.0], [0.0, 1.0]));
+        assert_eq!((comp(2).start, comp(2).end), ([-1.0, 0.0], [-1.0, 0.0]));
+        assert_eq!(comp(2).corner, vec![[0.0, 1.0], [-1.0, 1.0], [-1.0, 0.0]]);
+        assert!((comp(2).trim - 1.0).abs() < 1e-12);
+        // the clockwise arc about (20, 10), the tool left of it: outside, 1 mm along the radius;
+        // it continues the +Y move (tangent), so no corner
+        assert_eq!(comp(3).radial, 1.0);
+        assert!(comp(3).corner.is_empty() && comp(3).trim == 0.0);
+        // the move after G40 leaves the offset at the arc's end ((20, 20): radius up, +Y) for
+        // the programmed end
+        assert_eq!((comp(4).start, comp(4).end), ([0.0, 1.0], [0.0, 0.0]));
     }
 
     #[test]
