@@ -850,7 +850,8 @@ impl<'a> Emitter<'a> {
         // along it is straight within the chord tolerance. Other straight moves keep their
         // pieces clear of the corners' ends ([`Emitter::comp_pieces`])
         let comp = (rec.comp != crate::interp::NO_COMP).then(|| &it.comps[rec.comp as usize]);
-        let comp_whole = comp.is_some_and(|c| !rec.motion.is_arc() && c.start != c.end);
+        let comp_whole =
+            comp.is_some_and(|c| !rec.motion.is_arc() && (c.start != c.end || c.kink > self.st.arc_tol));
         if comp_whole && !straight {
             let e = xyz_at(n - 1);
             let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
@@ -863,7 +864,7 @@ impl<'a> Emitter<'a> {
                     line: rec.line as usize + 1,
                     col: 1,
                     message: format!(
-                        "the move that starts or ends cutter compensation must stay one move, but the corrected path along it is {:.1} µm off a straight line (more than the chord tolerance {} mm), or it moves another axis; plunge with G1 before turning compensation on, correct the rapid before it (--rapids), or raise --chord-tol",
+                        "the move that starts or ends cutter compensation, or follows a turn under 0.05 rad (which the controller neither rounds nor trims), must stay one move, but the corrected path along it is {:.1} µm off a straight line (more than the chord tolerance {} mm), or it moves another axis; plunge with G1 before turning compensation on, correct the rapid before it (--rapids), or raise --chord-tol",
                         worst * 1000.0,
                         self.st.arc_tol
                     ),

@@ -154,6 +154,10 @@ pub struct Comp {
     /// ends there, along the move before and along this one (0 elsewhere). A piece the
     /// corrected program cuts next to the corner must be longer.
     pub trim: f64,
+    /// At a turn under 0.05 rad before the move (which the controller neither rounds nor trims):
+    /// how far apart (mm) the offset ends meet; the tool goes straight from the move before's
+    /// offset end to this move's, so a move cut in pieces would take another path (0 elsewhere).
+    pub kink: f64,
 }
 
 /// Tool length offsets of a tool table (or at a program's start): unknown along Z.
@@ -458,6 +462,9 @@ struct State {
     comp: Option<CompOn>,
     /// After G40: the offset the tool centre stands at until the move that ends compensation.
     comp_exit: Option<[f64; 2]>,
+    /// After G40 ending compensation the engine did not follow: the move that ends it is not
+    /// corrected either (the blocker stays until a move in the plane).
+    comp_unfollowed_exit: bool,
     /// The tool a T word selected, and the one M6 loaded.
     tool_next: Option<u32>,
     tool_loaded: Option<u32>,
@@ -591,6 +598,7 @@ impl Interpreter {
                 tlo: UNKNOWN_LENGTH,
                 comp: None,
                 comp_exit: None,
+                comp_unfollowed_exit: false,
                 tool_next: None,
                 tool_loaded: None,
                 tools: Default::default(),
@@ -999,7 +1007,12 @@ impl Interpreter {
                     901 => st.arc_absolute = true,
                     911 => st.arc_absolute = false,
                     400 => {
-                        st.active.cutter_comp = None;
+                        // compensation the engine did not follow still puts the tool at the
+                        // offset until the move that ends it, which stays as written too
+                        st.comp_unfollowed_exit = st.active.cutter_comp.is_some();
+                        if !st.comp_unfollowed_exit {
+                            st.active.cutter_comp = None;
+                        }
                         if let Some(on) = st.comp.take() {
                             st.comp_exit = on.last.map(|(o, _)| o);
                         }
@@ -1112,6 +1125,20 @@ impl Interpreter {
                         let l = l_word.unwrap_or(0.0).round() as i32;
                         let idx =
                             push_unsupported(out, li, gc, &format!("offset setting G10 L{l}"));
+                        if matches!(l, 1 | 10 | 11) {
+                            // a tool table entry set in the program: its diameter is no longer
+                            // the table's (every tool's, when P is not a tool number)
+                            let tools: Vec<(u32, f64)> = match p {
+                                Some(v) if v >= 0.0 && v.fract() == 0.0 => st
+                                    .tools
+                                    .iter()
+                                    .copied()
+                                    .filter(|&(n, _)| n != v as u32)
+                                    .collect(),
+                                _ => Vec::new(),
+                            };
+                            st.tools = std::sync::Arc::new(tools);
+                        }
                         if matches!(l, 2 | 20) && st.active.shift.is_none() {
                             st.active.shift = Some((li as u32, idx));
                         }
@@ -1641,8 +1668,14 @@ impl Interpreter {
                             None
                         }
                     };
+                    let leaves = st.comp_unfollowed_exit
+                        && (m.is_arc() || (end[0] - st.pos[0]).hypot(end[1] - st.pos[1]) > 1e-9);
                     st.pos = end;
                     push_record(out, st, li, m, supported && known, named, center, turns);
+                    if leaves {
+                        st.comp_unfollowed_exit = false;
+                        st.active.cutter_comp = None;
+                    }
                     if let Some(c) = comp {
                         out.records.last_mut().unwrap().comp = out.comps.len() as u32;
                         out.comps.push(c);
@@ -2410,6 +2443,12 @@ fn comp_on(
 
 /// Turn between directions: an angle (rad) of the corner arc's pieces checked.
 const COMP_CORNER_STEP: f64 = std::f64::consts::PI / 12.0;
+/// Turns under this (rad) the controller neither rounds nor trims (LinuxCNC's
+/// TOLERANCE_CONCAVE_CORNER).
+const COMP_SMALL_TURN: f64 = 0.05;
+/// Turns over this (rad, 175°) are reversals, where whether the controller meets the offset
+/// paths or goes round depends on its reading of the curvature: refused.
+const COMP_REVERSAL: f64 = 175.0 * std::f64::consts::PI / 180.0;
 
 /// The tool centre's offsets for a move under cutter radius compensation, or the move that ends
 /// it (None for other moves); Err names why the move cannot be followed.
@@ -2489,6 +2528,12 @@ fn comp_move(
         let o = [-r * t[1], r * t[0]];
         (o, t, o, t, 0.0)
     };
+    if let Some((_, ta)) = on.last {
+        let turn = (ta[0] * t0[1] - ta[1] * t0[0]).atan2(ta[0] * t0[0] + ta[1] * t0[1]);
+        if turn.abs() > COMP_REVERSAL {
+            return Err("a reversal (a turn of more than 175°) under cutter compensation: where the controller meets the offset paths is not followed");
+        }
+    }
     let (start, corner) = match on.last {
         None => {
             if dx.hypot(dy) <= r.abs() {
@@ -2499,6 +2544,20 @@ fn comp_move(
         Some((a, ta)) => (o0, comp_corner(a, ta, o0, t0, r)),
     };
     // an inside corner: the point where the offset paths meet (second of the corner points)
+    // a turn the controller neither rounds nor trims (LinuxCNC's TOLERANCE_CONCAVE_CORNER, 0.05
+    // rad): the tool goes straight from where the move before ended to this move's offset end
+    let kink = match on.last {
+        Some((a, ta)) if (ta[0] * t0[1] - ta[1] * t0[0]).abs() <= COMP_SMALL_TURN.sin()
+            && ta[0] * t0[0] + ta[1] * t0[1] > 0.0 =>
+        {
+            (a[0] - o0[0]).hypot(a[1] - o0[1])
+        }
+        _ => 0.0,
+    };
+    // (a tangent joint's, rounding's: nothing)
+    if kink > 1e-4 && m.is_arc() {
+        return Err("a turn under 0.05 rad into an arc under cutter compensation (the controller then moves the arc's start): not followed");
+    }
     let trim = if corner.is_empty() || r * ta_cross(on.last, t0) <= 0.0 {
         0.0
     } else if corner.len() == 3 {
@@ -2517,6 +2576,7 @@ fn comp_move(
         radial,
         corner,
         trim,
+        kink,
     }))
 }
 
