@@ -72,7 +72,7 @@ def test_refused_construct_then_kept(tmp_path):
     r = run("correct", p, "--shift", "0,0,0.01", "-o", tmp_path / "o.ngc")
     assert (
         r.exit_code == 1
-        and "line 2:1: cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table) (1 motion block(s))"
+        and "line 2:1: cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table) (2 motion block(s))"
         in r.stderr
     )
     r = run("correct", p, "--shift", "0,0,0.01", "-o", tmp_path / "o.ngc", "--keep-unsupported")

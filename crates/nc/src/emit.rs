@@ -850,8 +850,9 @@ impl<'a> Emitter<'a> {
         // along it is straight within the chord tolerance. Other straight moves keep their
         // pieces clear of the corners' ends ([`Emitter::comp_pieces`])
         let comp = (rec.comp != crate::interp::NO_COMP).then(|| &it.comps[rec.comp as usize]);
-        let comp_whole =
-            comp.is_some_and(|c| !rec.motion.is_arc() && (c.start != c.end || c.kink > self.st.arc_tol));
+        let comp_whole = comp.is_some_and(|c| {
+            !rec.motion.is_arc() && (c.start != c.end || c.kink > self.st.arc_tol)
+        });
         if comp_whole && !straight {
             let e = xyz_at(n - 1);
             let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];

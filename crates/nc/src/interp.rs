@@ -2547,8 +2547,9 @@ fn comp_move(
     // a turn the controller neither rounds nor trims (LinuxCNC's TOLERANCE_CONCAVE_CORNER, 0.05
     // rad): the tool goes straight from where the move before ended to this move's offset end
     let kink = match on.last {
-        Some((a, ta)) if (ta[0] * t0[1] - ta[1] * t0[0]).abs() <= COMP_SMALL_TURN.sin()
-            && ta[0] * t0[0] + ta[1] * t0[1] > 0.0 =>
+        Some((a, ta))
+            if (ta[0] * t0[1] - ta[1] * t0[0]).abs() <= COMP_SMALL_TURN.sin()
+                && ta[0] * t0[0] + ta[1] * t0[1] > 0.0 =>
         {
             (a[0] - o0[0]).hypot(a[1] - o0[1])
         }
@@ -2692,13 +2693,14 @@ mod tests {
                 1,
                 "cutter compensation G41 with tool 1: its diameter is not known; give the tool table (--tool-table)"
                     .to_string(),
-                2
+                3
             )
         );
         assert_eq!(names[1].0, 4);
         assert!(names[1].1.starts_with("canned cycle G88"), "{names:?}");
         assert_eq!(names[1].2, 2);
-        assert!(it.records[3].supported);
+        // the move after G40 leaves the offset compensation put the tool at: as written too
+        assert!(!it.records[3].supported);
     }
 
     #[test]
