@@ -433,7 +433,8 @@ def test_compensate_aligns_then_compensates_the_form(tmp_path):
     assert sorted(j["faces"]) == [1, 3, 6]  # x = 0, y = 0, z = H in OpenCASCADE's order
     # the written part, read back with OpenCASCADE and cut along the faces' normals (as in
     # tests/test_cad_compensate.py): the form error left, E − dF, against E
-    from test_cad_compensate import _along, _count, _read_step, _truth_figures, _valid
+    from helpers import along as _along
+    from test_cad_compensate import _count, _read_step, _truth_figures, _valid
 
     back = _read_step(out)
     assert _valid(back) and _count(back, TopAbs_FACE) == 6

@@ -23,8 +23,8 @@ from ncadapt.errors import InputError
 needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not installed")
 
 # rs274 without an INI file reads a tool table in inches: T3 0.1" (radius 1.27 mm), T7 1" (12.7 mm)
-TABLE_INCH = "T1 P1 D0.25\nT3 P3 D0.1\nT5 P5 D0.2\nT7 P7 D1.0\n"
-TOOLS_MM = {1: 6.35, 3: 2.54, 5: 5.08, 7: 25.4}
+TABLE_INCH = "T1 P1 D0.25\nT3 P3 D0.1\nT5 P5 D0.2\nT7 P7 D1.0\nT8 P8 D0.5\n"
+TOOLS_MM = {1: 6.35, 3: 2.54, 5: 5.08, 7: 25.4, 8: 12.7}
 HEAD = "G21 G17 G90 F300\nG0 X-5 Y-5 Z2\nG1 Z-1\n"
 
 
@@ -212,3 +212,38 @@ def test_contour_across_pieces(tmp_path, back):
     dz = z_wave(np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()])[:, 2].reshape(X.shape).T
     grid = fields.GridField(xs, ys, dz)
     assert _distance(tmp_path, text, grid, native=True) < 0.005
+
+
+def _quadrant_wave(p):
+    """40 µm of waviness around the origin over the quadrant x > 0, y < 0 (sin² of twice the
+    angle: zero, and flat, on the quadrant's edges), nothing elsewhere."""
+    p = np.asarray(p, float)
+    th = np.arctan2(p[:, 1], p[:, 0])
+    d = np.zeros_like(p)
+    d[:, 2] = np.where((th <= 0) & (th >= -np.pi / 2), 0.04 * np.sin(2 * th) ** 2, 0.0)
+    return d
+
+
+@needs_rs274
+@pytest.mark.parametrize("native", [False, True])
+def test_a_large_tool_outside_an_arc_cut_in_chords(tmp_path, native):
+    """A ½" tool (r 6.35 mm) outside a quarter arc of radius 10 mm (G42 on G3, the lines before
+    and after it tangent), cut in chords at a 3 µm chord tolerance: chords laid for the arc's own
+    radius turn by 0.049 rad, which LinuxCNC neither rounds nor trims, so the tool would cut
+    chords of the offset circle (radius 16.35 mm) 16.35 / 10 × 3 = 4.9 µm off it; they are laid
+    for the offset circle (0.038 rad). With a 1" tool (r 12.7 mm) at 4 µm the chords would be
+    0.374 mm long, shorter than the 12.7 × 2√2 × 0.00005 / 0.004 = 0.449 mm under which the
+    rounding of the written numbers alone could turn the tool centre by more than 4 µm: refused."""
+    text = (
+        "G21 G17 G90 F300\nG0 X-40 Y-10 Z2\nG1 Z-1\nG42 D8\nG1 X-20 Y-10\nG1 X0 Y-10\n"
+        "G3 X10 Y0 I0 J10\nG1 X10 Y10\nG40 G1 X30 Y30\nM2\n"
+    )
+    field = _quadrant_wave
+    if native:
+        xs, ys = np.linspace(-60, 60, 481), np.linspace(-60, 60, 481)
+        X, Y = np.meshgrid(xs, ys, indexing="ij")
+        dz = _quadrant_wave(np.c_[X.ravel(), Y.ravel(), 0 * X.ravel()])[:, 2].reshape(X.shape).T
+        field = fields.GridField(xs, ys, dz)
+    assert _distance(tmp_path, text, field, native=native, chord_tol=0.003) < 0.005
+    with pytest.raises(InputError, match=r":7:1: an arc under cutter compensation cut in chords as short as 0\.374"):
+        _distance(tmp_path, text.replace("D8", "D7"), field, native=native, chord_tol=0.004)

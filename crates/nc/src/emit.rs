@@ -1025,7 +1025,29 @@ impl<'a> Emitter<'a> {
             col: 1,
             message,
         };
+        // the written numbers are rounded (half a unit of the last digit, `half` mm): a piece of
+        // length L turns by up to 2√2·half/L, which moves the offset end the controller starts
+        // the next piece from by r times that: pieces shorter than `shortest` would move the
+        // tool centre by more than the chord tolerance
+        let half = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
+        let shortest = c.radius * 2.0 * std::f64::consts::SQRT_2 * half / self.st.arc_tol;
         if rec.motion.is_arc() {
+            let chord = (0..n)
+                .map(|k| {
+                    let (x0, y0) = if k == 0 {
+                        (start[0], start[1])
+                    } else {
+                        (xyz[3 * k - 3], xyz[3 * k - 2])
+                    };
+                    (xyz[3 * k] - x0).hypot(xyz[3 * k + 1] - y0)
+                })
+                .fold(f64::INFINITY, f64::min);
+            if chord < shortest {
+                return Err(refuse(format!(
+                    "an arc under cutter compensation cut in chords as short as {chord:.4} mm: the rounding of the written numbers turns such a chord enough to move the tool centre (radius {:.4} mm) by more than the chord tolerance; raise --chord-tol so the arc stays an arc or its chords are longer",
+                    c.radius
+                )));
+            }
             let (a, b) = (along(0), {
                 let k = n.saturating_sub(2);
                 (xyz[3 * (n - 1)] - xyz[3 * k]).hypot(xyz[3 * (n - 1) + 1] - xyz[3 * k + 1])
@@ -1039,13 +1061,17 @@ impl<'a> Emitter<'a> {
             self.st.comp_piece = if n > 1 { b } else { a };
             return Ok((0..n).collect());
         }
-        let guard = (COMP_GUARD * c.radius).min(len);
-        let mut keep: Vec<usize> = (0..n)
-            .filter(|&k| k == n - 1 || (along(k) > c.trim && len - along(k) >= guard))
-            .collect();
-        if keep.len() > 1 && along(keep[0]) <= c.trim {
-            keep.remove(0);
+        let guard = (COMP_GUARD * c.radius).max(shortest).min(len);
+        let mut keep: Vec<usize> = Vec::new();
+        let mut last = 0.0;
+        for k in 0..n - 1 {
+            let at = along(k);
+            if at > c.trim && at - last >= shortest && len - at >= guard {
+                keep.push(k);
+                last = at;
+            }
         }
+        keep.push(n - 1);
         // the samples left out must be on the corrected path the pieces take
         let at = |k: usize| {
             [

@@ -258,7 +258,11 @@ pub fn sample_range(
                     prev_o: &mut [f64; 2],
                     cuts: &mut Vec<f64>| {
             let o = offset(&p, t);
-            if !opts.grid_x.is_empty() || !opts.grid_y.is_empty() {
+            // (an arc under cutter compensation is not split at the grid lines: its chords would
+            // be as short as the crossings make them, which the controller reads as corners)
+            if (!opts.grid_x.is_empty() || !opts.grid_y.is_empty())
+                && !(comp.is_some() && rec.motion.is_arc())
+            {
                 // where the tool centre crosses the grid lines
                 cuts.clear();
                 crossings(&grid_x, prev[0] + prev_o[0], p[0] + o[0], cuts);
@@ -324,7 +328,15 @@ pub fn sample_range(
         } else if rec.motion.is_arc() {
             let geom = arc_sweep(rec, &start);
             let an = PLANE_AXES[rec.plane as usize][2];
-            let n = arc_pieces(geom, rec.end[an] - start[an], opts);
+            // under cutter compensation the tool outside the arc runs the chords' offsets, whose
+            // joints the controller neither rounds nor trims when they turn by under 0.05 rad: it
+            // cuts chords of the offset circle, so their number is that circle's
+            let out = comp.map_or(0.0, |c| c.radial.max(0.0));
+            let n = arc_pieces(
+                (geom.0, geom.1, geom.2 + out, geom.3 + out),
+                rec.end[an] - start[an],
+                opts,
+            );
             if !(n <= MAX_PIECES_PER_BLOCK) {
                 return Err(too_many(rec, n));
             }
