@@ -261,7 +261,7 @@ pub fn sample_range(
             // (an arc under cutter compensation is not split at the grid lines: its chords would
             // be as short as the crossings make them, which the controller reads as corners)
             if (!opts.grid_x.is_empty() || !opts.grid_y.is_empty())
-                && !(comp.is_some() && rec.motion.is_arc())
+                && (comp.is_none() || !rec.motion.is_arc())
             {
                 // where the tool centre crosses the grid lines
                 cuts.clear();
