@@ -944,7 +944,8 @@ impl Interpreter {
             let mut e_construct: Option<usize> = None;
             if let Some(ec) = e_word {
                 let e_reader = ms[..nm].iter().any(|&(m, _)| matches!(m, 66..=68))
-                    || gs[..ng].iter().any(|&(c, _)| matches!(c, 700 | 760));
+                    || gs[..ng].iter().any(|&(c, _)| matches!(c, 700 | 760))
+                    || (st.dialect == Dialect::Fanuc && gs[..ng].iter().any(|&(c, _)| c == 1870));
                 if !e_reader && !g92_e_only {
                     e_construct = Some(grouped_unsupported(
                         out,
@@ -1183,6 +1184,12 @@ impl Interpreter {
                         st.active.polar = Some((li as u32, idx));
                     }
                     150 => st.active.polar = None,
+                    // Fanuc/Haas modes of the look-ahead and smoothing (AI contour control G05.1
+                    // Q, high-speed G05 P, Haas G187 P E): the programmed path is the same, so
+                    // they are copied (LinuxCNC's G5/G5.1 are splines, with axis words)
+                    51 if st.dialect == Dialect::Fanuc && q_word.is_some() && named == 0 => {}
+                    50 if st.dialect == Dialect::Fanuc && p.is_some() && named == 0 => {}
+                    1870 if st.dialect == Dialect::Fanuc && named == 0 => {}
                     _ => {
                         let what = match c {
                             50..=53 => "spline",
@@ -1772,7 +1779,7 @@ fn unused_word(
     let any_cycle = matches!(to_be, Some(Mode::Canned(_)));
     // codes the engine refuses anyway (splines, threading, G10, rotation G68, scaling G51) use
     // these words too
-    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510]
+    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510, 1870]
         .iter()
         .any(|&c| g(c));
     let user_m = m(|c| (100..=199).contains(&c));
