@@ -231,3 +231,22 @@ def test_fanuc_look_ahead_and_smoothing_modes_are_copied():
     assert out[2:5] == ["G05.1 Q1", "G05 P10000", "G187 P1 E0.01"] and out[7:10] == ["G187", "G05 P0", "G05.1 Q0"]
     assert out[5] == "G1 Z-0.9 F100." and out[6] == "X10."
     assert {u.construct for u in nc.parse(src).unsupported} >= {"spline G5.1", "unknown G code G187"}
+
+
+def test_fanuc_g10_l20_sets_an_extended_offset_and_l2_p0_the_external_one():
+    """On a Fanuc/Haas control G10 L20 P… sets an extended work offset (G54.1 P… / G154 P…), not
+    the system in force as LinuxCNC's G10 L20 does: a program in G54 goes on where it was. G10 L2
+    P0 sets the external offset, which moves every system (LinuxCNC's P0 is the system in force):
+    refused."""
+    from ncadapt import fields, nc
+
+    src = "O1\nG21 G90 G54 G0 X0. Y0. Z5.\nG1 Z-1. F100.\nG10 L20 P1 X50. Y50. Z0.\nG1 X10.\nM30\n"
+    out = nc.parse(src, dialect="fanuc").correct(fields.Shift((0, 0, 0.1))).text.splitlines()
+    assert out[3] == "G10 L20 P1 X50. Y50. Z0." and out[4] == "G1 X10."  # Z-0.9 in force, X as written
+    # LinuxCNC's G10 L20 makes the position read X50: the next move is 50 mm off where it was
+    lin = nc.parse(src.replace("O1\n", "")).blocks
+    assert lin.end[-1][0] != 10.0
+    ext = nc.parse(src.replace("L20 P1", "L2 P0"), dialect="fanuc")
+    assert [u.construct for u in ext.unsupported] == [
+        "external work offset G10 L2 P0 (Fanuc: it moves every work system)"
+    ]

@@ -1108,6 +1108,29 @@ impl Interpreter {
                         }
                     }
                     920 | 520 | 921 | 922 | 923 => frame_code = Some((c, gc)),
+                    // Fanuc/Haas: G10 L20 sets an extended work offset (G54.1 P… / G154 P…), a
+                    // system the engine does not follow (its moves are refused): the systems in
+                    // use stay as they are. G10 L2 P0 sets the external offset, which moves every
+                    // system: not followed
+                    100 if st.dialect == Dialect::Fanuc
+                        && l_word == Some(20.0)
+                        && r.is_none()
+                        && p.is_some_and(|v| v.fract() == 0.0 && v >= 1.0) =>
+                    {
+                        frame_code = Some((1000, gc));
+                    }
+                    100 if st.dialect == Dialect::Fanuc && l_word == Some(2.0) && p == Some(0.0) => {
+                        let idx = push_unsupported(
+                            out,
+                            li,
+                            gc,
+                            "external work offset G10 L2 P0 (Fanuc: it moves every work system)",
+                        );
+                        if st.active.shift.is_none() {
+                            st.active.shift = Some((li as u32, idx));
+                        }
+                        nonmodal_axis_user = Some((c, idx));
+                    }
                     // G10 L2/L20 on the work system in force (P0 or its number), without a rotation
                     100 if matches!(l_word, Some(l) if l == 2.0 || l == 20.0)
                         && r.is_none()
