@@ -1119,7 +1119,10 @@ impl Interpreter {
                     {
                         frame_code = Some((1000, gc));
                     }
-                    100 if st.dialect == Dialect::Fanuc && l_word == Some(2.0) && p == Some(0.0) => {
+                    100 if st.dialect == Dialect::Fanuc
+                        && l_word == Some(2.0)
+                        && p == Some(0.0) =>
+                    {
                         let idx = push_unsupported(
                             out,
                             li,
