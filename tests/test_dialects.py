@@ -250,3 +250,26 @@ def test_fanuc_g10_l20_sets_an_extended_offset_and_l2_p0_the_external_one():
     assert [u.construct for u in ext.unsupported] == [
         "external work offset G10 L2 P0 (Fanuc: it moves every work system)"
     ]
+
+
+def test_fanuc_extended_work_systems():
+    """G54.1 P n (Haas G154 P n) is a work system like G54…G59 (Fanuc and Haas manuals): the
+    position is unknown after a change, a change after the first move is refused naming both
+    systems, and G10 L20 P n on the system in force sets its origin (unknown here)."""
+    from ncadapt import fields, nc
+
+    one = "O1\nG21 G90 G54.1 P3 G0 X0. Y0. Z5.\nG1 Z-1. F100.\nX10.\nM30\n"
+    prog = nc.parse(one, dialect="fanuc")
+    assert not prog.unsupported and prog.inspect()["work_offsets"] == ["G54.1 P3"]
+    out = prog.correct(fields.Shift((0, 0, 0.1))).text.splitlines()
+    assert out[2] == "G1 Z-0.9 F100."
+    two = nc.parse(one.replace("X10.", "G154 P4 X10."), dialect="fanuc")
+    assert [u.construct for u in two.unsupported] == [
+        "work coordinate system G54.1 P4 after moves in G54.1 P3 (a field is in one system's coordinates)"
+    ]
+    with pytest.raises(InputError, match="needs P"):
+        nc.parse("G54.1 G0 X0.\n", dialect="fanuc")
+    reset = nc.parse(one.replace("X10.", "G10 L20 P3 X5.\nG1 X10."), dialect="fanuc")
+    c = reset.correct(fields.Shift((0, 0, 0.1)))
+    assert c.text.splitlines()[4] == "G1 X10."  # its X in machine terms is not known: left as written
+    assert "line 5: the end of X unknown" in c.correction.warnings[0]

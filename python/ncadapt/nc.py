@@ -565,4 +565,10 @@ def _inspect(source, name, dialect="linuxcnc") -> dict:
 
 
 def _wcs_name(code: int) -> str:
+    if code >= _EXTENDED_WCS:  # Fanuc's G54.1 P n (Haas G154 P n)
+        return f"G54.1 P{code - _EXTENDED_WCS}"
     return f"G{code // 10}" if code % 10 == 0 else f"G{code // 10}.{code % 10}"
+
+
+#: The engine's code of the extended work system G54.1 P n is this plus n.
+_EXTENDED_WCS = 10000

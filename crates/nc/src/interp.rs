@@ -1047,36 +1047,23 @@ impl Interpreter {
                     // tip's coordinates where the tool stands (by the table's length: unknown here;
                     // G43.1's words give it; G49 takes it off)
                     430 | 432 | 490 | 431 => tool_length = Some(c),
+                    // Fanuc's extended work systems G54.1 P1…, Haas's G154 P1…: one code each
+                    541 | 1540 if st.dialect == Dialect::Fanuc => {
+                        let n = p.filter(|v| v.fract() == 0.0 && (1.0..=300.0).contains(v));
+                        let Some(n) = n else {
+                            return Err(ierr(
+                                li,
+                                gc,
+                                format!(
+                                    "{} needs P, the number of the extended work system (1-300)",
+                                    g_name(c)
+                                ),
+                            ));
+                        };
+                        set_wcs(out, st, li, gc, EXTENDED_WCS + n as i32);
+                    }
                     540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => {
-                        let o = c as u16;
-                        if !out.summary.work_offsets.contains(&o) {
-                            out.summary.work_offsets.push(o);
-                        }
-                        if c != st.wcs {
-                            // the tool stays where it is; its coordinates in the new system depend
-                            // on offsets the program does not know
-                            st.pos = [f64::NAN; NAXES];
-                        }
-                        st.wcs = c;
-                        // a field is measured in one work system's coordinates: moves in another
-                        // (a second fixture, a second part) are elsewhere on the machine
-                        match st.wcs_moves {
-                            Some(first) if first == c => st.active.wcs = None,
-                            Some(first) if st.active.wcs.is_none() => {
-                                let idx = push_unsupported(
-                                    out,
-                                    li,
-                                    gc,
-                                    &format!(
-                                        "work coordinate system {} after moves in {} (a field is in one system's coordinates)",
-                                        g_name(c),
-                                        g_name(first)
-                                    ),
-                                );
-                                st.active.wcs = Some((li as u32, idx));
-                            }
-                            _ => {}
-                        }
+                        set_wcs(out, st, li, gc, c)
                     }
                     530 => g53 = true,
                     610 | 611 | 640 => {} // path control
@@ -1117,7 +1104,9 @@ impl Interpreter {
                         && r.is_none()
                         && p.is_some_and(|v| v.fract() == 0.0 && v >= 1.0) =>
                     {
-                        frame_code = Some((1000, gc));
+                        // on the extended system in force: its origin set in machine coordinates
+                        let here = p.is_some_and(|v| st.wcs == EXTENDED_WCS + v as i32);
+                        frame_code = Some((if here { 1002 } else { 1000 }, gc));
                     }
                     100 if st.dialect == Dialect::Fanuc
                         && l_word == Some(2.0)
@@ -1746,7 +1735,7 @@ fn g_group(c: i32) -> Option<u8> {
         400 | 410 | 411 | 420 | 421 => 7,
         430 | 431 | 432 | 490 => 8,
         980 | 990 => 10,
-        540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => 12,
+        540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 | 541 | 1540 => 12,
         610 | 611 | 640 => 13,
         960 | 970 => 14,
         70 | 80 => 15,
@@ -1805,7 +1794,7 @@ fn unused_word(
     let any_cycle = matches!(to_be, Some(Mode::Canned(_)));
     // codes the engine refuses anyway (splines, threading, G10, rotation G68, scaling G51) use
     // these words too
-    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510, 1870]
+    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510, 1870, 541, 1540]
         .iter()
         .any(|&c| g(c));
     let user_m = m(|c| (100..=199).contains(&c));
@@ -1951,6 +1940,52 @@ pub fn polar_xy(cur: [f64; 2], polar: [Option<f64>; 2], incremental: bool) -> [f
 }
 
 /// The number G10 gives the work system `wcs` (G54 = 1 … G59.3 = 9).
+/// Extended work systems (Fanuc G54.1 P n, Haas G154 P n) are this plus n in the work system
+/// codes (G54 … G59.3 are 540 … 593).
+pub const EXTENDED_WCS: i32 = 10000;
+
+/// A work system's name: G54 … G59.3, or G54.1 P n for an extended one.
+pub fn wcs_name(c: i32) -> String {
+    if c >= EXTENDED_WCS {
+        format!("G54.1 P{}", c - EXTENDED_WCS)
+    } else {
+        g_name(c)
+    }
+}
+
+/// A change of work system (code `c`: 540 … 593, or [`EXTENDED_WCS`] + n).
+fn set_wcs(out: &mut Interp, st: &mut State, li: usize, gc: usize, c: i32) {
+    let o = c as u16;
+    if !out.summary.work_offsets.contains(&o) {
+        out.summary.work_offsets.push(o);
+    }
+    if c != st.wcs {
+        // the tool stays where it is; its coordinates in the new system depend
+        // on offsets the program does not know
+        st.pos = [f64::NAN; NAXES];
+    }
+    st.wcs = c;
+    // a field is measured in one work system's coordinates: moves in another
+    // (a second fixture, a second part) are elsewhere on the machine
+    match st.wcs_moves {
+        Some(first) if first == c => st.active.wcs = None,
+        Some(first) if st.active.wcs.is_none() => {
+            let idx = push_unsupported(
+                out,
+                li,
+                gc,
+                &format!(
+                    "work coordinate system {} after moves in {} (a field is in one system's coordinates)",
+                    wcs_name(c),
+                    wcs_name(first)
+                ),
+            );
+            st.active.wcs = Some((li as u32, idx));
+        }
+        _ => {}
+    }
+}
+
 fn wcs_number(wcs: i32) -> Option<f64> {
     [540, 550, 560, 570, 580, 590, 591, 592, 593]
         .iter()
