@@ -144,3 +144,22 @@ def xyz_csv(path, pts):
 
 def rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a))))
+
+
+def write_step(shape, path):
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+
+    w = STEPControl_Writer()
+    w.Transfer(shape, STEPControl_AsIs)
+    w.Write(str(path))
+    return path
+
+
+def read_step(path):
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_Reader
+
+    r = STEPControl_Reader()
+    assert r.ReadFile(str(path)) == IFSelect_RetDone
+    r.TransferRoots()
+    return r.OneShape()

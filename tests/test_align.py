@@ -434,9 +434,10 @@ def test_compensate_aligns_then_compensates_the_form(tmp_path):
     # the written part, read back with OpenCASCADE and cut along the faces' normals (as in
     # tests/test_cad_compensate.py): the form error left, E − dF, against E
     from helpers import along as _along
-    from test_cad_compensate import _count, _read_step, _truth_figures, _valid
+    from helpers import read_step
+    from test_cad_compensate import _count, _truth_figures, _valid
 
-    back = _read_step(out)
+    back = read_step(out)
     assert _valid(back) and _count(back, TopAbs_FACE) == 6
     rs = np.random.default_rng(9)
     ps, ns, inner = [], [], []

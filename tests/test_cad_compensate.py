@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from helpers import along, rms, xyz_csv
+from helpers import along, read_step, rms, write_step, xyz_csv
 from ncadapt import measure
 from ncadapt.cli import main
 from ncadapt.processes import freeform as pf
@@ -27,25 +27,6 @@ from ncadapt.processes import freeform as pf
 pytest.importorskip("OCP")
 
 NOISE = 0.005  # mm, the measurement noise (normal, seeded)
-
-
-def _write_step(shape, path):
-    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
-
-    w = STEPControl_Writer()
-    w.Transfer(shape, STEPControl_AsIs)
-    w.Write(str(path))
-    return path
-
-
-def _read_step(path):
-    from OCP.IFSelect import IFSelect_RetDone
-    from OCP.STEPControl import STEPControl_Reader
-
-    r = STEPControl_Reader()
-    assert r.ReadFile(str(path)) == IFSelect_RetDone
-    r.TransferRoots()
-    return r.OneShape()
 
 
 def _valid(shape) -> bool:
@@ -90,7 +71,7 @@ def _cylinder_points(th_deg, z, rng):
 def _cylinder_case(tmp_path, seed=7):
     """The solid sixth of a cylinder, measured on its curved face over 6…54° and z 5…45 mm: a
     border strip of 6° (4.2 mm) and 5 mm unmeasured."""
-    step = _write_step(_cylinder_solid(), tmp_path / "cyl.step")
+    step = write_step(_cylinder_solid(), tmp_path / "cyl.step")
     th, z = np.meshgrid(np.arange(6, 54.1, 1.5), np.arange(5, 45.1, 1.5), indexing="ij")
     _, _, m = _cylinder_points(th.ravel(), z.ravel(), np.random.default_rng(seed))
     return step, xyz_csv(tmp_path / "cyl.csv", m)
@@ -124,7 +105,7 @@ def test_a_cylinder_segment_is_compensated_in_its_own_uv(tmp_path):
     from ncadapt import cad
 
     cad.write_shape(pc.part, tmp_path / "out.step")
-    back = _read_step(tmp_path / "out.step")
+    back = read_step(tmp_path / "out.step")
     from OCP.TopAbs import TopAbs_FACE, TopAbs_SOLID
 
     assert _valid(back) and _count(back, TopAbs_SOLID) == 1 and _count(back, TopAbs_FACE) == 5
@@ -180,7 +161,7 @@ def test_a_blade_like_bspline_patch(tmp_path):
 
     face = _patch_face()
     u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
-    step = _write_step(face, tmp_path / "patch.step")
+    step = write_step(face, tmp_path / "patch.step")
     # measured over the inner 84 % of each parameter: the rest is the border strip
     lo_u, hi_u, lo_v, hi_v = u0 + 0.08 * (u1 - u0), u1 - 0.08 * (u1 - u0), v0 + 0.08 * (v1 - v0), v1 - 0.08 * (v1 - v0)
     uu, vv = np.meshgrid(np.linspace(lo_u, hi_u, 40), np.linspace(lo_v, hi_v, 24), indexing="ij")
@@ -203,7 +184,7 @@ def test_a_blade_like_bspline_patch(tmp_path):
         and j["part"]["valid"]
         and j["part"]["check"]["max_error"] <= 1e-3
     )
-    back = _read_step(out)
+    back = read_step(out)
     assert _valid(back)
     rs = np.random.default_rng(5)
     su, sv = rs.uniform(u0, u1, 1200), rs.uniform(v0, v1, 1200)
@@ -244,7 +225,7 @@ def test_a_two_face_part_names_its_faces(tmp_path):
     j = json.loads(js.read_text())
     shape = measure.project_on_cad(csv, step).faces
     assert len(shape) == 5 and j["faces"] == [1, 2] and [b["face"] for b in j["by_face"]] == [1, 2]
-    back = _read_step(out)
+    back = read_step(out)
     assert _valid(back) and _count(back, TopAbs_SOLID) == 1 and _count(back, TopAbs_FACE) == 5
     # the side, as for the cylinder alone
     p, n, _, _, measured = _cylinder_samples(600)
@@ -288,7 +269,7 @@ def test_refusals(tmp_path, monkeypatch):
     _, _, m = _cylinder_points(th.ravel(), z.ravel(), rng)
     _refused(tmp_path, [xyz_csv(tmp_path / "corner.csv", m), "--nominal", step], "the measured points cover")
     # a full turn (a seam edge): no B-spline face keeps its trimming
-    full = _write_step(_cylinder_solid(360.0), tmp_path / "full.step")
+    full = write_step(_cylinder_solid(360.0), tmp_path / "full.step")
     _refused(tmp_path, [csv, "--nominal", full], "closes on itself")
     # a part that fails OpenCASCADE's check after the replacement: refused, nothing written
     from ncadapt import cad
@@ -314,7 +295,7 @@ def test_a_program_is_corrected_from_a_cad_nominal(tmp_path):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
     from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
 
-    step = _write_step(
+    step = write_step(
         BRepBuilderAPI_MakeFace(gp_Pln(gp_Pnt(0, 0, 5), gp_Dir(0, 0, 1)), 0.0, 60.0, 0.0, 40.0).Face(),
         tmp_path / "plate.step",
     )

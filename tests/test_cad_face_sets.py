@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from helpers import along, rms, xyz_csv
+from helpers import along, read_step, rms, write_step, xyz_csv
 from ncadapt import cad, measure
 from ncadapt.cli import main
 from ncadapt.errors import InputError
@@ -34,25 +34,6 @@ RB, L = 100.0, 40.0  # the top's radius and the part's length, mm
 def E(p):
     """The error field (mm) of a point's position (n, 3)."""
     return 0.01 + 0.04 * np.exp(-((p[:, 0] - 5.0) ** 2 + (p[:, 1] + 20.0) ** 2) / (2 * 6.0**2))
-
-
-def _write_step(shape, path):
-    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
-
-    w = STEPControl_Writer()
-    w.Transfer(shape, STEPControl_AsIs)
-    w.Write(str(path))
-    return path
-
-
-def _read_step(path):
-    from OCP.IFSelect import IFSelect_RetDone
-    from OCP.STEPControl import STEPControl_Reader
-
-    r = STEPControl_Reader()
-    assert r.ReadFile(str(path)) == IFSelect_RetDone
-    r.TransferRoots()
-    return r.OneShape()
 
 
 def _on_top(x, y):
@@ -77,7 +58,7 @@ def crest(tmp_path_factory):
     fuse = BRepAlgoAPI_Fuse(sector(70, 90), sector(90, 110))
     fuse.Build()
     d = tmp_path_factory.mktemp("crest")
-    step = _write_step(fuse.Shape(), d / "crest.step")
+    step = write_step(fuse.Shape(), d / "crest.step")
     part = cad.read_part(step)
     top = {}
     for k, f in enumerate(part.faces, 1):
@@ -185,7 +166,7 @@ def test_the_written_part_lies_minus_df_from_the_nominal(crest):
     # up to the common edge from both sides
     from OCP.BRepCheck import BRepCheck_Analyzer
 
-    back = _read_step(out)
+    back = read_step(out)
     assert BRepCheck_Analyzer(back).IsValid()
     proj = measure.project_on_cad(csv, step, face_sets=[[right, left]])
     pc = pf.compensate_cad(proj)
@@ -219,7 +200,7 @@ def _cylinder_with_cap(tmp_path):
     from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
 
     shape = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 40.0, 50.0, math.radians(60)).Shape()
-    step = _write_step(shape, tmp_path / "cyl.step")
+    step = write_step(shape, tmp_path / "cyl.step")
     th, z = np.meshgrid(np.radians(np.arange(6, 54.1, 3.0)), np.arange(5, 45.1, 3.0), indexing="ij")
     side = np.column_stack([40 * np.cos(th.ravel()), 40 * np.sin(th.ravel()), z.ravel()])
     rr, tt = np.meshgrid(np.arange(4, 36.1, 3.0), np.radians(np.arange(6, 54.1, 4.0)), indexing="ij")

@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 import rs274
 from ncadapt import RefusedError, constants, fields, nc
 from ncadapt.errors import InputError
+from test_cutter_comp import _dense, z_wave
 
 needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not installed")
 
@@ -26,26 +27,6 @@ needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not
 TABLE_INCH = "T1 P1 D0.25\nT3 P3 D0.1\nT5 P5 D0.2\nT7 P7 D1.0\nT8 P8 D0.5\n"
 TOOLS_MM = {1: 6.35, 3: 2.54, 5: 5.08, 7: 25.4, 8: 12.7}
 HEAD = "G21 G17 G90 F300\nG0 X-5 Y-5 Z2\nG1 Z-1\n"
-
-
-def z_wave(p):
-    """A Z field of its own: 20 µm of waviness over 25 mm (|∇f| ≤ 8e-4)."""
-    p = np.asarray(p, float)
-    d = np.zeros_like(p)
-    d[:, 2] = 0.01 * np.sin(p[:, 0] / 25.0) + 0.01 * np.cos(p[:, 1] / 25.0)
-    return d
-
-
-def _dense(moves, step=0.002):
-    """Points along rs274's moves at most `step` mm apart (arcs along their length)."""
-    out = []
-    for m in moves:
-        if m.arc is None:
-            length = float(np.linalg.norm(m.end[:3] - m.start[:3]))
-        else:
-            length = float(np.hypot(m.sweep * max(m.rs, m.re), m.end[m.axes[2]] - m.start[m.axes[2]]))
-        out.append(m.at(np.linspace(0.0, 1.0, int(np.ceil(length / step)) + 2)))
-    return np.concatenate(out)
 
 
 def _motion(path, table):
