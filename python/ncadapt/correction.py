@@ -90,7 +90,8 @@ def _unsupported_error(name, uns) -> RefusedError:
         "(--keep-unsupported, keep_unsupported=True in Python, copies those blocks unchanged and corrects the "
         "rest"
         + (
-            "; --expand, expand=True in Python, flattens parameters and O-word flow into straight G-code"
+            "; --expand, expand=True in Python, flattens parameters, O-word flow and M98 subprograms into "
+            "straight G-code"
             if flow
             else ""
         )

@@ -307,8 +307,9 @@ def _read(text: str, src: str) -> list[_Line]:
     return out
 
 
-def _match(lines: list[_Line], src: str) -> tuple[dict, dict]:
-    """The O-word structure: for each flow line, the lines it jumps to; the subroutines by label."""
+def _match(lines: list[_Line], src: str) -> tuple[dict, dict, dict]:
+    """The O-word structure: for each flow line, the lines it jumps to; the subroutines by label;
+    the programs (O1234, which M98 P1234 calls) by number."""
     jumps: dict[int, dict] = {}
     subs: dict[str, int] = {}
     programs: dict[int, int] = {}
@@ -371,16 +372,13 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict]:
     if stack:
         lab, kind, start, _ = stack[-1]
         raise InputError(f"o{lab} {kind} without its end", src, start + 1)
-    subs.update({f"#{k}": v for k, v in programs.items()})  # (M98 P…: not an O-word label)
-    return jumps, subs
+    return jumps, subs, programs
 
 
 class _Machine:
     """Runs the flattened program and holds its parameters."""
 
-    def __init__(self, src: str):
-        self.src = src
-        self.fanuc = False
+    def __init__(self):
         self.numbered = np.zeros(5603)
         self.set_numbered = np.zeros(5603, bool)
         self.globals: dict[str, float] = {}
@@ -431,213 +429,216 @@ def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> 
     M2
     <BLANKLINE>
     """
-    text = data.decode("utf-8", "surrogateescape")
-    lines = _read(text, name)
-    jumps, subs = _match(lines, name)
     if dialect not in ("linuxcnc", "fanuc"):
         raise ValueError(f"flatten reads LinuxCNC's and Fanuc's programs, not {dialect}")
-    mac = _Machine(name)
-    mac.fanuc = dialect == "fanuc"
-    out: list[str] = []
-    origin: list[int] = []
-    # the call stack: ("o", line to return to, saved #1-#30, loop counters) for an O-word call,
-    # ("m98", line to return to, the subprogram's first line, passes left) for M98
-    calls: list[tuple] = []
-    counters: dict[int, int] = {}
-    i, run = 0, 0
+    lines = _read(data.decode("utf-8", "surrogateescape"), name)
+    run = _Run(lines, *_match(lines, name), fanuc=dialect == "fanuc")
+    i, blocks = 0, 0
     while i < len(lines):
-        run += 1
-        if run > MAX_BLOCKS:
+        blocks += 1
+        if blocks > MAX_BLOCKS:
             raise InputError(
                 f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", name, i + 1
             )
-        ln = lines[i]
         try:
-            if mac.fanuc and (
-                "#" in ln.text
-                or ln.keyword not in (None, "program")
-                or re.search(r"g0*65(?![\d.])|\bif\[|while\[|goto|\bend\d", ln.text)
-            ):
-                raise _Error("Fanuc Macro B (# variables, G65, IF/GOTO, WHILE/DO/END): not flattened")
-            nxt = _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin)
+            nxt = run.step(i)
         except _Error as e:
             raise InputError(e.message, name, i + 1, e.col) from None
         if nxt is None:
             break
         i = nxt
-    body = "".join(s + "\n" for s in out)
-    return Flat(body.encode("utf-8", "surrogateescape"), np.asarray(origin, dtype=np.int64) + 1, run)
+    body = "".join(t + "\n" for t in run.out)
+    return Flat(body.encode("utf-8", "surrogateescape"), np.asarray(run.origin, dtype=np.int64) + 1, blocks)
 
 
-def _subprogram(words, i: int, calls: list, subs: dict) -> int:
-    """M98 P<program> [L<passes>] calls program O<program> of the file; M99 ends a pass of it."""
-    got = dict(words)
-    other = sorted(set(got) - {"m", "p", "l"})
-    if other:
-        raise _Error(f"M98/M99 with a {other[0].upper()} word: not flattened")
-    if round(got["m"]) == 99:
-        if "p" in got or "l" in got:
-            raise _Error("M99 with P or L (a jump within the program): not flattened")
-        if not calls or calls[-1][0] != "m98":
-            raise _Error("M99 outside a subprogram call (a main program's M99 repeats it without end)")
-        _, back, start, left = calls.pop()
-        if left > 1:
-            calls.append(("m98", back, start, left - 1))
-            return start
-        return back
-    pv, lv = got.get("p"), got.get("l", 1.0)
-    if pv is None or pv != int(pv) or not 0 <= pv <= 9999:
-        raise _Error(
-            "M98 needs P, the number of a program in this file (0-9999; a longer P that counts passes in its "
-            "first digits, as some Fanuc controls read it, is not flattened: give the passes as L)"
-        )
-    if lv != int(lv) or lv < 0:
-        raise _Error(f"M98 L{lv:g}: the passes are a whole number >= 0")
-    key = f"#{int(pv)}"
-    if key not in subs:
-        raise _Error(f"M98 P{int(pv)}: program O{int(pv)} is not in this file (a program in the control's memory)")
-    if len(calls) >= MAX_DEPTH:
-        raise _Error(f"subprograms nested deeper than {MAX_DEPTH}")
-    if lv == 0:
-        return i + 1
-    calls.append(("m98", i + 1, subs[key] + 1, int(lv)))
-    return subs[key] + 1
+class _Run:
+    """A program being run: its lines and O-word structure, its parameters (``mac``), the call
+    stack, the repeat counters, and the blocks written (``out``, each with the index of the line
+    it comes from in ``origin``)."""
 
+    def __init__(self, lines: list[_Line], jumps: dict, subs: dict, programs: dict, *, fanuc: bool):
+        self.lines, self.jumps, self.subs, self.programs, self.fanuc = lines, jumps, subs, programs, fanuc
+        self.mac = _Machine()
+        # ("o", line to return to, saved #1-#30, loop counters) for an O-word call,
+        # ("m98", line to return to, the subprogram's first line, passes left) for M98
+        self.calls: list[tuple] = []
+        self.counters: dict[int, int] = {}
+        self.out: list[str] = []
+        self.origin: list[int] = []
 
-def _cond(ln: _Line, mac: _Machine) -> float:
-    """The [condition] (or count) after an O-word keyword."""
-    p = _Parser(ln.rest, mac.read)
-    if not p.peek():
-        raise _Error(f"o{ln.label} {ln.keyword} needs [a condition]")
-    v = p.value()
-    if p.peek():
-        raise _Error(f"unexpected '{p.s[p.k :]}' after o{ln.label} {ln.keyword}", p.k + 1)
-    return v
-
-
-def _step(ln, i, lines, jumps, subs, mac, calls, counters, out, origin):
-    """Run line i; the next line's index, or None at the program's end."""
-    kw = ln.keyword
-    if kw is None:
-        return _block(ln, i, mac, out, origin, calls, subs)
-    if kw == "program":
-        return i + 1  # a program number: where M98 enters, no block
-    j = jumps.get(i, {})
-    if kw == "sub":
-        return j["end"] + 1  # a definition: skipped where it stands
-    if kw in ("endsub", "return"):
-        p = _Parser(ln.rest, mac.read)
+    def cond(self, ln: _Line) -> float:
+        """The [condition] (or count) after an O-word keyword."""
+        p = _Parser(ln.rest, self.mac.read)
+        if not p.peek():
+            raise _Error(f"o{ln.label} {ln.keyword} needs [a condition]")
+        v = p.value()
         if p.peek():
-            mac.globals["_value"] = p.value()
-            mac.globals["_value_returned"] = 1.0
-        if not calls or calls[-1][0] != "o":
-            raise _Error(f"o{ln.label} {kw} outside a call")
-        _, back, saved, saved_counters = calls.pop()
-        mac.numbered[1:31] = saved
-        mac.frames.pop()
-        counters.clear()
-        counters.update(saved_counters)
-        return back
-    if kw == "call":
-        if ln.label not in subs:
-            raise _Error(f"subroutine o{ln.label} is not in this file (a subroutine file of the machine's)")
-        if len(calls) >= MAX_DEPTH:
-            raise _Error(f"subroutines nested deeper than {MAX_DEPTH}")
-        p = _Parser(ln.rest, mac.read)
-        args = []
+            raise _Error(f"unexpected '{p.s[p.k :]}' after o{ln.label} {ln.keyword}", p.k + 1)
+        return v
+
+    def step(self, i: int) -> int | None:
+        """Run line i; the next line's index, or None at the program's end."""
+        ln, lines, mac, calls, counters = self.lines[i], self.lines, self.mac, self.calls, self.counters
+        if self.fanuc and (
+            "#" in ln.text
+            or ln.keyword not in (None, "program")
+            or re.search(r"g0*65(?![\d.])|\bif\[|while\[|goto|\bend\d", ln.text)
+        ):
+            raise _Error("Fanuc Macro B (# variables, G65, IF/GOTO, WHILE/DO/END): not flattened")
+        kw = ln.keyword
+        if kw is None:
+            return self.block(ln, i)
+        if kw == "program":
+            return i + 1  # a program number: where M98 enters, no block
+        j = self.jumps.get(i, {})
+        if kw == "sub":
+            return j["end"] + 1  # a definition: skipped where it stands
+        if kw in ("endsub", "return"):
+            p = _Parser(ln.rest, mac.read)
+            if p.peek():
+                mac.globals["_value"] = p.value()
+                mac.globals["_value_returned"] = 1.0
+            if not calls or calls[-1][0] != "o":
+                raise _Error(f"o{ln.label} {kw} outside a call")
+            _, back, saved, saved_counters = calls.pop()
+            mac.numbered[1:31] = saved
+            mac.frames.pop()
+            counters.clear()
+            counters.update(saved_counters)
+            return back
+        if kw == "call":
+            if ln.label not in self.subs:
+                raise _Error(f"subroutine o{ln.label} is not in this file (a subroutine file of the machine's)")
+            if len(calls) >= MAX_DEPTH:
+                raise _Error(f"subroutines nested deeper than {MAX_DEPTH}")
+            p = _Parser(ln.rest, mac.read)
+            args = []
+            while p.peek():
+                if p.peek() != "[":
+                    raise _Error("call arguments are [expressions]", p.k + 1)
+                args.append(p.value())
+            if len(args) > 30:
+                raise _Error("more than 30 call arguments")
+            calls.append(("o", i + 1, mac.numbered[1:31].copy(), dict(counters)))
+            mac.numbered[1:31] = 0.0
+            mac.numbered[1 : 1 + len(args)] = args
+            mac.frames.append({})
+            mac.globals["_value_returned"] = 0.0
+            counters.clear()
+            return self.subs[ln.label] + 1
+        if kw == "if":
+            # the first branch whose condition holds (an else's when none does), else past the endif
+            k = i
+            while lines[k].keyword in ("if", "elseif"):
+                if self.cond(lines[k]) != 0.0:
+                    return k + 1
+                k = self.jumps[k]["next"]
+            return k + 1
+        if kw in ("elseif", "else"):
+            return j["end"] + 1  # reached at the end of the branch taken
+        if kw in ("endif", "do"):
+            return i + 1
+        if kw == "while" and lines[j["start"]].keyword == "do" and j["end"] == i:
+            return j["start"] + 1 if self.cond(ln) != 0.0 else i + 1
+        if kw == "while":
+            return i + 1 if self.cond(ln) != 0.0 else j["end"] + 1
+        if kw == "endwhile":
+            return j["start"]
+        if kw == "repeat":
+            counters[i] = int(self.cond(ln))
+            return i + 1 if counters[i] > 0 else j["end"] + 1
+        if kw == "endrepeat":
+            s = j["start"]
+            counters[s] = counters.get(s, 0) - 1
+            return s + 1 if counters[s] > 0 else i + 1
+        if kw == "break":
+            return j["end"] + 1
+        if kw == "continue":
+            start, end = j["start"], j["end"]
+            return end if lines[start].keyword in ("repeat", "do") else start
+        raise _Error(f"o{ln.label} {kw}: not followed")
+
+    def block(self, ln: _Line, i: int) -> int | None:
+        """A block of words and parameter settings: written with its values, the settings applied
+        after the line is read (as LinuxCNC does); M98/M99 call and end subprograms."""
+        mac = self.mac
+        if ln.text == "%":
+            self.out.append("%")
+            self.origin.append(i)
+            return i + 1
+        p = _Parser(ln.text, mac.read)
+        words: list[tuple[str, float]] = []
+        texts: list[str] = []
+        sets = []
         while p.peek():
-            if p.peek() != "[":
-                raise _Error("call arguments are [expressions]", p.k + 1)
-            args.append(p.value())
-        if len(args) > 30:
-            raise _Error("more than 30 call arguments")
-        calls.append(("o", i + 1, mac.numbered[1:31].copy(), dict(counters)))
-        mac.numbered[1:31] = 0.0
-        mac.numbered[1 : 1 + len(args)] = args
-        mac.frames.append({})
-        mac.globals["_value_returned"] = 0.0
-        counters.clear()
-        return subs[ln.label] + 1
-    if kw == "if":
-        # the first branch whose condition holds (an else's when none does), else past the endif
-        k = i
-        while lines[k].keyword in ("if", "elseif"):
-            if _cond(lines[k], mac) != 0.0:
-                return k + 1
-            k = jumps[k]["next"]
-        return k + 1
-    if kw in ("elseif", "else"):
-        return j["end"] + 1  # reached at the end of the branch taken
-    if kw == "endif":
-        return i + 1
-    if kw == "while" and lines[j["start"]].keyword == "do" and j["end"] == i:
-        return j["start"] + 1 if _cond(ln, mac) != 0.0 else i + 1
-    if kw == "while":
-        return i + 1 if _cond(ln, mac) != 0.0 else j["end"] + 1
-    if kw == "do":
-        return i + 1
-    if kw == "endwhile":
-        return j["start"]
-    if kw == "repeat":
-        counters[i] = int(_cond(ln, mac))
-        return i + 1 if counters[i] > 0 else j["end"] + 1
-    if kw == "endrepeat":
-        s = j["start"]
-        counters[s] = counters.get(s, 0) - 1
-        return s + 1 if counters[s] > 0 else i + 1
-    if kw == "break":
-        return j["end"] + 1
-    if kw == "continue":
-        start, end = j["start"], j["end"]
-        return end if lines[start].keyword in ("repeat", "do") else start
-    raise _Error(f"o{ln.label} {kw}: not followed")
+            c = p.peek()
+            if c == "#":
+                ref = p.param_ref()
+                p.need("=")
+                sets.append((ref, p.value()))
+            elif c.isalpha() or c in "@^":
+                p.k += 1
+                at = p.k
+                v = p.value()
+                if c != "n":
+                    words.append((c, v))
+                    written = p.s[at : p.k]
+                    if not _LITERAL.fullmatch(written):
+                        written = _fmt(v, c)
+                        if self.fanuc and c not in "gmnopst" and "." not in written:
+                            written += "."
+                    texts.append(c.upper() + written)
+            else:
+                raise _Error(f"unexpected '{c}'", p.k + 1)
+        for ref, v in sets:
+            mac.write(ref, v)
+        ms = [round(v) for c, v in words if c == "m"]
+        gs = [round(v * 10) for c, v in words if c == "g"]
+        if any(g in (700, 710, 711, 720, 721) for g in gs):
+            raise _Error("lathe cycles G70-G72 take their contour from the program's subroutines: not flattened")
+        if any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms):
+            # probing, offsets, stored positions, tool data: the machine sets its parameters again
+            mac.set_numbered[MACHINE_PARAMETERS:] = False
+        if any(m in (98, 99) for m in ms):
+            return self.subprogram(words, i)
+        if words or ln.comments:
+            self.out.append(" ".join(t for t in (" ".join(texts), *ln.comments) if t))
+            self.origin.append(i)
+        if len(self.out) > MAX_BLOCKS:
+            raise _Error(f"the flattened program has more than {MAX_BLOCKS:,} blocks")
+        return None if any(m in (2, 30) for m in ms) else i + 1
 
-
-def _block(ln: _Line, i: int, mac: _Machine, out: list, origin: list, calls: list, subs: dict):
-    """A block of words and parameter settings: written with its values, the settings applied
-    after the line is read (as LinuxCNC does); M98/M99 call and end subprograms."""
-    if ln.text == "%":
-        out.append("%")
-        origin.append(i)
-        return i + 1
-    p = _Parser(ln.text, mac.read)
-    words: list[tuple[str, float]] = []
-    texts: list[str] = []
-    sets = []
-    while p.peek():
-        c = p.peek()
-        if c == "#":
-            ref = p.param_ref()
-            p.need("=")
-            sets.append((ref, p.value()))
-        elif c.isalpha() or c in "@^":
-            p.k += 1
-            at = p.k
-            v = p.value()
-            if c != "n":
-                words.append((c, v))
-                written = p.s[at : p.k]
-                if not _LITERAL.fullmatch(written):
-                    written = _fmt(v, c)
-                    if mac.fanuc and c not in "gmnopst" and "." not in written:
-                        written += "."
-                texts.append(c.upper() + written)
-        else:
-            raise _Error(f"unexpected '{c}'", p.k + 1)
-    for ref, v in sets:
-        mac.write(ref, v)
-    ms = [round(v) for c, v in words if c == "m"]
-    gs = [round(v * 10) for c, v in words if c == "g"]
-    if any(g in (700, 710, 711, 720, 721) for g in gs):
-        raise _Error("lathe cycles G70-G72 take their contour from the program's subroutines: not flattened")
-    if any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms):
-        # probing, offsets, stored positions, tool data: the machine sets its parameters again
-        mac.set_numbered[MACHINE_PARAMETERS:] = False
-    if any(m in (98, 99) for m in ms):
-        return _subprogram(words, i, calls, subs)
-    if words or ln.comments:
-        out.append(" ".join(t for t in (" ".join(texts), *ln.comments) if t))
-        origin.append(i)
-    if len(out) > MAX_BLOCKS:
-        raise _Error(f"the flattened program has more than {MAX_BLOCKS:,} blocks")
-    return None if any(m in (2, 30) for m in ms) else i + 1
+    def subprogram(self, words, i: int) -> int:
+        """M98 P<program> [L<passes>] calls program O<program> of the file; M99 ends a pass of it."""
+        calls = self.calls
+        got = dict(words)
+        other = sorted(set(got) - {"m", "p", "l"})
+        if other:
+            raise _Error(f"M98/M99 with a {other[0].upper()} word: not flattened")
+        if round(got["m"]) == 99:
+            if "p" in got or "l" in got:
+                raise _Error("M99 with P or L (a jump within the program): not flattened")
+            if not calls or calls[-1][0] != "m98":
+                raise _Error("M99 outside a subprogram call (a main program's M99 repeats it without end)")
+            _, back, start, left = calls.pop()
+            if left > 1:
+                calls.append(("m98", back, start, left - 1))
+                return start
+            return back
+        pv, lv = got.get("p"), got.get("l", 1.0)
+        if pv is None or pv != int(pv) or not 0 <= pv <= 9999:
+            raise _Error(
+                "M98 needs P, the number of a program in this file (0-9999; a longer P that counts passes in its "
+                "first digits, as some Fanuc controls read it, is not flattened: give the passes as L)"
+            )
+        if lv != int(lv) or lv < 0:
+            raise _Error(f"M98 L{lv:g}: the passes are a whole number >= 0")
+        if int(pv) not in self.programs:
+            raise _Error(f"M98 P{int(pv)}: program O{int(pv)} is not in this file (a program in the control's memory)")
+        if len(calls) >= MAX_DEPTH:
+            raise _Error(f"subprograms nested deeper than {MAX_DEPTH}")
+        if lv == 0:
+            return i + 1
+        start = self.programs[int(pv)] + 1
+        calls.append(("m98", i + 1, start, int(lv)))
+        return start

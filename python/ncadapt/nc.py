@@ -455,8 +455,7 @@ class Program:
         """
         parts: list[bytes] = []
         tools = self.tools if tools is None else tools
-        if tools == self.tools:
-            self._refuse_unsupported(keep_unsupported)
+        self._refuse_unsupported(keep_unsupported, tools)
         c = _correct(
             self._data,
             self.name,
@@ -490,14 +489,17 @@ class Program:
         p = Path(path)
         _refuse_overwrite(p, self.path)
         options.setdefault("tools", self.tools)
-        if options["tools"] == self.tools:
-            self._refuse_unsupported(options.get("keep_unsupported", False))
+        self._refuse_unsupported(options.get("keep_unsupported", False), options["tools"])
         with atomic_open(p) as f, _BackgroundWriter(f) as w:
             return _correct(
                 self._data, self.name, w.write, field, keep_points=False, out_file=f, dialect=self.dialect, **options
             )
 
-    def _refuse_unsupported(self, keep_unsupported) -> None:
+    def _refuse_unsupported(self, keep_unsupported, tools) -> None:
+        """Refuse now what the program was read with (the reading pass checks it again; with
+        another tool table than :attr:`tools`, what compensation it follows is its to say)."""
+        if tools != self.tools:
+            return
         uns = self.unsupported
         if uns and not keep_unsupported:
             raise _unsupported_error(self.name, uns)

@@ -429,7 +429,7 @@ impl<'a> Emitter<'a> {
                 }
                 let (f, c) = samples.of(ri);
                 self.off = self.it.frames[self.it.records[ri].frame as usize];
-                self.comp_corner(ri)?;
+                self.comp_inside_corner(ri)?;
                 let uvw = if uvw.is_empty() {
                     uvw
                 } else {
@@ -674,12 +674,11 @@ impl<'a> Emitter<'a> {
         }
     }
 
-    /// Write a sampled block with its displacements.
     /// Under cutter compensation: a move after an inside corner needs the output's piece before
     /// the corner longer than the tool stops short there (else the controller finds the corner
     /// unreachable); the move's whole length (in the plane) stands as the last piece until
     /// [`Emitter::corrected`] cuts it.
-    fn comp_corner(&mut self, ri: usize) -> Result<(), NcError> {
+    fn comp_inside_corner(&mut self, ri: usize) -> Result<(), NcError> {
         let rec = &self.it.records[ri];
         if rec.comp == crate::interp::NO_COMP {
             return Ok(());
@@ -709,6 +708,7 @@ impl<'a> Emitter<'a> {
         Ok(())
     }
 
+    /// Write a sampled block with its displacements.
     fn corrected(
         &mut self,
         li: usize,
@@ -1006,7 +1006,7 @@ impl<'a> Emitter<'a> {
     /// and the output's last piece of it kept in [`EmitState::comp_piece`]. The first piece must
     /// be longer than the tool stops short at an inside corner before the move; the last one is
     /// kept [`COMP_GUARD`] tool radii long for a corner after it (a sharper one is refused there,
-    /// [`Emitter::comp_corner`]). A straight move's samples closer to its ends are left out when
+    /// [`Emitter::comp_inside_corner`]). A straight move's samples closer to its ends are left out when
     /// the corrected path passes them within the chord tolerance, else the move is refused; an
     /// arc's chords cannot be left out.
     fn comp_pieces(
@@ -1032,7 +1032,8 @@ impl<'a> Emitter<'a> {
         let half = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
         let shortest = c.radius * 2.0 * std::f64::consts::SQRT_2 * half / self.st.arc_tol;
         if rec.motion.is_arc() {
-            let chord = (0..n)
+            // the chords' lengths (in the plane), from the arc's start
+            let chords: Vec<f64> = (0..n)
                 .map(|k| {
                     let (x0, y0) = if k == 0 {
                         (start[0], start[1])
@@ -1041,24 +1042,22 @@ impl<'a> Emitter<'a> {
                     };
                     (xyz[3 * k] - x0).hypot(xyz[3 * k + 1] - y0)
                 })
-                .fold(f64::INFINITY, f64::min);
+                .collect();
+            let chord = chords.iter().copied().fold(f64::INFINITY, f64::min);
             if chord < shortest {
                 return Err(refuse(format!(
                     "an arc under cutter compensation cut in chords as short as {chord:.4} mm: the rounding of the written numbers turns such a chord enough to move the tool centre (radius {:.4} mm) by more than the chord tolerance; raise --chord-tol so the arc stays an arc or its chords are longer",
                     c.radius
                 )));
             }
-            let (a, b) = (along(0), {
-                let k = n.saturating_sub(2);
-                (xyz[3 * (n - 1)] - xyz[3 * k]).hypot(xyz[3 * (n - 1) + 1] - xyz[3 * k + 1])
-            });
+            let a = chords[0];
             if !(a > c.trim) {
                 return Err(refuse(format!(
                     "an inside corner under cutter compensation before an arc cut in chords: the tool stops {:.4} mm short of the corner, longer than the first chord ({a:.4} mm); raise --chord-tol so the arc stays an arc",
                     c.trim
                 )));
             }
-            self.st.comp_piece = if n > 1 { b } else { a };
+            self.st.comp_piece = chords[n - 1];
             return Ok((0..n).collect());
         }
         let guard = (COMP_GUARD * c.radius).max(shortest).min(len);

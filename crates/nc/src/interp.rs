@@ -1939,7 +1939,6 @@ pub fn polar_xy(cur: [f64; 2], polar: [Option<f64>; 2], incremental: bool) -> [f
     [r * a.to_radians().cos(), r * a.to_radians().sin()]
 }
 
-/// The number G10 gives the work system `wcs` (G54 = 1 … G59.3 = 9).
 /// Extended work systems (Fanuc G54.1 P n, Haas G154 P n) are this plus n in the work system
 /// codes (G54 … G59.3 are 540 … 593).
 pub const EXTENDED_WCS: i32 = 10000;
@@ -1986,6 +1985,7 @@ fn set_wcs(out: &mut Interp, st: &mut State, li: usize, gc: usize, c: i32) {
     }
 }
 
+/// The number G10 gives the work system `wcs` (G54 = 1 … G59.3 = 9).
 fn wcs_number(wcs: i32) -> Option<f64> {
     [540, 550, 560, 570, 580, 590, 591, 592, 593]
         .iter()
@@ -2596,11 +2596,12 @@ fn comp_move(
         let o = [-r * t[1], r * t[0]];
         (o, t, o, t, 0.0)
     };
-    if let Some((_, ta)) = on.last {
-        let turn = (ta[0] * t0[1] - ta[1] * t0[0]).atan2(ta[0] * t0[0] + ta[1] * t0[1]);
-        if turn.abs() > COMP_REVERSAL {
-            return Err("a reversal (a turn of more than 175°) under cutter compensation: where the controller meets the offset paths is not followed");
-        }
+    // the turn (rad, positive to the left) from the direction the move before ended in
+    let turn = on.last.map_or(0.0, |(_, ta)| {
+        (ta[0] * t0[1] - ta[1] * t0[0]).atan2(ta[0] * t0[0] + ta[1] * t0[1])
+    });
+    if turn.abs() > COMP_REVERSAL {
+        return Err("a reversal (a turn of more than 175°) under cutter compensation: where the controller meets the offset paths is not followed");
     }
     let (start, corner) = match on.last {
         None => {
@@ -2611,23 +2612,18 @@ fn comp_move(
         }
         Some((a, ta)) => (o0, comp_corner(a, ta, o0, t0, r)),
     };
-    // an inside corner: the point where the offset paths meet (second of the corner points)
     // a turn the controller neither rounds nor trims (LinuxCNC's TOLERANCE_CONCAVE_CORNER, 0.05
     // rad): the tool goes straight from where the move before ended to this move's offset end
     let kink = match on.last {
-        Some((a, ta))
-            if (ta[0] * t0[1] - ta[1] * t0[0]).abs() <= COMP_SMALL_TURN.sin()
-                && ta[0] * t0[0] + ta[1] * t0[1] > 0.0 =>
-        {
-            (a[0] - o0[0]).hypot(a[1] - o0[1])
-        }
+        Some((a, _)) if turn.abs() <= COMP_SMALL_TURN => (a[0] - o0[0]).hypot(a[1] - o0[1]),
         _ => 0.0,
     };
     // (a tangent joint's, rounding's: nothing)
     if kink > 1e-4 && m.is_arc() {
         return Err("a turn under 0.05 rad into an arc under cutter compensation (the controller then moves the arc's start): not followed");
     }
-    let trim = if corner.is_empty() || r * ta_cross(on.last, t0) <= 0.0 {
+    // an inside corner: the point where the offset paths meet (second of the corner points)
+    let trim = if corner.is_empty() || r * turn <= 0.0 {
         0.0
     } else if corner.len() == 3 {
         let (a, q) = (corner[0], corner[1]);
@@ -2647,11 +2643,6 @@ fn comp_move(
         trim,
         kink,
     }))
-}
-
-/// The turn (cross product) from the direction at the end of the last move to `t`.
-fn ta_cross(last: Option<([f64; 2], [f64; 2])>, t: [f64; 2]) -> f64 {
-    last.map_or(0.0, |(_, ta)| ta[0] * t[1] - ta[1] * t[0])
 }
 
 /// The tool centre around a corner of a compensated contour (offsets from the corner, mm): `a`,

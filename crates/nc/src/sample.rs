@@ -508,6 +508,60 @@ fn crossings_found(lines: &GridLines, a: f64, b: f64, lo: f64, hi: f64, out: &mu
     }
 }
 
+/// Largest X or Y displacement (mm) a compensated move may get: the controller offsets the
+/// moved contour along its own normal, which such a displacement turns (not followed).
+pub const COMP_XY_TOL: f64 = 1e-9;
+
+/// What refuses a compensated program once the field is known: the field displacing X or Y
+/// under compensation, or varying around the tool at a corner by more than `budget` (mm; the
+/// output keeps one displacement at a corner, where the controller turns the tool). `disp` holds
+/// the displacements at the samples, `cdisp` at [`Samples::checks`]. (1-based line, message).
+pub fn comp_check(
+    it: &Interp,
+    s: &Samples,
+    disp: &[f64],
+    cdisp: &[f64],
+    budget: f64,
+) -> Option<(u32, String)> {
+    if it.comps.is_empty() {
+        return None;
+    }
+    for (k, &ri) in s.rec.iter().enumerate() {
+        let rec = &it.records[ri as usize];
+        if rec.comp != crate::interp::NO_COMP
+            && (disp[3 * k].abs() > COMP_XY_TOL || disp[3 * k + 1].abs() > COMP_XY_TOL)
+        {
+            return Some((
+                rec.line + 1,
+                format!(
+                    "the field moves X or Y ({:.4}, {:.4} mm) under cutter compensation: the controller offsets the moved contour along its own normal, which that turns; only a Z displacement is followed there",
+                    disp[3 * k], disp[3 * k + 1]
+                ),
+            ));
+        }
+    }
+    for &(ri, f, c) in &s.check_groups {
+        let d = &cdisp[3 * f as usize..3 * (f + c) as usize];
+        let mut worst = 0.0f64;
+        for q in d.chunks_exact(3).skip(1) {
+            let v = ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2) + (q[2] - d[2]).powi(2)).sqrt();
+            worst = worst.max(v);
+        }
+        if !(worst <= budget) {
+            let rec = &it.records[ri as usize];
+            let r = it.comps[rec.comp as usize].radius;
+            let um = worst * 1000.0;
+            return Some((
+                rec.line + 1,
+                format!(
+                    "cutter compensation corner: the field varies by {um:.1} µm around the tool (radius {r:.4} mm) where the controller turns it, more than the chord tolerance {budget} mm; the corrected program keeps one displacement there (raise --chord-tol to accept {um:.1} µm)"
+                ),
+            ));
+        }
+    }
+    None
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -626,59 +680,4 @@ mod tests {
         let xs: Vec<f64> = (0..s.t.len()).map(|k| s.xyz[3 * k]).collect();
         assert_eq!(xs, vec![1.0, 2.0, 3.0, 3.5]);
     }
-}
-
-/// Largest X or Y displacement (mm) a compensated move may get: the controller offsets the
-/// moved contour along its own normal, which such a displacement turns (not followed).
-pub const COMP_XY_TOL: f64 = 1e-9;
-
-/// What refuses a compensated program once the field is known: the field displacing X or Y
-/// under compensation, or varying around the tool at a corner by more than `budget` (mm; the
-/// output keeps one displacement at a corner, where the controller turns the tool). `disp` holds
-/// the displacements at the samples, `cdisp` at [`Samples::checks`]. (1-based line, message).
-pub fn comp_check(
-    it: &Interp,
-    s: &Samples,
-    disp: &[f64],
-    cdisp: &[f64],
-    budget: f64,
-) -> Option<(u32, String)> {
-    if it.comps.is_empty() {
-        return None;
-    }
-    for (k, &ri) in s.rec.iter().enumerate() {
-        let rec = &it.records[ri as usize];
-        if rec.comp != crate::interp::NO_COMP
-            && (disp[3 * k].abs() > COMP_XY_TOL || disp[3 * k + 1].abs() > COMP_XY_TOL)
-        {
-            return Some((
-                rec.line + 1,
-                format!(
-                    "the field moves X or Y ({:.4}, {:.4} mm) under cutter compensation: the controller offsets the moved contour along its own normal, which that turns; only a Z displacement is followed there",
-                    disp[3 * k], disp[3 * k + 1]
-                ),
-            ));
-        }
-    }
-    for &(ri, f, c) in &s.check_groups {
-        let d = &cdisp[3 * f as usize..3 * (f + c) as usize];
-        let mut worst = 0.0f64;
-        for q in d.chunks_exact(3).skip(1) {
-            let v = ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2) + (q[2] - d[2]).powi(2)).sqrt();
-            worst = worst.max(v);
-        }
-        if !(worst <= budget) {
-            let rec = &it.records[ri as usize];
-            let r = it.comps[rec.comp as usize].radius;
-            return Some((
-                rec.line + 1,
-                format!(
-                    "cutter compensation corner: the field varies by {:.1} µm around the tool (radius {r:.4} mm) where the controller turns it, more than the chord tolerance {budget} mm; the corrected program keeps one displacement there (raise --chord-tol to accept {:.1} µm)",
-                    worst * 1000.0,
-                    worst * 1000.0
-                ),
-            ));
-        }
-    }
-    None
 }
