@@ -34,7 +34,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from ncadapt import dialects, fields, nc  # noqa: E402
+import ncgi  # noqa: E402
+from ncadapt import (  # noqa: E402
+    dialects,
+    fields,
+    nc,
+    sinumerik,  # noqa: E402
+)
 from ncadapt.errors import InputError, RefusedError  # noqa: E402
 from ncadapt.flatten import flatten  # noqa: E402
 from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
@@ -656,6 +662,9 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.outcome = f"refused: line {e.line}: {dialects.NAMES[d.name]} program ({d.text}), syntax not read"
         r.reason, r.refusal_line = f"{dialects.NAMES[d.name]} program, syntax not read", e.line
         return
+    if dialect == "sinumerik" and entry.root is None:
+        _run_sinumerik(entry, work, r)
+        return
     try:
         # the tool table rs274 is given, so cutter compensation is followed as rs274 follows it
         prog = nc.read(entry.path, dialect=dialect, tools=TOOLS)
@@ -751,6 +760,45 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
                 details.append(f"{name}: " + "; ".join(problems))
     r.motion = "mismatch" if details else "matched"
     r.motion_detail = " || ".join(details)
+
+
+def _run_sinumerik(entry: Entry, work: Path, r: Result) -> None:
+    """A Sinumerik program as ``ncadapt correct`` treats it: run into straight RS274NGC, which is
+    checked against the oracle nc-gcode-interpreter running the source (block ends), then
+    corrected and compared with rs274 as any RS274NGC program; a zero correction must give the
+    Sinumerik program back byte for byte."""
+    data = entry.path.read_bytes()
+    try:
+        tr = sinumerik.translate(data, entry.file)
+    except InputError as e:
+        r.outcome = f"refused: line {e.line}: {e.message}"
+        r.reason, r.refusal_line = _generic(e.message), e.line
+        return
+    folder = work / "straight"
+    folder.mkdir(exist_ok=True)
+    straight = Path(entry.file).stem + ".ngc"
+    (folder / straight).write_bytes(tr.data)
+    _run(dataclasses.replace(entry, file=straight, root=folder), work, r)
+    if r.refusal_line is not None and 1 <= r.refusal_line <= len(tr.lines):
+        k = r.refusal_line
+        r.refusal_line = int(tr.lines[k - 1])
+        r.outcome = r.outcome.replace(f"line {k}:", f"line {r.refusal_line}:", 1)
+    if not r.accepted:
+        return
+    r.outcome = "accepted (run straight)"
+    out = work / ("zero" + entry.path.suffix)
+    nc.correct_file(entry.path, out, fields.Shift((0.0, 0.0, 0.0)), dialect="sinumerik")
+    if out.read_bytes() != data:
+        r.identity, r.identity_detail = False, _first_difference(data, out.read_bytes())
+    if not ncgi.AVAILABLE or RS274 is None:
+        return
+    want = ncgi.ends(data.decode("utf-8", "replace"))
+    canon = canonical(folder / straight)
+    got = ncgi.distinct(canon.ends) if canon.error is None else None
+    if got is None or got.shape != want.shape or np.abs(got - want).max() > ncgi.tolerance(want):
+        detail = "the straight program does not move as nc-gcode-interpreter runs the source"
+        r.motion = "mismatch"
+        r.motion_detail = f"{detail} || {r.motion_detail}" if r.motion_detail else detail
 
 
 # ------------------------------------------------------------------------------------------ report

@@ -204,8 +204,10 @@ def test_cli_expand(tmp_path):
     assert r.exit_code == 1 and "--expand" in r.output
     r = CliRunner().invoke(main, ["correct", str(src), "--shift", "0,0,0.05", "-o", str(out), "--expand"])
     assert r.exit_code == 0, r.output
-    # 4 blocks, the repeat, 40 × (the move and the endrepeat), 2 blocks; 4 + 40 + 2 written
-    assert "9 lines ran 87 blocks; the corrected program is written flat, 46 blocks" in r.output
+    # 4 blocks, the repeat, 40 × (the move and the endrepeat), 2 blocks; the shift changes the
+    # plunge only (the loop's moves are incremental), which runs once: rewritten in place
+    assert "9 lines ran 87 blocks; 1 line(s) rewritten in place, every other line as written" in r.output
+    assert out.read_text().splitlines() == SPIRAL.replace("G1 Z-0.1 F100", "G1 Z-0.05 F100").splitlines()
     a, b = rs274.canonical(src), rs274.canonical(out)
     assert a.error is None and b.error is None and a.kinds == b.kinds
     feed = np.array([k != "traverse" for k in a.kinds])
@@ -290,3 +292,78 @@ def test_subprogram_refusals(prog, line, message):
 def test_fanuc_numbers_keep_their_points():
     # a number without a decimal point stays as written, for the Fanuc reader to refuse
     assert fl.flatten(b"O1\nG0 X10 Y2.5\nM30\n", "p", "fanuc").data == b"G0 X10 Y2.5\nM30\n"
+
+
+STRUCTURED = """(a part in two features; parameters, a subroutine called once and a branch)
+#<depth> = -0.5
+#<width> = 20
+o100 sub
+  G1 X[#1] Y0 F200
+  G1 Y[#<_width_seen>]
+o100 endsub
+#<_width_seen> = [#<width> / 2]
+G21 G90 G17
+G0 X0 Y0 Z2
+N40 G1 Z#<depth> F100 ; plunge
+o100 call [#<width>]
+o200 if [#<width> GT 10]
+  G1 X0 Y[#<width>]
+o200 else
+  G1 X99 Y99
+o200 endif
+#1 = 5 G1 X[#<width> / 4]
+G0 Z2
+M2
+"""
+
+
+def _slope(p):
+    d = np.zeros_like(p)
+    d[:, 2] = 0.01 + 0.002 * p[:, 0]
+    return d
+
+
+@needs_rs274
+def test_changed_lines_run_once_are_rewritten_in_place(tmp_path):
+    """A field changes moves outside loops: those lines are rewritten with the corrected block, the
+    parameters, the subroutine, the branch and every other line kept as written; rs274 runs the
+    written program as the flat corrected one, and its cutting ends are the input's raised by the
+    field there. A changed line that sets a parameter (#1 = 5 G1 X[#<width> / 4]) cannot be rewritten: the
+    program is then written flat."""
+    src = tmp_path / "part.ngc"
+    src.write_text(STRUCTURED.replace("#1 = 5 G1 X[#<width> / 4]\n", ""))
+    out = tmp_path / "out.ngc"
+    c = nc.correct_file(src, out, _slope, expand=True)
+    # the plunge, the subroutine's first move (its second stays at the same height) and the branch's
+    assert c.expanded["written"] == "in place" and c.expanded["lines_rewritten"] == 3
+    assert "  G1 X20 Y0 Z-0.45 F200" in out.read_text().splitlines()  # in the subroutine, indented
+    a, b = src.read_text().splitlines(), out.read_text().splitlines()
+    kept = [t for t in a if not t.lstrip().startswith(("G1", "N40"))]
+    assert [t for t in b if t in kept] == kept  # every other line as written, in order
+    assert "N40 G1 Z-0.49 F100 (plunge)" in b  # the number stays; the comment is the flat block's
+    ca, cb = rs274.canonical(src), rs274.canonical(out)
+    assert ca.error is None and cb.error is None and ca.kinds == cb.kinds
+    feed = np.array([k != "traverse" for k in ca.kinds])
+    want = ca.ends[:, :3].copy()
+    want[feed] += _slope(want[feed])
+    np.testing.assert_allclose(cb.ends[:, :3], want, atol=1e-4)
+
+    src.write_text(STRUCTURED)
+    c = nc.correct_file(src, out, _slope, expand=True)
+    assert c.expanded["written"] == "straight"
+    assert "o100" not in out.read_text() and "#" not in out.read_text()
+
+
+@needs_rs274
+def test_a_line_changed_in_a_loop_writes_the_program_flat(tmp_path):
+    src = tmp_path / "spiral.ngc"
+    src.write_text(SPIRAL)
+    out = tmp_path / "out.ngc"
+    c = nc.correct_file(src, out, _slope, expand=True)
+    assert c.expanded["written"] == "straight"
+    ca, cb = rs274.canonical(src), rs274.canonical(out)
+    assert ca.kinds == cb.kinds
+    feed = np.array([k != "traverse" for k in ca.kinds])
+    want = ca.ends[:, :3].copy()
+    want[feed] += _slope(want[feed])
+    np.testing.assert_allclose(cb.ends[:, :3], want, atol=1e-4)

@@ -29,7 +29,7 @@ from .errors import InputError
 CHOICES = ("auto", "linuxcnc", "fanuc", "sinumerik", "grbl", "marlin")
 
 #: Dialects whose programs the engine reads (as RS274NGC; what differs is refused at its line).
-READ = ("linuxcnc", "fanuc", "grbl", "marlin")
+READ = ("linuxcnc", "fanuc", "sinumerik", "grbl", "marlin")
 
 #: How much of a program detection reads.
 HEAD_BYTES = 64 * 1024

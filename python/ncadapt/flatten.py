@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -99,6 +99,11 @@ class Flat:
     data: bytes
     lines: np.ndarray
     blocks_run: int
+    #: (lines of the program,) how many flattened lines each line gave
+    runs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: (lines of the program,) lines whose text cannot be replaced by their flattened block: they
+    #: set parameters, or call or end a subprogram
+    fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 class _Error(Exception):
@@ -448,7 +453,16 @@ def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> 
             break
         i = nxt
     body = "".join(t + "\n" for t in run.out)
-    return Flat(body.encode("utf-8", "surrogateescape"), np.asarray(run.origin, dtype=np.int64) + 1, blocks)
+    origin = np.asarray(run.origin, dtype=np.int64)
+    fixed = np.zeros(len(lines), dtype=bool)
+    fixed[sorted(run.fixed)] = True
+    return Flat(
+        body.encode("utf-8", "surrogateescape"),
+        origin + 1,
+        blocks,
+        np.bincount(origin, minlength=len(lines)),
+        fixed,
+    )
 
 
 class _Run:
@@ -465,6 +479,7 @@ class _Run:
         self.counters: dict[int, int] = {}
         self.out: list[str] = []
         self.origin: list[int] = []
+        self.fixed: set[int] = set()
 
     def cond(self, ln: _Line) -> float:
         """The [condition] (or count) after an O-word keyword."""
@@ -592,6 +607,8 @@ class _Run:
                 raise _Error(f"unexpected '{c}'", p.k + 1)
         for ref, v in sets:
             mac.write(ref, v)
+        if sets:
+            self.fixed.add(i)
         ms = [round(v) for c, v in words if c == "m"]
         gs = [round(v * 10) for c, v in words if c == "g"]
         if any(g in (700, 710, 711, 720, 721) for g in gs):
@@ -600,6 +617,7 @@ class _Run:
             # probing, offsets, stored positions, tool data: the machine sets its parameters again
             mac.set_numbered[MACHINE_PARAMETERS:] = False
         if any(m in (98, 99) for m in ms):
+            self.fixed.add(i)
             return self.subprogram(words, i)
         if words or ln.comments:
             self.out.append(" ".join(t for t in (" ".join(texts), *ln.comments) if t))

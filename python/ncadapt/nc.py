@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -165,58 +166,150 @@ def correct_file(
     ``ncadapt._nc.read_ahead(path, constants.PIECE_BYTES, dialect)`` started earlier on the same
     file (the command line starts one before its imports), whose pieces the engine takes.
     ``expand``: the program's parameters, expressions and O-word flow (LinuxCNC's), and its M98/M99
-    subprograms (LinuxCNC's and Fanuc's), are first flattened into straight G-code (:func:`ncadapt.flatten.flatten`), which is corrected and
-    written; ``Correction.expanded`` then says how many blocks. The output is written atomically: when a check
-    refuses (an unsupported construct, a displacement over the limit, a point outside the field),
-    nothing is written. Raises :class:`InputError` naming ``path:line:col`` on bad input.
+    subprograms (LinuxCNC's and Fanuc's), are first flattened into straight G-code
+    (:func:`ncadapt.flatten.flatten`), which is corrected. A Sinumerik program (``dialect="sinumerik"``)
+    is always run into straight G-code first (:func:`ncadapt.sinumerik.translate`). The program is
+    then written as it is when no block changed; with its changed lines rewritten in place when
+    each runs once (its structure and every other line kept); and otherwise straight, one line per
+    block run (a Sinumerik program only with ``expand``, else :class:`RefusedError` naming the
+    line). ``Correction.expanded`` says which (``written``) and how many blocks.
+
+    The output is written atomically: when a check refuses (an unsupported construct, a
+    displacement over the limit, a point outside the field), nothing is written. Raises
+    :class:`InputError` naming ``path:line:col`` on bad input.
     """
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
-    flat = None
-    if expand:
-        if dialect not in ("linuxcnc", "fanuc"):
-            raise ValueError(f"expand reads LinuxCNC's and Fanuc's programs; the dialect is {dialect}")
+    if dialect == "sinumerik":
         if read_ahead is not None:
             read_ahead.cancel()
-            read_ahead = None
-        from .flatten import flatten
-
-        try:
-            data = p.read_bytes()
-        except OSError as e:
-            raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
-        flat = flatten(data, str(p), dialect)
+        return _correct_sinumerik(p, out, field, expand, options)
+    if expand:
+        if dialect not in ("linuxcnc", "fanuc"):
+            raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
+        if read_ahead is not None:
+            read_ahead.cancel()
+        return _correct_flat(p, out, field, dialect, options)
     with atomic_open(out) as f:
         with _BackgroundWriter(f) as w:
-            try:
-                c = _correct(
-                    str(p) if flat is None else flat.data,
-                    str(p),
-                    w.write,
-                    field,
-                    keep_points=False,
-                    out_file=f,
-                    dialect=_check_dialect(dialect),
-                    read_ahead=read_ahead,
-                    **options,
-                )
-            except (InputError, RefusedError) as e:
-                raise e if flat is None else _flat_error(e, flat, str(p)) from None
-        if flat is not None:
-            # a correction that changes no block of the flattened program (a zero field) keeps the
-            # program as it is written, its parameters and O-words with it
-            kept = c.blocks_changed == 0 and c.lines_added == 0
-            if kept:
-                f.seek(0)
-                f.truncate()
-                f.write(data)
-            n = len(data.splitlines())
-            expanded = {"lines_in": n, "blocks": len(flat.lines), "blocks_run": flat.blocks_run, "kept": kept}
-            c = dataclasses.replace(c, expanded=expanded)
+            c = _correct(
+                str(p),
+                str(p),
+                w.write,
+                field,
+                keep_points=False,
+                out_file=f,
+                dialect=_check_dialect(dialect),
+                read_ahead=read_ahead,
+                **options,
+            )
     return c
 
 
-def _flat_error(e, flat, name):
+def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Correction:
+    """:func:`correct_file` with ``expand``: the program flattened
+    (:func:`ncadapt.flatten.flatten`) and corrected; written as it is when no block changed, with
+    its changed lines rewritten in place when each of them runs once and sets no parameter (its
+    parameters, O-words and every other line kept), and flat otherwise."""
+    import io
+
+    from . import rewrite
+    from .flatten import flatten
+
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    flat = flatten(data, str(p), dialect)
+    straight = flat.data.decode("utf-8", "surrogateescape").splitlines()
+    buf = io.BytesIO()
+    try:
+        c = _correct(rewrite.mark(straight), str(p), buf.write, field, keep_points=False, dialect=dialect, **options)
+    except (InputError, RefusedError) as e:
+        raise _flat_error(e, flat, str(p)) from None
+    groups = rewrite.groups(buf.getvalue(), len(straight))
+    changed = rewrite.changed(groups, straight)
+    lines = {int(flat.lines[k]) - 1: k for k, ch in enumerate(changed) if ch}  # original line → flat line
+    if not lines:
+        text, written = data, "as it is"
+    elif all(flat.runs[i] == 1 and not flat.fixed[i] for i in lines):
+        out_lines = []
+        for i, (body, eol) in enumerate(rewrite.lines_of(data)):
+            if i not in lines:
+                out_lines.append(body + eol)
+                continue
+            # the line's indent, block delete and number stay; its words are the corrected block's
+            m = re.match(r"[ \t]*/?[ \t]*(?:[Nn][ \t]*\d+[ \t]*)?", body)
+            head = m.group() if m else ""
+            g = groups[lines[i]]
+            out_lines += [head + g[0].strip() + (eol or "\n")]
+            out_lines += [t.strip() + (eol or "\n") for t in g[1:]]
+        text, written = "".join(out_lines).encode("utf-8", "surrogateescape"), "in place"
+    else:
+        text, written = "".join(t + "\n" for g in groups for t in g).encode("utf-8", "surrogateescape"), "straight"
+    atomic_write(out, text)
+    expanded = {
+        "lines_in": len(data.splitlines()),
+        "blocks": len(flat.lines),
+        "blocks_run": flat.blocks_run,
+        "kept": written == "as it is",
+        "written": written,
+        "lines_rewritten": len(lines)
+        if written == "in place"
+        else (0 if written == "as it is" else len(text.splitlines())),
+    }
+    return dataclasses.replace(c, expanded=expanded)
+
+
+def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -> Correction:
+    """:func:`correct_file` for a Sinumerik program: run into straight RS274NGC
+    (:func:`ncadapt.sinumerik.translate`), corrected, and written back in Sinumerik's syntax."""
+    import io
+
+    from . import sinumerik
+
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    tr = sinumerik.translate(data, str(p))
+    buf = io.BytesIO()
+    try:
+        c = _correct(tr.data, str(p), buf.write, field, keep_points=False, dialect="linuxcnc", **options)
+    except (InputError, RefusedError) as e:
+        raise _flat_error(e, tr, str(p), "run as straight G-code") from None
+    try:
+        text, rewritten, written = sinumerik.assemble(tr, buf.getvalue(), expand)
+    except sinumerik.NeedsExpand as e:
+        raise RefusedError(
+            f"line {e.line} runs {e.runs} times (a loop or a jump) and its move is corrected differently on each run: "
+            "the corrected program cannot keep the loop; --expand writes it straight, one block per move run",
+            [{"line": e.line, "runs": e.runs, "reason": "corrected in a loop"}],
+        ) from None
+
+    def orig(m):
+        k = int(m.group(2))
+        return f"{m.group(1)}{tr.lines[k - 1] if 1 <= k <= len(tr.lines) else k}"
+
+    at_line = re.compile(r"(\bline )(\d+)")
+    c = dataclasses.replace(
+        c,
+        warnings=tuple(at_line.sub(orig, w) for w in c.warnings),
+        notes=tuple((int(tr.lines[k - 1]) if 1 <= k <= len(tr.lines) else k, m) for k, m in c.notes),
+    )
+    atomic_write(out, text)
+    expanded = {
+        "lines_in": len(data.splitlines()),
+        "blocks": len(tr.items),
+        "blocks_run": tr.blocks_run,
+        "kept": written == "as it is",
+        "written": written,
+        "lines_rewritten": rewritten,
+    }
+    return dataclasses.replace(c, expanded=expanded)
+
+
+def _flat_error(e, flat, name, how="flattened with --expand"):
     """An error of the flattened program, located at the original line its block comes from."""
     if isinstance(e, InputError):
         k = e.line
@@ -229,7 +322,7 @@ def _flat_error(e, flat, name):
             d = {**d, "line": int(flat.lines[d["line"] - 1]), "flat_line": d["line"]}
         details.append(d)
     return RefusedError(
-        f"{e.message} (the program was flattened with --expand: line numbers in this message are of the flattened "
+        f"{e.message} (the program was {how}: line numbers in this message are of that "
         "program; the details give the original lines)",
         details,
     )
@@ -237,8 +330,31 @@ def _flat_error(e, flat, name):
 
 def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
-    piece: memory stays bounded whatever the program's length."""
-    return _inspect(str(path), str(path), _check_dialect(dialect))
+    piece: memory stays bounded whatever the program's length. A Sinumerik program is run into
+    straight G-code first (:func:`ncadapt.sinumerik.translate`); the lines named are its own."""
+    if dialect != "sinumerik":
+        return _inspect(str(path), str(path), _check_dialect(dialect))
+    from . import sinumerik
+
+    try:
+        data = Path(path).read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read program: {e.strerror}", str(path)) from None
+    tr = sinumerik.translate(data, str(path))
+    try:
+        info = _inspect(tr.data, str(path))
+    except InputError as e:
+        raise _flat_error(e, tr, str(path)) from None
+
+    def orig(k):
+        return int(tr.lines[k - 1]) if isinstance(k, int) and 1 <= k <= len(tr.lines) else k
+
+    info["lines"] = len(data.splitlines())
+    info["blocks_run"] = tr.blocks_run
+    info["end_line"] = orig(info["end_line"])
+    info["unsupported"] = [{**u, "line": orig(u["line"])} for u in info["unsupported"]]
+    info["notes"] = [{**n, "line": orig(n["line"])} for n in info["notes"]]
+    return info
 
 
 def read(path: str | os.PathLike, dialect: str = "linuxcnc", tools: Mapping[int, float] | None = None) -> Program:

@@ -100,7 +100,9 @@ def _shift(ctx, param, value):
     is_flag=True,
     help="Flatten the program's parameters, expressions and O-word flow (LinuxCNC's: o-word subroutines, "
     "if/while/repeat) and its M98/M99 subprograms (LinuxCNC's and Fanuc's) into straight G-code as the control "
-    "runs them, and correct and write that. Without it such programs are refused.",
+    "runs them, and correct and write that. Without it such programs are refused. A Sinumerik program is always "
+    "run (its R parameters, variables, IF/WHILE/FOR and GOTO) and its corrected lines rewritten in place; a line "
+    "corrected differently on each pass of a loop needs --expand, which then writes the program straight.",
 )
 @click.option(
     "--tool-table",
@@ -146,9 +148,9 @@ def correct(
     if (tool_table is None) != (tool_units is None):
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = dialects.resolve(program, dialect)
-    if expand and d.name not in ("linuxcnc", "fanuc"):
+    if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
         raise click.UsageError(
-            f"--expand flattens LinuxCNC's and Fanuc's programs; this program is read as {d.describe()}"
+            f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
         )
     tools = None
     if tool_table is not None:
@@ -159,7 +161,9 @@ def correct(
     # core that would wait (without a tool table: the read-ahead reads without one)
     from .._nc import read_ahead
 
-    ahead = None if tools or expand else read_ahead(str(program), constants.PIECE_BYTES, d.name)
+    ahead = (
+        None if tools or expand or d.name == "sinumerik" else read_ahead(str(program), constants.PIECE_BYTES, d.name)
+    )
     from .. import fields as _fields
     from .. import nc
 
@@ -191,14 +195,13 @@ def correct(
     summary(f"  field: {field.describe()}")
     if c.expanded is not None:
         e = c.expanded
-        summary(
-            f"  flattened (--expand): {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; "
-            + (
-                "no block changed: the program is written as it is"
-                if e["kept"]
-                else f"the corrected program is written flat, {e['blocks']:,} blocks"
-            )
-        )
+        how = {
+            "as it is": "no block changed: the program is written as it is",
+            "in place": f"{e['lines_rewritten']:,} line(s) rewritten in place, every other line as written",
+            "straight": f"the corrected program is written straight, {e['lines_rewritten']:,} lines",
+        }[e["written"]]
+        ran = "run as straight G-code" if d.name == "sinumerik" else "flattened (--expand)"
+        summary(f"  {ran}: {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; {how}")
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
         f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"

@@ -1,0 +1,1116 @@
+"""Read a Sinumerik 840D program: run it as the control does and write the motion it makes as
+straight RS274NGC, which the engine corrects; then write the corrected program back in
+Sinumerik's syntax (:func:`translate`, :func:`assemble`).
+
+What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and *Job Planning*):
+
+- blocks with ``N`` numbers and ``LABEL:`` labels, ``;`` comments, upper or lower case;
+- ``G0 G1 G2 G3`` with ``X Y Z A B C`` (literals or ``X=expr``), ``=AC(…)``/``=IC(…)`` per word,
+  arcs by centre (``I J K``, incremental or ``=AC(…)``; a ``K`` in a G17 arc, the centre's
+  coordinate along the helix axis, does not change the arc), by radius (``CR=``, negative for more
+  than 180°), or through an intermediate point (``CIP`` with ``I1= J1= K1=``, in the active plane);
+- ``G17 G18 G19``, ``G90 G91``, ``G70 G71 G700 G710`` (inch / metric), ``G54``–``G57`` (before the
+  first move), ``G53``/``G153``/``SUPA`` (machine coordinates for the block: kept, not corrected),
+  ``G40``, ``G4 F``/``G4 S`` (dwell), ``G93 G94 G95 G96 G97``, ``F S T D M`` words;
+- frames ``TRANS``/``ATRANS`` (translations; ``ROT``, ``SCALE``, ``MIRROR`` without axes reset
+  the frame; with axes they are refused);
+- R parameters (``R1``, ``R[expr]``; one read before the program sets it is refused: its value is
+  the machine's), ``DEF INT|REAL|BOOL`` variables, assignments, expressions (``+ - * / DIV MOD``,
+  comparisons, ``AND OR XOR NOT``, ``SIN COS TAN ASIN ACOS ATAN2`` in degrees, ``SQRT ABS POT
+  TRUNC ROUND MINVAL MAXVAL LN EXP``), ``IF/ELSE/ENDIF``, ``WHILE/ENDWHILE``, ``FOR … TO …/ENDFOR``,
+  ``REPEAT/UNTIL``, ``LOOP/ENDLOOP``, ``GOTOF/GOTOB/GOTO`` to a label or block number, ``IF … GOTOF``;
+- copied as written, without an effect on the path: ``MSG(…)``, ``T="name"``, ``G9 G60 G64 G641
+  G642 G643 G644 G645 G601 G602 G603``, ``SOFT BRISK DRIVE FFWON FFWOF CFC CFTCP CFIN STOPRE``,
+  ``G340 G341 G450 G451 DIAMOF``, ``ADIS= ADISPOS= LIMS=``, ``TURN=0``;
+- ``M30 M2 M17 RET`` end the program.
+
+Refused at their line (:class:`~ncadapt.InputError`), because the path they make is not
+followed: subprogram and cycle calls (``NAME(…)``, ``CYCLE81(…)``, ``L123``, ``EXTERN``, ``PROC``),
+splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), ``CT`` tangential arcs, ``TURN=`` more
+than 0, polar coordinates (``AP= RP= G110 G111 G112``), ``AR=``, threads and tapping, cutter
+compensation ``G41``/``G42``, rotations, scaling and mirroring, ``DIAMON``, system variables
+(``$…``), other axes, a change of work system after a move, an arc without a centre or radius,
+an axis written twice in a block, a loop that runs more than :data:`MAX_BLOCKS` blocks.
+
+The straight program (:attr:`Translation.data`) has one line per thing the program did, each
+ending in a marker ``;@k`` naming its :class:`Item`; the engine keeps the markers, so its output
+says which corrected lines belong to which original line (:func:`assemble`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import rewrite
+from .errors import InputError
+
+#: Most blocks a program may run: a loop that runs more is taken as one that does not end.
+MAX_BLOCKS = 2_000_000
+
+_AXES = ("X", "Y", "Z", "A", "B", "C")
+_LINEAR = ("X", "Y", "Z")
+#: Plane: (first axis, second axis, their centre letters).
+_PLANES = {17: ("X", "Y", "I", "J"), 18: ("Z", "X", "K", "I"), 19: ("Y", "Z", "J", "K")}
+_CENTRE = {"I": "X", "J": "Y", "K": "Z"}
+#: G codes copied without an effect on the path (exact stop, continuous path, SAR plane, corners).
+_COPY_G = {9, 60, 64, 641, 642, 643, 644, 645, 601, 602, 603, 340, 341, 450, 451}
+_COPY_WORDS = {"SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "DIAMOF"}
+_COPY_ASSIGN = {"ADIS", "ADISPOS", "LIMS"}
+_FRAMES = {"TRANS", "ATRANS", "ROT", "AROT", "SCALE", "ASCALE", "MIRROR", "AMIRROR"}
+_REFUSED_WORDS = {
+    "ASPLINE": "spline interpolation",
+    "BSPLINE": "spline interpolation",
+    "CSPLINE": "spline interpolation",
+    "POLY": "polynomial interpolation",
+    "CT": "a tangential arc (CT)",
+    "DIAMON": "diameter programming (DIAMON)",
+    "DIAM90": "diameter programming (DIAM90)",
+    "TRAORI": "a 5-axis transformation",
+    "TRANSMIT": "a transformation",
+    "TRACYL": "a transformation",
+}
+_REFUSED_G = {
+    33: "a thread (G33)",
+    34: "a thread (G34)",
+    35: "a thread (G35)",
+    331: "tapping (G331)",
+    332: "tapping (G332)",
+    63: "tapping (G63)",
+    41: "cutter radius compensation (G41): its offset path is not followed for Sinumerik programs",
+    42: "cutter radius compensation (G42): its offset path is not followed for Sinumerik programs",
+    110: "polar coordinates (G110)",
+    111: "polar coordinates (G111)",
+    112: "polar coordinates (G112)",
+    25: "a working-area limit (G25)",
+    26: "a working-area limit (G26)",
+    74: "a reference point approach (G74)",
+    75: "a fixed point approach (G75)",
+    147: "a smooth approach (SAR)",
+    148: "a smooth retract (SAR)",
+    247: "a smooth approach (SAR)",
+    248: "a smooth retract (SAR)",
+    347: "a smooth approach (SAR)",
+    348: "a smooth retract (SAR)",
+}
+_PASS_G = {17, 18, 19, 90, 91, 40, 93, 94, 95, 96, 97, 54, 55, 56, 57}
+_UNITS = {70: 20, 700: 20, 71: 21, 710: 21}
+_FLOW = ("IF", "ELSE", "ENDIF", "WHILE", "ENDWHILE", "FOR", "ENDFOR", "REPEAT", "UNTIL", "LOOP", "ENDLOOP")
+_OPENERS = {
+    "IF": ("ELSE", "ENDIF"),
+    "WHILE": ("ENDWHILE",),
+    "FOR": ("ENDFOR",),
+    "REPEAT": ("UNTIL",),
+    "LOOP": ("ENDLOOP",),
+}
+_TOKEN = re.compile(
+    r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:EX[-+]?\d+)?)|(?P<name>[A-Z_$][A-Z0-9_$]*)|(?P<str>\"[^\"]*\")"
+    r"|(?P<op>==|<>|<=|>=|<<|[-+*/()<>=,\[\]:]))"
+)
+_FUNCS = {
+    "SIN": lambda x: math.sin(math.radians(x)),
+    "COS": lambda x: math.cos(math.radians(x)),
+    "TAN": lambda x: math.tan(math.radians(x)),
+    "ASIN": lambda x: math.degrees(math.asin(x)),
+    "ACOS": lambda x: math.degrees(math.acos(x)),
+    "ATAN2": lambda y, x: math.degrees(math.atan2(y, x)),
+    "SQRT": math.sqrt,
+    "ABS": abs,
+    "POT": lambda x: x * x,
+    "TRUNC": lambda x: float(math.trunc(x)),
+    "ROUND": lambda x: float(math.floor(abs(x) + 0.5)) * (1.0 if x >= 0 else -1.0),
+    "MINVAL": min,
+    "MAXVAL": max,
+    "LN": math.log,
+    "EXP": math.exp,
+}
+# binary operators by priority, lowest first (Siemens, Job Planning, "Priority of the operations":
+# the comparisons come last, after the logic, so ``A > 1 AND B`` compares ``A`` with ``1 AND B``)
+_LEVELS = (("==", "<>", "<", ">", "<=", ">="), ("OR",), ("XOR",), ("AND",), ("+", "-"), ("*", "/", "DIV", "MOD"))
+#: Comparisons test relative equality (Siemens, "Precision correction on comparison errors"):
+#: two values within this fraction of the larger are equal.
+RELATIVE_EQUAL = 1e-12
+
+
+class _Error(Exception):
+    def __init__(self, message: str, col: int = 0):
+        super().__init__(message)
+        self.message, self.col = message, col
+
+
+@dataclass
+class Item:
+    """One line of the straight program: ``line`` the 0-based original line it comes from,
+    ``kind`` ``motion`` (a move; its words ``spans`` in the original line are what a correction
+    rewrites) or ``state`` (modal settings, a dwell, an end), ``rs`` its RS274NGC text, ``sn`` its
+    Sinumerik text for an expanded program (for a move: None, the corrected RS274 text is
+    written), ``mode`` the Sinumerik motion mode in effect for a move (``G0``…``G3``, ``CIP``) and
+    ``machine`` the word that puts a move in machine coordinates (``SUPA``, ``G53``, ``G153``)."""
+
+    line: int
+    kind: str
+    rs: str
+    sn: str | None = None
+    spans: tuple[tuple[int, int], ...] = ()
+    mode: str | None = None
+    machine: str | None = None
+
+
+@dataclass(frozen=True)
+class Translation:
+    """A Sinumerik program as straight RS274NGC: ``data`` (bytes, one :class:`Item` a line),
+    ``items``, ``lines`` (n,) the 1-based original line of each, ``runs`` how many times each
+    original line ran, ``blocks_run`` the blocks the program ran (its flow lines included)."""
+
+    data: bytes
+    items: list[Item]
+    lines: np.ndarray
+    runs: np.ndarray
+    blocks_run: int
+    source: bytes = field(repr=False, default=b"")
+
+
+# ----------------------------------------------------------------------------------- expressions
+#: What :meth:`_Tokens.peek` gives past the last token.
+_END = ("end", "", -1, -1)
+
+
+class _Tokens:
+    """The tokens of a line's code (upper case outside strings), with their columns."""
+
+    def __init__(self, code: str):
+        self.toks: list[tuple[str, str, int, int]] = []  # (kind, text, start, end)
+        k = 0
+        while k < len(code):
+            if code[k].isspace():
+                k += 1
+                continue
+            m = _TOKEN.match(code, k)
+            if not m or m.end() == k:
+                raise _Error(f"cannot read '{code[k : k + 12]}'", k + 1)
+            kind = m.lastgroup or "op"
+            self.toks.append((kind, m.group(kind), m.start(kind), m.end()))
+            k = m.end()
+        self.i = 0
+
+    def peek(self, n: int = 0) -> tuple[str, str, int, int]:
+        """The token ``n`` ahead, or :data:`_END` past the last."""
+        j = self.i + n
+        return self.toks[j] if j < len(self.toks) else _END
+
+    def take(self, text: str) -> bool:
+        t = self.peek()
+        if t[0] in ("op", "name") and t[1] == text:
+            self.i += 1
+            return True
+        return False
+
+    def need(self, text: str) -> None:
+        if not self.take(text):
+            raise _Error(f"expected '{text}'", self.col())
+
+    def col(self) -> int:
+        t = self.peek()
+        return t[2] + 1 if t[0] != "end" else (self.toks[-1][3] + 1 if self.toks else 1)
+
+
+def _number(text: str) -> float:
+    return float(text.replace("EX", "E"))
+
+
+class _Machine:
+    """The program's variables: R parameters and ``DEF`` variables (name → [type, value])."""
+
+    def __init__(self):
+        self.r: dict[int, float] = {}
+        self.vars: dict[str, list] = {}
+
+    def get(self, name: str, col: int) -> float:
+        v = self.vars.get(name)
+        if v is None:
+            if name.startswith("$"):
+                raise _Error(f"{name} is a system variable: its value is the machine's", col)
+            raise _Error(f"'{name}' is not defined (DEF) in the program", col)
+        return v[1]
+
+    def get_r(self, k: float, col: int) -> float:
+        if k != int(k) or k < 0:
+            raise _Error(f"R{k} is not an R parameter", col)
+        if int(k) not in self.r:
+            raise _Error(f"R{int(k)} is read before the program sets it: its value is the machine's", col)
+        return self.r[int(k)]
+
+    def set(self, target: tuple, v: float, col: int) -> None:
+        if target[0] == "R":
+            self.r[int(target[1])] = v
+            return
+        var = self.vars.get(target[1])
+        if var is None:
+            raise _Error(f"'{target[1]}' is not defined (DEF) in the program", col)
+        if var[0] == "INT":
+            v = float(math.floor(abs(v) + 0.5)) * (1.0 if v >= 0 else -1.0)
+        elif var[0] == "BOOL":
+            v = float(v != 0.0)
+        var[1] = v
+
+
+def _expr(t: _Tokens, m: _Machine, level: int = 0) -> float:
+    if level == len(_LEVELS):
+        return _unary(t, m)
+    a = _expr(t, m, level + 1)
+    while True:
+        tok = t.peek()
+        if tok[0] in ("end", "str") or tok[1] not in _LEVELS[level]:
+            return a
+        col = t.col()
+        t.i += 1
+        b = _expr(t, m, level + 1)
+        a = _binary(tok[1], a, b, col)
+
+
+def _binary(op: str, a: float, b: float, col: int) -> float:
+    if op in ("/", "DIV", "MOD") and b == 0.0:
+        raise _Error("division by zero", col)
+    match op:
+        case "+":
+            return a + b
+        case "-":
+            return a - b
+        case "*":
+            return a * b
+        case "/":
+            return a / b
+        case "DIV":
+            return float(math.trunc(a / b))
+        case "MOD":
+            return math.fmod(a, b)
+        case "==" | "<>" | "<" | ">" | "<=" | ">=":
+            same = abs(a - b) <= RELATIVE_EQUAL * max(abs(a), abs(b))
+            return float(
+                {"==": same, "<>": not same, "<": a < b and not same, ">": a > b and not same}.get(
+                    op, same or (a < b if op == "<=" else a > b)
+                )
+            )
+        case "AND":
+            return float(a != 0.0 and b != 0.0)
+        case "XOR":
+            return float((a != 0.0) != (b != 0.0))
+    return float(a != 0.0 or b != 0.0)
+
+
+def _unary(t: _Tokens, m: _Machine) -> float:
+    tok = t.peek()
+    if tok[0] == "end":
+        raise _Error("expected a value", t.col())
+    kind, text, col = tok[0], tok[1], tok[2] + 1
+    if t.take("-"):
+        return -_unary(t, m)
+    if t.take("+"):
+        return _unary(t, m)
+    if t.take("NOT"):
+        return float(_unary(t, m) == 0.0)
+    if t.take("("):
+        v = _expr(t, m)
+        t.need(")")
+        return v
+    t.i += 1
+    if kind == "num":
+        return _number(text)
+    if kind != "name":
+        raise _Error(f"expected a value, found '{text}'", col)
+    if text in ("TRUE", "FALSE"):
+        return float(text == "TRUE")
+    if text in _FUNCS:
+        t.need("(")
+        args = [_expr(t, m)]
+        while t.take(","):
+            args.append(_expr(t, m))
+        t.need(")")
+        try:
+            return float(_FUNCS[text](*args))  # type: ignore[operator]
+        except (ValueError, TypeError, OverflowError):
+            raise _Error(f"{text} of {', '.join(f'{a:g}' for a in args)} has no value", col) from None
+    r = _r_index(text, t, m, col)
+    if r is not None:
+        return m.get_r(r, col)
+    return m.get(text, col)
+
+
+def _r_index(text: str, t: _Tokens, m: _Machine, col: int) -> float | None:
+    """The index of an R parameter named by ``text`` (``R12``, or ``R`` followed by ``[expr]``)."""
+    if re.fullmatch(r"R\d+", text):
+        return float(text[1:])
+    if text == "R" and t.take("["):
+        k = _expr(t, m)
+        t.need("]")
+        return k
+    return None
+
+
+# ----------------------------------------------------------------------------------- the program
+@dataclass
+class _Line:
+    code: str  # upper case outside strings, comment removed, N number and label removed
+    code_at: int  # column of `code` in the raw line
+    label: str | None
+    number: int | None
+    keyword: str | None  # a flow keyword, DEF, GOTO…, PROC, EXTERN, or None
+
+
+def _split(raw: str) -> tuple[str, int]:
+    """A line's code (comment removed, upper case outside strings) and where it starts."""
+    out, k, quoted = [], 0, False
+    while k < len(raw):
+        c = raw[k]
+        if c == '"':
+            quoted = not quoted
+        elif c == ";" and not quoted:
+            break
+        up = c.upper()
+        out.append(c if quoted or len(up) != 1 else up)
+        k += 1
+    return "".join(out), 0
+
+
+def _read(text: str, src: str) -> list[_Line]:
+    lines = []
+    for n, raw in enumerate(text.splitlines(), 1):
+        code, at = _split(raw)
+        number, label = None, None
+        m = re.match(r"\s*N(\d+)\b\s*", code)
+        if m:
+            number, at = int(m.group(1)), m.end()
+        m = re.match(r"\s*([A-Z_][A-Z0-9_]*):(?!=)\s*", code[at:])
+        if m:
+            label, at = m.group(1), at + m.end()
+        body = code[at:]
+        stripped = body.strip()
+        if stripped.startswith("/"):
+            raise InputError("a skipped block (/): whether it runs is the machine's setting", src, n, at + 1)
+        kw = re.match(
+            r"(IF|ELSE|ENDIF|WHILE|ENDWHILE|FOR|ENDFOR|REPEAT|UNTIL|LOOP|ENDLOOP|DEF|GOTOF|GOTOB|GOTOC|GOTO"
+            r"|PROC|EXTERN|RET|DEFINE|SAVE)\b",
+            stripped,
+        )
+        lines.append(_Line(body, at, label, number, kw.group(1) if kw else None))
+    return lines
+
+
+def _match(lines: list[_Line], src: str) -> dict[int, tuple[int, ...]]:
+    """For each flow opener and middle, the lines of its ELSE / end (IF → (ELSE, ENDIF) …)."""
+    stack: list[tuple[str, int, list[int]]] = []
+    out: dict[int, tuple[int, ...]] = {}
+    for i, ln in enumerate(lines):
+        kw = ln.keyword
+        if kw == "IF" and re.search(r"\bGOTO[FBC]?\b", ln.code):
+            continue  # IF … GOTOF label: one line
+        if kw in _OPENERS:
+            stack.append((kw, i, []))
+        elif kw in ("ELSE", "ENDIF", "ENDWHILE", "ENDFOR", "UNTIL", "ENDLOOP"):
+            if not stack or kw not in _OPENERS[stack[-1][0]]:
+                raise InputError(f"{kw} without its opening statement", src, i + 1, ln.code_at + 1)
+            opener, at, mids = stack[-1]
+            if kw == "ELSE":
+                if mids:
+                    raise InputError("a second ELSE", src, i + 1, ln.code_at + 1)
+                mids.append(i)
+                continue
+            stack.pop()
+            els = mids[0] if mids else -1
+            out[at] = (els, i)
+            if els >= 0:
+                out[els] = (els, i)
+            out[i] = (at,)
+    if stack:
+        kw, at, _ = stack[-1]
+        raise InputError(f"{kw} without its end", src, at + 1)
+    return out
+
+
+@dataclass
+class _State:
+    """What the control holds between blocks, as far as the path goes."""
+
+    mode: str | None = None  # group 1: G0 G1 G2 G3 CIP; at the start the machine's (machine data)
+    plane: int = 17
+    absolute: bool = True
+    inch: bool | None = None
+    moved: bool = False
+    wcs: int | None = None
+    trans: dict = field(default_factory=lambda: dict.fromkeys(_AXES, 0.0))
+    pos: dict = field(default_factory=lambda: dict.fromkeys(_AXES))  # program coordinates; None unknown
+
+
+def _fmt(v: float) -> str:
+    t = f"{v:.6f}".rstrip("0").rstrip(".")
+    return "0" if t in ("-0", "") else t
+
+
+@dataclass
+class _Block:
+    """The words of one block, gathered before it runs."""
+
+    axes: dict = field(default_factory=dict)  # letter → (value, "AC"/"IC"/"", span)
+    arc: dict = field(default_factory=dict)  # I J K I1 J1 K1 CR → (value, how, span)
+    motion: tuple[str, tuple[int, int]] | None = None
+    pre: list = field(default_factory=list)  # (rs, sn) before the move
+    post: list = field(default_factory=list)  # (rs, sn) after it
+    machine: str | None = None
+    frame: str | None = None
+    dwell: bool = False
+    end: bool = False
+
+    def put(self, name: str, v: float, how: str, col: int, span: tuple[int, int]) -> None:
+        into = self.axes if name in _AXES else self.arc
+        if name in into:
+            raise _Error(f"{name} is written twice in the block", col)
+        into[name] = (v, how, span)
+
+    def set_motion(self, code: str, span: tuple[int, int], col: int) -> None:
+        if self.motion is not None:
+            raise _Error("two motion codes in one block", col)
+        self.motion = (code, span)
+
+
+class _Run:
+    def __init__(self, lines: list[_Line], src: str):
+        self.lines, self.src = lines, src
+        self.flow = _match(lines, src)
+        self.m = _Machine()
+        self.s = _State()
+        self.items: list[Item] = []
+        self.runs = np.zeros(len(lines), dtype=np.int64)
+        self.labels: dict[str, int] = {}
+        for i, ln in enumerate(lines):
+            if ln.label is not None:
+                self.labels.setdefault(ln.label, i)
+        self.for_end: dict[int, float] = {}
+
+    # --- flow
+    def step(self, i: int) -> int | None:
+        ln = self.lines[i]
+        self.runs[i] += 1
+        kw = ln.keyword
+        t = _Tokens(ln.code)
+        if kw is None:
+            return self.block(t, i)
+        t.i = 1
+        if kw == "IF":
+            cond = _expr(t, self.m)
+            if t.peek()[1].startswith("GOTO"):
+                return self.goto(t, i) if cond != 0.0 else i + 1
+            self.end(t)
+            if cond != 0.0:
+                return i + 1
+            els, end = self.flow[i]
+            return (els if els >= 0 else end) + 1
+        if kw == "ELSE":
+            return self.flow[i][1] + 1
+        if kw in ("ENDIF", "REPEAT", "LOOP"):
+            self.end(t)
+            return i + 1
+        if kw == "WHILE":
+            cond = _expr(t, self.m)
+            self.end(t)
+            return i + 1 if cond != 0.0 else self.flow[i][1] + 1
+        if kw == "ENDWHILE":
+            return self.flow[i][0]
+        if kw == "ENDLOOP":
+            return self.flow[i][0] + 1
+        if kw == "UNTIL":
+            cond = _expr(t, self.m)
+            self.end(t)
+            return i + 1 if cond != 0.0 else self.flow[i][0] + 1
+        if kw == "FOR":
+            target = self.target(t)
+            t.need("=")
+            start = _expr(t, self.m)
+            t.need("TO")
+            stop = _expr(t, self.m)
+            self.end(t)
+            self.m.set(target, start, ln.code_at + 1)
+            self.for_end[i] = stop
+            return i + 1 if self.value(target) <= stop else self.flow[i][1] + 1
+        if kw == "ENDFOR":
+            at = self.flow[i][0]
+            ft = _Tokens(self.lines[at].code)
+            ft.i = 1
+            target = self.target(ft)
+            self.m.set(target, self.value(target) + 1.0, ln.code_at + 1)
+            return at + 1 if self.value(target) <= self.for_end[at] else i + 1
+        if kw == "DEF":
+            self.define(t)
+            return i + 1
+        if kw.startswith("GOTO"):
+            t.i = 0
+            return self.goto(t, i)
+        if kw == "RET":
+            return None
+        if kw == "PROC":
+            raise _Error(
+                "a subprogram (PROC): its parameters come from the program that calls it; correct that one "
+                "(a subprogram in another file is not read)",
+                1,
+            )
+        if kw == "EXTERN":
+            return i + 1  # a declaration: the call, if the program makes it, is refused
+        raise _Error(f"{kw} is not read", 1)
+
+    def end(self, t: _Tokens) -> None:
+        if t.peek()[0] != "end":
+            raise _Error(f"unexpected '{t.peek()[1]}'", t.col())
+
+    def target(self, t: _Tokens) -> tuple:
+        tok = t.peek()
+        if tok[0] != "name":
+            raise _Error("expected a variable", t.col())
+        t.i += 1
+        r = _r_index(tok[1], t, self.m, tok[2] + 1)
+        return ("R", r) if r is not None else ("V", tok[1])
+
+    def value(self, target: tuple) -> float:
+        return self.m.r.get(int(target[1]), 0.0) if target[0] == "R" else self.m.vars[target[1]][1]
+
+    def define(self, t: _Tokens) -> None:
+        tok = t.peek()
+        kind = tok[1]
+        if kind not in ("INT", "REAL", "BOOL"):
+            raise _Error(f"DEF {kind}: only INT, REAL and BOOL variables are read", t.col())
+        t.i += 1
+        while True:
+            name = t.peek()
+            if name[0] != "name":
+                raise _Error("expected a variable name", t.col())
+            t.i += 1
+            if t.peek()[1] == "[":
+                raise _Error("arrays are not read", t.col())
+            self.m.vars[name[1]] = [kind, 0.0]
+            if t.take("="):
+                self.m.set(("V", name[1]), _expr(t, self.m), name[2] + 1)
+            if not t.take(","):
+                break
+        self.end(t)
+
+    def goto(self, t: _Tokens, i: int) -> int:
+        kw = t.peek()[1]
+        t.i += 1
+        tok = t.peek()
+        if tok[0] == "end":
+            raise _Error(f"{kw} without a destination", t.col())
+        t.i += 1
+        dest = tok[1]
+        if dest == "N" and t.peek()[0] == "num":
+            dest = "N" + t.peek()[1]
+            t.i += 1
+        self.end(t)
+        found = [
+            j
+            for j, ln in enumerate(self.lines)
+            if ln.label == dest or (dest.startswith("N") and dest[1:].isdigit() and ln.number == int(dest[1:]))
+        ]
+        fwd = [j for j in found if j > i]
+        back = [j for j in found if j <= i]
+        if kw == "GOTOF":
+            found = fwd[:1]
+        elif kw == "GOTOB":
+            found = back[-1:]
+        else:
+            found = fwd[:1] or back[-1:]
+        if not found:
+            if kw == "GOTOC":
+                return i + 1
+            raise _Error(f"{kw} {dest}: no such label", tok[2] + 1)
+        return found[0]
+
+    # --- a block of words
+    def block(self, t: _Tokens, i: int) -> int | None:
+        ln = self.lines[i]
+        at = ln.code_at
+        b = _Block()
+        while t.peek()[0] != "end":
+            kind, text, c0, c1 = t.peek()
+            col = at + c0 + 1
+            if kind != "name":
+                raise _Error(f"unexpected '{text}'", col)
+            nxt = t.peek(1)
+            if nxt[1] == "=":
+                t.i += 2
+                self.assignment(text, t, col, c0, b)
+                continue
+            if nxt[1] == "(":
+                if text != "MSG":
+                    raise self.call(text, col)
+                t.i += 2
+                depth = 1
+                while depth and t.peek()[0] != "end":
+                    depth += {"(": 1, ")": -1}.get(t.peek()[1], 0) if t.peek()[0] == "op" else 0
+                    t.i += 1
+                if depth:
+                    raise _Error("MSG( without its )", col)
+                b.pre.append(("", ln.code[c0 : t.toks[t.i - 1][3]]))
+                continue
+            t.i += 1
+            lit = re.fullmatch(r"([A-Z])(\d+)", text)
+            if lit:  # X10, G1, M30: a letter and a number written together (X10.5: and a fraction)
+                letter, num, end_at = lit.group(1), lit.group(2), c1
+                if nxt[0] == "num" and nxt[2] == c1 and nxt[1].startswith("."):
+                    num, end_at = num + nxt[1], nxt[3]
+                    t.i += 1
+                self.word(letter, _number(num), num, col, (c0, end_at), b)
+                continue
+            if len(text) == 1 and nxt[2] == c1 and nxt[0] == "num":
+                t.i += 1  # X.5
+                self.word(text, _number(nxt[1]), nxt[1], col, (c0, nxt[3]), b)
+                continue
+            num_tok = t.peek(1)
+            if (
+                len(text) == 1
+                and nxt[1] in ("-", "+")
+                and nxt[2] == c1
+                and num_tok[0] == "num"
+                and num_tok[2] == nxt[3]
+            ):
+                t.i += 2  # X-5
+                v = _number(num_tok[1]) * (-1.0 if nxt[1] == "-" else 1.0)
+                self.word(text, v, nxt[1] + num_tok[1], col, (c0, num_tok[3]), b)
+                continue
+            if text == "CIP":
+                b.set_motion("CIP", (c0, c1), col)
+            elif text == "SUPA":
+                b.machine = text
+            elif text in _FRAMES:
+                b.frame = text
+            elif text in _COPY_WORDS:
+                b.pre.append(("", text))
+            elif text in _REFUSED_WORDS:
+                raise _Error(f"{_REFUSED_WORDS[text]} is not followed", col)
+            elif text.startswith("$"):
+                raise _Error(f"{text} is a system variable: what it does is the machine's", col)
+            elif text in self.m.vars:
+                raise _Error(f"'{text}' without a value", col)
+            elif re.fullmatch(r"[A-Z_][A-Z0-9_]{2,}", text) and not re.fullmatch(r"[A-Z]\d+[A-Z].*", text):
+                raise self.call(text, col)
+            else:
+                raise _Error(f"'{text}' is not read", col)
+        if b.frame is not None:
+            return self.set_frame(b, i)
+        if b.dwell:
+            self.dwell(b, i)
+            return i + 1
+        if b.motion is not None:
+            self.s.mode = b.motion[0]
+        # the words that set things come before the move, the program's stops and end after it
+        for rs, sn in b.pre:
+            self.items.append(Item(i, "state", rs, sn))
+        if b.axes or b.arc:
+            self.move(i, b)
+        elif b.motion is not None:
+            if b.motion[0] in ("G2", "G3", "CIP"):
+                raise _Error(f"{b.motion[0]} without an end point", at + b.motion[1][0] + 1)
+            self.items.append(Item(i, "state", b.motion[0], b.motion[0]))
+        elif b.machine is not None:
+            raise _Error(f"{b.machine} without a move", at + 1)
+        for rs, sn in b.post:
+            self.items.append(Item(i, "state", rs, sn))
+        return None if b.end else i + 1
+
+    def call(self, name: str, col: int) -> _Error:
+        what = "a cycle" if re.match(r"(CYCLE|POCKET|SLOT|HOLES|LONGHOLE)", name) else "a subprogram"
+        return _Error(f"{name} calls {what} that is not read: the motion it makes is not known", col)
+
+    def assignment(self, name: str, t: _Tokens, col: int, c0: int, b: _Block) -> None:
+        if name in _AXES or name in ("I", "J", "K", "I1", "J1", "K1", "CR"):
+            how = ""
+            tok, nxt = t.peek(), t.peek(1)
+            if tok[1] in ("AC", "IC") and nxt[1] == "(":
+                how = tok[1]
+                t.i += 2
+                v = _expr(t, self.m)
+                t.need(")")
+            elif tok[1] in ("DC", "ACP", "ACN", "CAC", "CIC", "CACP", "CACN"):
+                raise _Error(f"{name}={tok[1]}(…): rotary positioning is not followed", col)
+            else:
+                v = _expr(t, self.m)
+            b.put(name, v, how, col, (c0, t.toks[t.i - 1][3]))
+            return
+        if name in ("F", "S"):
+            v = _expr(t, self.m)
+            b.pre.append((f"{name}{_fmt(v)}", f"{name}{_fmt(v)}"))
+            return
+        if name == "T":
+            tok = t.peek()
+            if tok[0] == "str":
+                t.i += 1
+                b.pre.append(("", f"T={tok[1]}"))
+            else:
+                b.pre.append(("", f"T{_fmt(_expr(t, self.m))}"))
+            return
+        if name in _COPY_ASSIGN or name == "TURN":
+            v = _expr(t, self.m)
+            if name == "TURN" and v != 0.0:
+                raise _Error("TURN= (helix turns) is not followed", col)
+            b.pre.append(("", f"{name}={_fmt(v)}"))
+            return
+        if name in ("AP", "RP", "AR"):
+            what = "an arc by its angle" if name == "AR" else "polar coordinates"
+            raise _Error(f"{name}= ({what}) is not followed", col)
+        r = re.fullmatch(r"R(\d+)", name)
+        if not r and name not in self.m.vars:
+            if name.startswith("$"):
+                raise _Error(f"{name} is a system variable: setting it is the machine's", col)
+            raise _Error(f"'{name}' is not defined (DEF) in the program", col)
+        self.m.set(("R", float(r.group(1))) if r else ("V", name), _expr(t, self.m), col)
+
+    def word(self, letter: str, v: float, text: str, col: int, span: tuple[int, int], b: _Block) -> None:
+        if letter in _AXES or letter in "IJK":
+            b.put(letter, v, "", col, span)
+            return
+        if letter == "G":
+            self.g(v, text, col, span, b)
+        elif letter == "M":
+            m = int(v)
+            if v != m:
+                raise _Error(f"M{text} is not read", col)
+            if m in (2, 17, 30):
+                b.post.append(("M2", f"M{m}"))
+                b.end = True
+            elif m in (0, 1):
+                b.post.append((f"M{m}", f"M{m}"))
+            else:
+                b.pre.append((f"M{m}", f"M{m}") if m in (3, 4, 5, 7, 8, 9) else ("", f"M{text}"))
+        elif letter in ("F", "S"):
+            b.pre.append((f"{letter}{text}", f"{letter}{text}"))
+        elif letter in ("T", "D"):
+            b.pre.append(("", f"{letter}{text}"))
+        elif letter == "L":
+            raise _Error(f"L{text} calls a subprogram that is not read: the motion it makes is not known", col)
+        else:
+            raise _Error(f"{letter}{text} is not read", col)
+
+    def g(self, v: float, text: str, col: int, span: tuple[int, int], b: _Block) -> None:
+        g = int(v)
+        if v != g:
+            raise _Error(f"G{text} is not read", col)
+        s = self.s
+        if g in (0, 1, 2, 3):
+            b.set_motion(f"G{g}", span, col)
+        elif g == 4:
+            b.dwell = True
+        elif g in (53, 153):
+            b.machine = f"G{g}"
+        elif g in _COPY_G:
+            b.pre.append(("", f"G{g}"))
+        elif g in _UNITS:
+            b.pre.append((f"G{_UNITS[g]}", f"G{g}"))
+        elif g in (54, 55, 56, 57, 500):
+            if s.moved and s.wcs != g:
+                raise _Error(f"G{g} changes the work system after a move: a field is in one system's coordinates", col)
+            s.wcs = g
+            s.pos = dict.fromkeys(_AXES)
+            b.pre.append((f"G{g}" if g != 500 else "", f"G{g}"))
+        elif g in _PASS_G:
+            if g in (17, 18, 19):
+                s.plane = g
+            if g in (90, 91):
+                s.absolute = g == 90
+            b.pre.append((f"G{g}", f"G{g}"))
+        elif g in _REFUSED_G:
+            raise _Error(f"{_REFUSED_G[g]} is not followed", col)
+        else:
+            raise _Error(f"G{g} is not read", col)
+
+    # --- what a block does
+    def value_of(self, name: str, v: float, how: str, col: int) -> tuple[float, float | None]:
+        """An axis word's value as the RS274 program writes it (absolute under G90, incremental
+        under G91) and the absolute program coordinate it gives (None when not known)."""
+        s = self.s
+        p = s.pos[name]
+        inc = how == "IC" or (how == "" and not s.absolute)
+        if inc == (not s.absolute):  # written in the mode in effect
+            return v, (v if s.absolute else (None if p is None else p + v))
+        if p is None:
+            raise _Error(f"{name}={how}(…) needs the position of {name}, which is not known here", col)
+        absolute = p + v if inc else v
+        return (absolute if s.absolute else absolute - p), absolute
+
+    def move(self, i: int, b: _Block) -> None:
+        s, mode = self.s, self.s.mode
+        col0 = self.lines[i].code_at + 1
+        if mode is None:
+            raise _Error(
+                "a move before any G0, G1, G2, G3 or CIP: the motion mode a program starts in is the "
+                "machine's setting (machine data); write G0 or G1 before the first move",
+                col0,
+            )
+        at = self.lines[i].code_at
+        spans = tuple(sp for _, _, sp in list(b.axes.values()) + list(b.arc.values()))
+        if b.motion is not None:
+            spans += (b.motion[1],)
+        spans = tuple(sorted((at + s0, at + s1) for s0, s1 in spans))
+        if b.machine is not None:
+            if mode not in ("G0", "G1") or b.arc:
+                raise _Error(f"{b.machine} with {mode}: only straight moves are read in machine coordinates", col0)
+            if any(how == "IC" for _, how, _ in b.axes.values()) or not s.absolute:
+                raise _Error(f"{b.machine} with incremental values is not read", col0)
+            moves = " ".join(f"{a}{_fmt(v)}" for a, (v, _, _) in b.axes.items())
+            self.items.append(Item(i, "motion", f"G53 {mode} {moves}", None, (), mode, b.machine))
+            for a in b.axes:
+                s.pos[a] = None
+            return
+        written, ends = {}, {}
+        for a, (v, how, sp) in b.axes.items():
+            written[a], ends[a] = self.value_of(a, v, how, self.lines[i].code_at + sp[0] + 1)
+        tail: list[str] = []
+        if mode in ("G0", "G1"):
+            if b.arc:
+                raise _Error(f"{', '.join(b.arc)} in a straight move ({mode}) is not read", col0)
+            words = [b.motion[0]] if b.motion is not None else []
+        else:
+            code, tail = self.circle(mode, ends, b.arc, col0)
+            words = [code]
+        words += [f"{a}{_fmt(v)}" for a, v in written.items()] + tail
+        s.moved = True
+        s.pos.update(ends)
+        self.items.append(Item(i, "motion", " ".join(words), None, spans, mode, None))
+
+    def circle(self, mode: str, ends: dict, arc: dict, col: int) -> tuple[str, list[str]]:
+        """The arc's direction (``G2``/``G3``) and its centre (incremental) or radius words."""
+        s = self.s
+        a1, a2, c1, c2 = _PLANES[s.plane]
+        if mode != "CIP" and "CR" not in arc and c1 not in arc and c2 not in arc:
+            raise _Error(f"{mode} without a centre ({c1}, {c2}) or a radius (CR=)", col)
+        start = (s.pos[a1], s.pos[a2])
+        if start[0] is None or start[1] is None:
+            raise _Error(f"an arc ({mode}) from a position that is not known here", col)
+        end = (ends.get(a1, start[0]), ends.get(a2, start[1]))
+        if any(e is None for e in end):
+            raise _Error(f"an arc ({mode}) to a position that is not known here", col)
+        if mode == "CIP":
+            names = (c1 + "1", c2 + "1")
+            extra = set(arc) - set(names)
+            if extra:
+                raise _Error(
+                    f"CIP with {', '.join(sorted(extra))}: only an intermediate point in the active plane "
+                    f"(G{s.plane}) is read",
+                    col,
+                )
+            mid = []
+            for k, c in enumerate(names):
+                if c not in arc:
+                    raise _Error(f"CIP without {c}= (its intermediate point)", col)
+                v, how, _ = arc[c]
+                inc = how == "IC" or (how == "" and not s.absolute)
+                mid.append(start[k] + v if inc else v)
+            bx, by = mid[0] - start[0], mid[1] - start[1]
+            cx, cy = end[0] - start[0], end[1] - start[1]
+            cross = bx * cy - by * cx
+            scale = max(math.hypot(bx, by), math.hypot(cx, cy))
+            if abs(cross) <= 1e-9 * scale * scale:
+                raise _Error("CIP through three points on a line, or back to its start: no circle", col)
+            bb, cc = bx * bx + by * by, cx * cx + cy * cy
+            ux, uy = (cy * bb - by * cc) / (2 * cross), (bx * cc - cx * bb) / (2 * cross)
+            return ("G3" if cross > 0 else "G2"), [f"{c1}{_fmt(ux)}", f"{c2}{_fmt(uy)}"]
+        other = set(arc) - {"CR", "I", "J", "K"}
+        if other:
+            raise _Error(f"{', '.join(sorted(other))} in a {mode} arc is not read", col)
+        given = [c for c in (c1, c2) if c in arc]
+        if "CR" in arc:
+            if given:
+                raise _Error(f"{mode} with both CR= and a centre", col)
+            r, how, _ = arc["CR"]
+            if how:
+                raise _Error(f"CR={how}(…) is not read", col)
+            if end == start:
+                raise _Error(f"{mode} CR= with its end at its start: no circle", col)
+            return mode, [f"R{_fmt(r)}"]
+        centre = []
+        for k, c in enumerate((c1, c2)):
+            v, how, _ = arc.get(c, (0.0, "", None))
+            inc = how != "AC"  # I J K are incremental unless AC: G90 does not change them
+            centre.append(v if inc else v - start[k])
+        return mode, [f"{c1}{_fmt(centre[0])}", f"{c2}{_fmt(centre[1])}"]
+
+    def dwell(self, b: _Block, i: int) -> None:
+        times = [p for p in b.pre if p[1][:1] in ("F", "S")]
+        if b.axes or b.arc or len(times) != 1 or len(b.pre) != 1 or b.post or b.motion:
+            raise _Error("G4 with other words than one F (seconds) or S (spindle turns)", self.lines[i].code_at + 1)
+        rs, sn = times[0]
+        self.items.append(Item(i, "state", f"G4 P{sn[1:]}" if sn.startswith("F") else "", f"G4 {sn}"))
+
+    def set_frame(self, b: _Block, i: int) -> int:
+        col = self.lines[i].code_at + 1
+        kind, axes = b.frame or "TRANS", b.axes
+        if b.motion is not None or b.pre or b.post or b.arc or b.machine:
+            raise _Error(f"{kind} with other words: a frame is programmed in a block of its own", col)
+        if kind in ("ROT", "SCALE", "MIRROR") and not axes:
+            kind = "TRANS"  # without axes they take the whole programmable frame away
+        if kind not in ("TRANS", "ATRANS"):
+            raise _Error(f"{kind} ({'a rotation' if 'ROT' in kind else 'scaling or mirroring'}) is not followed", col)
+        new = dict.fromkeys(_AXES, 0.0) if kind == "TRANS" else dict(self.s.trans)
+        for a, (v, how, _) in axes.items():
+            if how or a not in _LINEAR:
+                raise _Error(
+                    f"{kind} {a}{'=' + how + '(…)' if how else ''} is not read: translations of X, Y, Z are", col
+                )
+            new[a] = new[a] + v if kind == "ATRANS" else v
+        for a in _AXES:
+            if self.s.pos[a] is not None:
+                self.s.pos[a] -= new[a] - self.s.trans[a]
+        self.s.trans = new
+        words = " ".join(f"{a}{_fmt(new[a])}" for a in _LINEAR)
+        sn = (b.frame or kind) + "".join(f" {a}{_fmt(v)}" for a, (v, _, _) in axes.items())
+        self.items.append(Item(i, "state", f"G52 {words}", sn))
+        return i + 1
+
+
+def translate(data: bytes, name: str = "<program>") -> Translation:
+    """The straight RS274NGC program a Sinumerik program runs (see the module's text)."""
+    text = data.decode("utf-8", "surrogateescape")
+    lines = _read(text, name)
+    run = _Run(lines, name)
+    if any(re.search(r"\bA?TRANS\b", ln.code) for ln in lines):
+        # the programmable frame is empty when a program starts (the control deletes it at reset
+        # and at the end of a program): the engine follows the translations from there
+        run.items.append(Item(0, "state", "G52 X0 Y0 Z0", ""))
+    i, blocks = 0, 0
+    while i < len(lines):
+        blocks += 1
+        if blocks > MAX_BLOCKS:
+            raise InputError(
+                f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", name, i + 1
+            )
+        try:
+            nxt = run.step(i)
+        except _Error as e:
+            raise InputError(e.message, name, i + 1, e.col) from None
+        if nxt is None:
+            break
+        i = nxt
+    return Translation(
+        rewrite.mark([it.rs for it in run.items]),
+        run.items,
+        np.asarray([it.line + 1 for it in run.items], dtype=np.int64),
+        run.runs,
+        blocks,
+        data,
+    )
+
+
+# ----------------------------------------------------------------------------------- writing back
+_RADIUS = re.compile(r"(?<![A-Z_=])R(?=[-+]?[.\d])")
+_MOTION = re.compile(r"(?<![A-Z_0-9.])G0*([0-3])(?![\d.])|\bCIP\b")
+
+
+class NeedsExpand(Exception):
+    """A corrected line runs more than once with different corrections: only the program written
+    straight (``expand``) holds them. ``line`` (1-based), ``runs``."""
+
+    def __init__(self, line: int, runs: int):
+        super().__init__(line, runs)
+        self.line, self.runs = line, runs
+
+
+def _sinumerik(rs: str) -> str:
+    """An RS274 line the engine wrote, in Sinumerik's words (its radius ``R`` is ``CR=``)."""
+    return _RADIUS.sub("CR=", rs)
+
+
+def _last_mode(text: str, mode: str | None) -> str | None:
+    for m in _MOTION.finditer(text):
+        mode = f"G{m.group(1)}" if m.group(1) else "CIP"
+    return mode
+
+
+def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[bytes, int, str]:
+    """The Sinumerik program the engine's ``corrected`` straight program makes, and how many of
+    its lines were written, and how (``as it is``, ``in place``, ``straight``): the program as
+    written when nothing changed; otherwise each line
+    whose move changed rewritten in place (its other words, its comment and every other line
+    kept as written). When a changed move is on a line that runs more than once (a loop, a
+    jump back), the program is written straight with ``expand`` (one line per block run), and
+    :class:`NeedsExpand` is raised without it."""
+    groups = rewrite.groups(corrected, len(tr.items))
+    changed = rewrite.changed(groups, [it.rs for it in tr.items])
+    for k in np.flatnonzero(changed):
+        it = tr.items[k]
+        if it.kind != "motion" or it.machine is not None:
+            raise RuntimeError(f"the engine changed line {it.line + 1}, which is not a move it corrects: {groups[k]}")
+    if not any(changed):
+        return tr.source, 0, "as it is"
+    looped = [int(tr.items[k].line) for k in np.flatnonzero(changed) if tr.runs[tr.items[k].line] > 1]
+    if looped and not expand:
+        raise NeedsExpand(looped[0] + 1, int(tr.runs[looped[0]]))
+    if looped:
+        out = []
+        for g, it in zip(groups, tr.items, strict=True):
+            if it.machine is not None:
+                out.append(it.rs.replace("G53", it.machine, 1))
+            elif it.kind == "motion":
+                out += [_sinumerik(t) for t in g]
+            elif it.sn:
+                out.append(it.sn)
+        return "".join(t + "\n" for t in out).encode("utf-8", "surrogateescape"), len(out), "straight"
+    redo = {tr.items[k].line: int(k) for k in np.flatnonzero(changed)}  # original line → item
+    motion_of = {it.line: it for it in tr.items if it.kind == "motion"}
+    src = tr.source.decode("utf-8", "surrogateescape").splitlines(keepends=True)
+    out, mode, n = [], None, 0
+    for j, raw in enumerate(src):
+        body = raw.rstrip("\r\n")
+        eol = raw[len(body) :] or "\n"
+        code = _code(body)
+        moved = motion_of.get(j)
+        if j in redo:
+            lines = _rewrite(body, tr.items[redo[j]], groups[redo[j]])
+            for t in lines:
+                mode = _last_mode(_code(t), mode)
+            out += [t + eol for t in lines]
+            n += 1
+            continue
+        own = _last_mode(code, None)
+        if moved is not None and own is None and moved.mode is not None and mode is not None and mode != moved.mode:
+            # the rewritten line before left another motion mode than this line's: write its own
+            at = _code_start(body)
+            body = body[:at] + moved.mode + " " + body[at:]
+            own = moved.mode
+        mode = own or mode
+        out.append(body + raw[len(raw.rstrip("\r\n")) :])
+    return "".join(out).encode("utf-8", "surrogateescape"), n, "in place"
+
+
+def _code(line: str) -> str:
+    """A line without its comment, upper case outside strings."""
+    return _split(line)[0]
+
+
+def _code_start(line: str) -> int:
+    """Where a line's words start, after its N number and label."""
+    code = _code(line)
+    at = 0
+    m = re.match(r"\s*N\d+(?![\d.])\s*", code)
+    if m:
+        at = m.end()
+    m = re.match(r"\s*[A-Z_][A-Z0-9_]*:(?!=)\s*", code[at:])
+    if m:
+        at += m.end()
+    return at + (len(code[at:]) - len(code[at:].lstrip()))
+
+
+def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
+    """The original line ``body`` with its move's words replaced by the engine's first line, and
+    the lines the engine added after it."""
+    first = _sinumerik(group[0]).strip()
+    start = it.spans[0][0]
+    keep, at = [], 0
+    for s0, s1 in it.spans:
+        keep.append(body[at:s0])
+        at = s1
+    keep.append(body[at:])
+    head = keep[0]
+    rest = " ".join(piece.strip() for piece in keep[1:] if piece.strip())
+    sep = "" if not head or head.endswith((" ", "\t")) else " "
+    line = head + sep + first + (" " + rest if rest else "")
+    assert start == len(head)
+    return [line] + [_sinumerik(t).strip() for t in group[1:]]

@@ -1,0 +1,378 @@
+"""Sinumerik 840D programs: run into straight G-code as the control runs them, corrected, and
+written back in Sinumerik's syntax.
+
+Two truths, independent of the reader: the Sinumerik-flavoured interpreter nc-gcode-interpreter
+(positions at each block's end) where it reads the program right, and positions worked out by
+hand from Siemens' rules where it does not (it reads no R parameters, CIP, ``=AC(…)`` or labels,
+adds the frame to an ``=IC(…)`` value a second time, keeps the frame after ``TRANS`` without axes,
+and adds G91 values to zero). LinuxCNC's rs274 runs the straight program the engine corrects.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import ncgi
+import rs274
+from ncadapt import fields, nc
+from ncadapt import sinumerik as sn
+from ncadapt.cli import main
+from ncadapt.errors import InputError, RefusedError
+
+DATA = Path(__file__).parent / "data" / "sinumerik"
+CORPUS = Path(__file__).resolve().parents[1].parent / "shared" / "corpus" / "nc"
+needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not installed")
+needs_oracle = pytest.mark.skipif(not ncgi.AVAILABLE, reason="nc-gcode-interpreter not installed")
+
+
+def linear(p: np.ndarray) -> np.ndarray:
+    """A field whose z grows along X and Y (mm)."""
+    d = np.zeros_like(p)
+    d[:, 2] = 0.01 + 0.001 * p[:, 0] + 0.0005 * p[:, 1]
+    return d
+
+
+def source(name: str) -> Path:
+    if name.startswith("sinumerik__"):
+        p = CORPUS / name
+        if not p.is_file():
+            pytest.skip(f"no corpus at {CORPUS}")
+        return p
+    return DATA / name
+
+
+def straight_motion(data: bytes, tmp_path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """rs274's end points of a straight (RS274NGC) program, consecutive repeats removed (mm), and
+    whether the move to each is a rapid."""
+    p = tmp_path / f"straight{len(list(tmp_path.iterdir()))}.ngc"
+    p.write_bytes(data)
+    canon = rs274.canonical(p)
+    assert canon.error is None, canon.error
+    ends = canon.ends[:, :3]
+    keep = np.any(np.abs(np.diff(np.vstack([np.zeros(3), ends]), axis=0)) > 0, axis=1)
+    return ends[keep], np.array([k == "traverse" for k in canon.kinds])[keep]
+
+
+def straight_ends(data: bytes, tmp_path: Path) -> np.ndarray:
+    return straight_motion(data, tmp_path)[0]
+
+
+# --------------------------------------------------------------------------- reading the program
+@needs_rs274
+@needs_oracle
+@pytest.mark.parametrize("name", ["sinumerik__cead_arc.mpf", "sinumerik__cead_loop.mpf", "pocket.mpf"])
+def test_straight_program_moves_as_the_oracle_runs_the_source(name, tmp_path):
+    text = source(name).read_text()
+    want = ncgi.ends(text)
+    got = straight_ends(sn.translate(text.encode(), name).data, tmp_path)
+    assert got.shape == want.shape
+    np.testing.assert_allclose(got, want, atol=ncgi.tolerance(want))
+
+
+# the ends worked out from Siemens' rules (Programming Manual Fundamentals / Job Planning)
+FLOW_ENDS = [
+    (0, 0, 5),
+    (0, 0, -0.5),  # DEPTH = -SQRT(4)/4
+    (20.5, 2.5, -0.5),  # R2 = R1*2 + 0.5; Y = I_ROW*STEP
+    (10, 2.5, -0.5),  # row 1 odd: X=AC(R1)
+    (20.5, 5, -0.5),
+    (10.25, 5, -0.5),  # row 2 even: X=IC(-R2/2)
+    (20.5, 7.5, -0.5),
+    (10, 7.5, -0.5),
+    (10, 8.75, -0.5),  # WHILE: Y=IC(1.25) twice
+    (10, 10, -0.5),
+    (3, 10, -0.5),  # REPEAT … UNTIL: R3 = 1, then 0
+    (0, 10, -0.5),
+    (5, 8, -0.5),  # IF … GOTOF SKIP jumps over X99 Y99; G91 X5 Y-2
+    (5, 8, 5),
+]
+FRAMES_ENDS = [
+    (0, 0, 5),
+    (110, 30, -1),  # TRANS X100 Y20
+    (115, 40, -1),  # ATRANS X5 adds
+    (120, 40, -1),  # X=IC(5): 5 from where the tool is
+    (0, 0, 5),  # TRANS without axes takes the frame away
+]
+INCH_ENDS = [(0, 0, 0.2), (0, 0, -0.05), (1.5, 0.25, -0.05), (1, 1, -0.05), (2, 2, -0.05)]  # then SUPA Z0
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    ("name", "want", "scale"),
+    [("flow.mpf", FLOW_ENDS, 1.0), ("frames.mpf", FRAMES_ENDS, 1.0), ("inch.mpf", INCH_ENDS, 25.4)],
+)
+def test_straight_program_moves_as_siemens_rules_say(name, want, scale, tmp_path):
+    got = straight_ends(sn.translate((DATA / name).read_bytes(), name).data, tmp_path)
+    want = np.array(want, dtype=float) * scale
+    # the SUPA retract goes to machine Z0, which rs274 (no machine offsets) puts at Z0
+    np.testing.assert_allclose(got[: len(want)], want, atol=1e-9)
+
+
+@needs_rs274
+def test_arcs_have_the_centres_siemens_rules_give(tmp_path):
+    p = tmp_path / "arcs.ngc"
+    p.write_bytes(sn.translate((DATA / "arcs.mpf").read_bytes()).data)
+    canon = rs274.canonical(p)
+    arcs = [(a[0], round(a[1], 9), round(a[2], 9), a[3]) for a in canon.arcs if a is not None]
+    assert arcs == [
+        (-1, 10.0, 0.0, "CANON_PLANE_XY"),  # G2 X20 Y0 I10 J0 from (0, 0)
+        (1, 20.0, 10.0, "CANON_PLANE_XY"),  # G3 CR=10 from (20, 0) to (30, 10): the short way, centre (20, 10)
+        (-1, 40.0, 10.0, "CANON_PLANE_XY"),  # G2 CR=-10 over a diameter
+        (-1, 60.0, 10.0, "CANON_PLANE_XY"),  # CIP through (60, 20): the circle about (60, 10), clockwise
+        (1, 80.0, 10.0, "CANON_PLANE_XY"),  # G3 I=AC(80) J=AC(10): the centre in absolute coordinates
+        (-1, -1.0, 95.0, "CANON_PLANE_XZ"),  # G18 G2 I5 K0 from X90: centre Z-1 X95 (rs274: Z first)
+    ]
+
+
+@pytest.mark.parametrize(
+    ("expr", "want"),
+    [
+        ("2 + 3 * 4", 14.0),
+        ("7 DIV 2", 3.0),
+        ("-7 DIV 2", -3.0),
+        ("7 MOD 3", 1.0),
+        ("SIN(30) + COS(60)", 1.0),
+        ("ATAN2(1, -1)", 135.0),
+        ("POT(3) + SQRT(16) + ABS(-1)", 14.0),
+        ("TRUNC(-2.7) + ROUND(2.5)", 1.0),
+        ("1 == 1 + 1EX-14", 1.0),  # relative equality
+        ("1 == 1.000001", 0.0),
+        ("3 > 1 AND 0", 1.0),  # comparisons last: 3 > (1 AND 0)
+        ("(3 > 1) AND 0", 0.0),
+        ("NOT 0 OR 0", 1.0),
+        ("MINVAL(4, 2) + MAXVAL(4, 2)", 6.0),
+    ],
+)
+def test_expressions_follow_siemens_priorities(expr, want):
+    tr = sn.translate(f"DEF REAL V\nV = {expr}\nG1 X=V F100\nM30\n".encode())
+    assert tr.items[1].rs == f"G1 X{sn._fmt(want)}"
+
+
+def test_int_variables_round_and_for_counts_to_its_end():
+    tr = sn.translate(b"DEF INT N\nN = 2.5\nG1 X=N F1\nN = 2.4999\nG1 X=N\nFOR N = 1 TO 2\nG1 Y=N\nENDFOR\nM30\n")
+    assert [it.rs for it in tr.items if it.kind == "motion"] == ["G1 X3", "G1 X2", "G1 Y1", "G1 Y2"]
+    assert tr.runs.tolist() == [1, 1, 1, 1, 1, 1, 2, 2, 1]
+
+
+# ----------------------------------------------------------------------------------- refusals
+@pytest.mark.parametrize(
+    ("text", "line", "says"),
+    [
+        ("G0 X0 Y0\nROT Z45\n", 2, "rotation"),
+        ("G1 X0 Y0 F100\nG41 X5\n", 2, "cutter radius compensation"),
+        ("G1 X=R5 F100\n", 1, "R5 is read before the program sets it"),
+        ("G1 X=$AA_IM[X] F100\n", 1, "system variable"),
+        ("G1 X1 X=2 F100\n", 1, "X is written twice"),
+        ("G1 X=IC(5) F100\n", 1, "not known here"),
+        ("X1 Y1\n", 1, "motion mode"),
+        ("G1 X0 Y0 F100\nCT X10 Y10\n", 2, "tangential arc"),
+        ("G1 X0 Y0 F100\nG2 X10 Y0 I5 TURN=2\n", 2, "TURN="),
+        ("G54\nG1 X0 Y0 F100\nG55\n", 3, "changes the work system"),
+        ("DEF REAL A[3]\n", 1, "arrays"),
+        ("G1 X0 F100\nIF Q > 1\nENDIF\n", 2, "'Q' is not defined"),
+        ("G1 X0 F100\n/G1 X5\n", 2, "skipped block"),
+        ("G1 X0 Y0 Z5 F100\nMCALL CYCLE81(10, 0, 2, -5)\n", 2, "MCALL"),
+        ("G1 X0 Y0 F100\nCYCLE81(10, 0, 2, -5)\n", 2, "CYCLE81 calls a cycle"),
+        ("G1 X0 Y0 F100\nL100\n", 2, "L100 calls a subprogram"),
+        ("G1 X0 Y0 F100\nG2 X10 Y0\n", 2, "without a centre"),
+        ("G1 X0 Y0 F100\nCIP X10 Y0 I1=5 J1=0\n", 2, "three points on a line"),
+        ("G1 X0 Y0 F100\nAP=45 RP=10\n", 2, "polar"),
+        ("G1 X0 F100\nGOTOF NOWHERE\n", 2, "no such label"),
+        ("G1 X0 F100\nIF 1\nG1 X1\n", 2, "IF without its end"),
+        ("G1 X0 F100\nENDWHILE\n", 2, "ENDWHILE without"),
+        ("G1 X0 F100\nX=1/0\n", 2, "division by zero"),
+    ],
+)
+def test_refused_at_its_line(text, line, says):
+    with pytest.raises(InputError) as e:
+        sn.translate(text.encode(), "p.mpf")
+    assert e.value.line == line
+    assert says in e.value.message
+
+
+def test_a_loop_that_does_not_end_is_refused(monkeypatch):
+    monkeypatch.setattr(sn, "MAX_BLOCKS", 1000)
+    with pytest.raises(InputError, match="more than 1,000 blocks"):
+        sn.translate(b"G1 X0 F100\nLOOP\nG1 X1\nENDLOOP\n")
+
+
+@pytest.mark.parametrize(
+    ("name", "line", "says"),
+    [
+        ("sinumerik__cead_simple.mpf", 2, "G2 without a centre"),
+        ("sinumerik__cead_spline.mpf", 10, "spline interpolation"),
+        ("sinumerik__cead_trans.mpf", 1, "motion mode"),
+        ("sinumerik__syil_TEST.MPF", 13, "WARMUP_CYCLE calls a subprogram"),
+        ("sinumerik__syil_WARMUP_CYCLE.SPF", 9, "PROC"),
+    ],
+)
+def test_corpus_programs_refused_at_their_line(name, line, says):
+    p = source(name)
+    with pytest.raises(InputError) as e:
+        sn.translate(p.read_bytes(), str(p))
+    assert (e.value.line, says in e.value.message) == (line, True), e.value
+
+
+# ------------------------------------------------------------------------------ the corrected program
+def correct(path: Path, out: Path, field, **kw):
+    return nc.correct_file(path, out, field, dialect="sinumerik", **kw)
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "sinumerik__cead_arc.mpf",
+        "sinumerik__cead_loop.mpf",
+        "pocket.mpf",
+        "flow.mpf",
+        "frames.mpf",
+        "inch.mpf",
+        "arcs.mpf",
+    ],
+)
+def test_zero_correction_writes_the_program_as_it_is(name, tmp_path):
+    p = source(name)
+    c = correct(p, tmp_path / "out.mpf", fields.Shift((0.0, 0.0, 0.0)))
+    assert (tmp_path / "out.mpf").read_bytes() == p.read_bytes()
+    assert c.expanded["written"] == "as it is"
+
+
+@needs_rs274
+@needs_oracle
+@pytest.mark.parametrize("name", ["sinumerik__cead_arc.mpf", "sinumerik__cead_loop.mpf", "pocket.mpf"])
+def test_a_shift_moves_every_cutting_end_in_the_oracle(name, tmp_path):
+    """Rapids are not corrected (without --rapids): the oracle's ends of the output are those of the
+    input, shifted where the move that ends there cuts."""
+    p = source(name)
+    c = correct(p, tmp_path / "out.mpf", fields.Shift((0.0, 0.0, 0.05)), expand=True)
+    assert c.expanded["written"] in ("in place", "straight")
+    before, after = ncgi.ends(p.read_text()), ncgi.ends((tmp_path / "out.mpf").read_text())
+    # which of the input's ends a rapid reaches (rs274 on the straight program, which moves as
+    # the oracle runs the input: test_straight_program_moves_as_the_oracle_runs_the_source)
+    ends, rapid = straight_motion(sn.translate(p.read_bytes()).data, tmp_path)
+    np.testing.assert_allclose(ends, before, atol=ncgi.tolerance(before))
+    # the output, run by the oracle, has the input's cutting ends 0.05 higher
+    cutting = before[~rapid] + [0.0, 0.0, 0.05]
+    ok, where = ncgi.contains_in_order(after, cutting, ncgi.tolerance(after) + 1e-4)
+    assert ok, where
+
+
+@needs_rs274
+@needs_oracle
+@pytest.mark.parametrize(("name", "expand"), [("pocket.mpf", True), ("arcs.mpf", False), ("frames.mpf", False)])
+def test_the_written_program_moves_as_the_corrected_straight_program(name, expand, tmp_path):
+    """The engine corrects the straight program; what is written back in Sinumerik's syntax, run
+    by the oracle (or read back, where the oracle cannot read it), ends where rs274 runs the
+    engine's straight output."""
+    p = source(name)
+    tr = sn.translate(p.read_bytes(), name)
+    straight = nc.parse(tr.data).correct(linear).data
+    want = straight_ends(straight, tmp_path)
+    text, _, how = sn.assemble(tr, straight, expand)
+    assert how == ("straight" if expand else "in place")
+    try:
+        got = ncgi.ends(text.decode())
+    except ValueError:  # CIP, AC(…): the reader reads its own output back
+        got = straight_ends(sn.translate(text).data, tmp_path)
+    if name == "frames.mpf":  # the oracle adds the frame to IC values twice: read back instead
+        got = straight_ends(sn.translate(text).data, tmp_path)
+    np.testing.assert_allclose(got, want, atol=ncgi.tolerance(want) + 1e-4)
+
+
+def test_a_field_written_in_place_keeps_every_other_line(tmp_path):
+    p = DATA / "frames.mpf"
+    c = correct(p, tmp_path / "out.mpf", linear)
+    src = p.read_text().splitlines()
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    assert c.expanded["written"] == "in place"
+    assert c.expanded["lines_rewritten"] == 3
+    # N40 is cut in pieces after it; N60 and N70 get their Z; the frames, comments and the rest stay
+    n40 = out.index(next(t for t in out if t.startswith("N40")))
+    assert out[:n40] == src[:4]
+    assert out[n40].endswith(" F300")  # the feed stays where it was written
+    assert out[out.index("N50 ATRANS X5")] == "N50 ATRANS X5"
+    z = {t.split()[0]: t for t in out if t.startswith(("N60", "N70"))}
+    # the field at the frame's position: X 115 Y 40, then X 120 Y 40
+    assert z["N60"] == "N60 G1 X10 Y20 Z-0.855"
+    assert z["N70"] == "N70 G1 X15 Z-0.85"  # X=IC(5) written as the position it reaches
+    assert out[-3:] == src[-3:]
+
+
+def test_a_move_in_a_loop_needs_expand(tmp_path):
+    p = DATA / "flow.mpf"
+    with pytest.raises(RefusedError) as e:
+        correct(p, tmp_path / "out.mpf", linear)
+    assert e.value.details[0]["line"] == 11 and e.value.details[0]["runs"] == 3
+    assert not (tmp_path / "out.mpf").exists()
+    c = correct(p, tmp_path / "out.mpf", linear, expand=True)
+    assert c.expanded["written"] == "straight"
+
+
+@needs_oracle
+def test_the_expanded_program_is_the_hand_worked_path_displaced(tmp_path):
+    """flow.mpf uses what the oracle cannot read (R parameters, labels); its straight output is
+    plain G-code the oracle reads: its ends are the hand-worked ends, displaced by the field at
+    each cutting end."""
+    correct(DATA / "flow.mpf", tmp_path / "out.mpf", linear, expand=True)
+    out = (tmp_path / "out.mpf").read_bytes()
+    want = np.array(FLOW_ENDS, dtype=float)
+    cutting = np.ones(len(want), dtype=bool)
+    cutting[[0, -1]] = False  # the rapids
+    want[cutting] += linear(want[cutting])
+    # the oracle up to the G91 move (it adds G91 values to zero), the reader's own read-back for all
+    got = ncgi.ends(out.decode())
+    np.testing.assert_allclose(got[:12], want[:12], atol=2e-4)
+    if rs274.RS274 is not None:
+        np.testing.assert_allclose(straight_ends(sn.translate(out).data, tmp_path), want, atol=1e-4)
+
+
+def test_a_cip_line_after_a_rewritten_one_keeps_its_motion_mode(tmp_path):
+    """A CIP block rewritten as G2/G3 leaves G2/G3 in force: the next CIP block, written without
+    its motion code and left as it is, gets CIP written back."""
+    p = tmp_path / "cip.mpf"
+    p.write_text(
+        "G90 G17 G71\nG0 X0 Y0 Z1\nG1 Z0 F100\nCIP X20 Y0 I1=10 J1=10\nX40 Y0 I1=30 J1=10\nX60 Y0 I1=50 J1=10\n"
+        "G0 Z5\nM30\n"
+    )
+
+    def left(q):  # 0.01 mm up left of X 30, nothing right of X 40
+        d = np.zeros_like(q)
+        d[:, 2] = 0.01 * np.clip((40.0 - q[:, 0]) / 10.0, 0.0, 1.0)
+        return d
+
+    correct(p, tmp_path / "out.mpf", left)
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    assert "CIP X60 Y0 I1=50 J1=10" in out
+    back = sn.translate((tmp_path / "out.mpf").read_bytes())
+    assert [it.mode for it in back.items if it.kind == "motion"][-2] == "CIP"
+
+
+# ------------------------------------------------------------------------------------ command line
+def test_cli_detects_reads_and_says_how_it_wrote(tmp_path):
+    p = tmp_path / "part.mpf"
+    p.write_bytes((DATA / "pocket.mpf").read_bytes())
+    r = CliRunner().invoke(
+        main,
+        ["correct", str(p), "--shift", "0,0,0.05", "-o", str(tmp_path / "o.mpf"), "--json", str(tmp_path / "c.json")],
+    )
+    assert r.exit_code == 1, r.output  # the pocket's rows are corrected differently on each pass
+    assert "--expand" in r.output and not (tmp_path / "o.mpf").exists()
+    r = CliRunner().invoke(main, ["correct", str(p), "--shift", "0,0,0.05", "-o", str(tmp_path / "o.mpf"), "--expand"])
+    assert r.exit_code == 0, r.output
+    assert "Sinumerik 840D (detected" in r.output and "the corrected program is written straight" in r.output
+    r = CliRunner().invoke(main, ["inspect", str(p)])
+    assert r.exit_code == 0, r.output
+
+
+def test_cli_refusal_names_the_line(tmp_path):
+    p = tmp_path / "spline.mpf"
+    p.write_text("G1 X0 Y0 F100\nBSPLINE\nX10 Y5\n")
+    r = CliRunner().invoke(main, ["correct", str(p), "--shift", "0,0,0.05", "-o", str(tmp_path / "o.mpf")])
+    assert r.exit_code == 2
+    assert re.search(r"spline\.mpf:2:\d+: error: spline interpolation is not followed", r.output), r.output
+    assert not (tmp_path / "o.mpf").exists()
