@@ -60,12 +60,10 @@ def test_unread_dialects_are_refused_at_their_line(tmp_path):
     with pytest.raises(InputError) as e:
         dialects.resolve(p)
     assert (e.value.line, e.value.col) == (1, 1) and "Heidenhain" in e.value.message
-    with pytest.raises(InputError, match="--dialect sinumerik"):
-        dialects.resolve(tmp_path / "any.ngc", "sinumerik")
+    # a Sinumerik program is read (run into straight G-code); --dialect linuxcnc reads it as RS274NGC
     q = tmp_path / "q.mpf"
     q.write_text("G0 X0 Y0\nG1 X10 F100\nM30\n")
-    with pytest.raises(InputError, match="q.mpf:1:1: a Sinumerik 840D program.*--dialect linuxcnc"):
-        dialects.resolve(q)
+    assert dialects.resolve(q) == dialects.Dialect("sinumerik", True, 1, "the file name q.mpf")
     assert dialects.resolve(q, "linuxcnc") == dialects.Dialect("linuxcnc", False)
 
 
@@ -86,13 +84,17 @@ def test_cli_reports_the_dialect_and_refuses_with_nothing_written(tmp_path):
     res = r.invoke(main, ["inspect", str(prog), "--dialect", "grbl"])
     assert res.exit_code == 0 and "dialect: grbl (given)" in res.stdout
 
+    hei = tmp_path / "h.h"
+    hei.write_text("; part\nBEGIN PGM P MM\nL X+10 FMAX\nEND PGM P MM\n")
+    out = tmp_path / "h_out.h"
+    res = r.invoke(main, ["correct", str(hei), "--shift", "0,0,0.01", "-o", str(out)])
+    assert res.exit_code == 2
+    assert f"{hei}:2:1: error: a Heidenhain conversational (Klartext) program (BEGIN PGM P MM)" in res.stderr
+    assert not out.exists()
     sie = tmp_path / "s.mpf"
     sie.write_text("; part\nG0 X0 Y0\nG1 X=10 F100\nM30\n")
-    out = tmp_path / "s_out.mpf"
-    res = r.invoke(main, ["correct", str(sie), "--shift", "0,0,0.01", "-o", str(out)])
-    assert res.exit_code == 2
-    assert f"{sie}:3:1: error: a Sinumerik 840D program (G1 X=10 F100)" in res.stderr
-    assert not out.exists()
+    res = r.invoke(main, ["correct", str(sie), "--shift", "0,0,0.01", "-o", str(tmp_path / "s_out.mpf")])
+    assert res.exit_code == 0 and "dialect: Sinumerik 840D (detected, line 3: G1 X=10 F100)" in res.stdout
 
 
 @pytest.mark.skipif(not CORPUS.is_dir(), reason="no corpus at ../shared/corpus/nc")

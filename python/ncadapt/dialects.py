@@ -3,9 +3,10 @@
 The engine reads RS274NGC as LinuxCNC reads it. grbl's G-code is a subset of it; Fanuc/Haas and
 Marlin programs share most of it, and what they write differently, or what the engine does not
 know, is refused at its line by the engine (an M code it does not know, an E word, a macro call).
-Sinumerik 840D and Heidenhain conversational programs have their own syntax: they are refused
-here, at the line that shows the dialect, with the dialect named, instead of failing on the first
-word the RS274NGC reader cannot parse.
+Sinumerik 840D programs have their own syntax: they are run into straight RS274NGC first
+(:mod:`ncadapt.sinumerik`). Heidenhain conversational programs are refused here, at the line that
+shows the dialect, with the dialect named, instead of failing on the first word the RS274NGC
+reader cannot parse.
 
 Detection reads the program's first :data:`HEAD_BYTES` only (a program of any length is detected
 at once) and looks, in this order, for: a Heidenhain ``BEGIN PGM`` line; Sinumerik syntax (a
@@ -28,7 +29,8 @@ from .errors import InputError
 #: The dialects ``--dialect`` takes (``auto`` detects one of them, or ``heidenhain``).
 CHOICES = ("auto", "linuxcnc", "fanuc", "sinumerik", "grbl", "marlin")
 
-#: Dialects whose programs the engine reads (as RS274NGC; what differs is refused at its line).
+#: Dialects whose programs are read (as RS274NGC, Sinumerik's run into it first; what differs is
+#: refused at its line).
 READ = ("linuxcnc", "fanuc", "sinumerik", "grbl", "marlin")
 
 #: How much of a program detection reads.
@@ -186,14 +188,9 @@ def resolve(path: str | Path, choice: str = "auto") -> Dialect:
     if not d.read:
         what = f"a {NAMES[d.name]} program" if d.detected else f"--dialect {d.name}"
         shown = f" ({d.text})" if d.text else ""
-        hint = (
-            "; if the program is written in ISO G-code only, --dialect linuxcnc reads it as RS274NGC"
-            if d.name == "sinumerik" and d.detected
-            else ""
-        )
         raise InputError(
             f"{what}{shown}: its syntax is not read; ncadapt reads RS274NGC and the dialects that share it "
-            f"(LinuxCNC, grbl, Fanuc/Haas, Marlin){hint}",
+            "(LinuxCNC, grbl, Fanuc/Haas, Marlin), and Sinumerik 840D's",
             str(path),
             d.line or 0,
             1 if d.line else 0,

@@ -376,6 +376,7 @@ dialect_option = click.option(
     type=click.Choice(dialects.CHOICES),
     default="auto",
     show_default=True,
-    help="The program's controller dialect; auto detects it from the program's first 64 KB. Sinumerik and "
-    "Heidenhain programs are refused, naming the line that shows the dialect.",
+    help="The program's controller dialect; auto detects it from the program's first 64 KB. Sinumerik programs "
+    "are run into straight G-code and written back in their syntax; Heidenhain programs are refused, naming the "
+    "line that shows the dialect.",
 )
