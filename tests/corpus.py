@@ -35,12 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import ncgi  # noqa: E402
-from ncadapt import (  # noqa: E402
-    dialects,
-    fields,
-    nc,
-    sinumerik,  # noqa: E402
-)
+from ncadapt import dialects, fields, marlin, nc, sinumerik  # noqa: E402
 from ncadapt.errors import InputError, RefusedError  # noqa: E402
 from ncadapt.flatten import flatten  # noqa: E402
 from rs274 import _PLANES, RS274, Canon, canonical  # noqa: E402
@@ -115,12 +110,18 @@ def _strip_cycle_p(data: bytes) -> bytes:
     return _CYCLE_LINE.sub(lambda m: _P_WORD.sub(b"", m.group(0)), data)
 
 
+def _strip_u(data: bytes) -> bytes:
+    """Without U words: a Marlin program's extruder, carried as U, which rs274 has no axis for."""
+    return re.sub(rb"[ \t]*U[-+]?(?:\d+\.?\d*|\.\d+)", b"", data)
+
+
 ADJUSTMENTS = {
     "File ended with no percent sign or program end": ("M2 appended", _append_end),
     "K word given for arc in xy plane": ("K0 words removed", _strip_k0),
     "Unknown m code used: M3": ("Haas auxiliary M codes removed", _strip_haas_m),
     "Unknown m code used: M8": ("Haas auxiliary M codes removed", _strip_haas_m),
     "P word with no G2 G3 G4 G10 G64": ("P words of G81/G73/G83 removed", _strip_cycle_p),
+    "Bad character 'u' used": ("U words (a Marlin program's E) removed", _strip_u),
 }
 
 
@@ -662,8 +663,8 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.outcome = f"refused: line {e.line}: {dialects.NAMES[d.name]} program ({d.text}), syntax not read"
         r.reason, r.refusal_line = f"{dialects.NAMES[d.name]} program, syntax not read", e.line
         return
-    if dialect == "sinumerik" and entry.root is None:
-        _run_sinumerik(entry, work, r)
+    if dialect in ("sinumerik", "marlin") and entry.root is None:
+        _run_translated(entry, work, r, dialect)
         return
     try:
         # the tool table rs274 is given, so cutter compensation is followed as rs274 follows it
@@ -762,14 +763,16 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
     r.motion_detail = " || ".join(details)
 
 
-def _run_sinumerik(entry: Entry, work: Path, r: Result) -> None:
-    """A Sinumerik program as ``ncadapt correct`` treats it: run into straight RS274NGC, which is
-    checked against the oracle nc-gcode-interpreter running the source (block ends), then
-    corrected and compared with rs274 as any RS274NGC program; a zero correction must give the
-    Sinumerik program back byte for byte."""
+def _run_translated(entry: Entry, work: Path, r: Result, dialect: str) -> None:
+    """A Sinumerik or Marlin program as ``ncadapt correct`` treats it: translated into straight
+    RS274NGC (a Sinumerik program run, checked against the oracle nc-gcode-interpreter running the
+    source; a Marlin program's E carried as a U axis, which rs274 is not given), then corrected and
+    compared with rs274 as any RS274NGC program; a zero correction must give the program back byte
+    for byte."""
     data = entry.path.read_bytes()
+    module = sinumerik if dialect == "sinumerik" else marlin
     try:
-        tr = sinumerik.translate(data, entry.file)
+        tr = module.translate(data, entry.file)
     except InputError as e:
         r.outcome = f"refused: line {e.line}: {e.message}"
         r.reason, r.refusal_line = _generic(e.message), e.line
@@ -785,12 +788,12 @@ def _run_sinumerik(entry: Entry, work: Path, r: Result) -> None:
         r.outcome = r.outcome.replace(f"line {k}:", f"line {r.refusal_line}:", 1)
     if not r.accepted:
         return
-    r.outcome = "accepted (run straight)"
+    r.outcome = "accepted (run straight)" if dialect == "sinumerik" else "accepted (E as U)"
     out = work / ("zero" + entry.path.suffix)
-    nc.correct_file(entry.path, out, fields.Shift((0.0, 0.0, 0.0)), dialect="sinumerik")
+    nc.correct_file(entry.path, out, fields.Shift((0.0, 0.0, 0.0)), dialect=dialect)
     if out.read_bytes() != data:
         r.identity, r.identity_detail = False, _first_difference(data, out.read_bytes())
-    if not ncgi.AVAILABLE or RS274 is None:
+    if dialect != "sinumerik" or not ncgi.AVAILABLE or RS274 is None:
         return
     want = ncgi.ends(data.decode("utf-8", "replace"))
     canon = canonical(folder / straight)

@@ -1,12 +1,12 @@
 """NC dialects: which controller family a program is written for, detected from its text.
 
-The engine reads RS274NGC as LinuxCNC reads it. grbl's G-code is a subset of it; Fanuc/Haas and
-Marlin programs share most of it, and what they write differently, or what the engine does not
-know, is refused at its line by the engine (an M code it does not know, an E word, a macro call).
-Sinumerik 840D programs have their own syntax: they are run into straight RS274NGC first
-(:mod:`ncadapt.sinumerik`). Heidenhain conversational programs are refused here, at the line that
-shows the dialect, with the dialect named, instead of failing on the first word the RS274NGC
-reader cannot parse.
+The engine reads RS274NGC as LinuxCNC reads it. grbl's G-code is a subset of it; Fanuc/Haas
+programs share most of it, and what they write differently, or what the engine does not know, is
+refused at its line by the engine (an M code it does not know, a macro call). Marlin programs are
+read with their extruder E carried as an axis (:mod:`ncadapt.marlin`), and Sinumerik 840D programs
+are run into straight RS274NGC first (:mod:`ncadapt.sinumerik`). Heidenhain conversational
+programs are refused here, at the line that shows the dialect, with the dialect named, instead of
+failing on the first word the RS274NGC reader cannot parse.
 
 Detection reads the program's first :data:`HEAD_BYTES` only (a program of any length is detected
 at once) and looks, in this order, for: a Heidenhain ``BEGIN PGM`` line; Sinumerik syntax (a

@@ -180,9 +180,11 @@ def correct_file(
     """
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
-    if dialect == "sinumerik":
+    if dialect in ("sinumerik", "marlin"):
         if read_ahead is not None:
             read_ahead.cancel()
+        if dialect == "marlin":
+            return _correct_marlin(p, out, field, options)
         return _correct_sinumerik(p, out, field, expand, options)
     if expand:
         if dialect not in ("linuxcnc", "fanuc"):
@@ -309,6 +311,37 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -
     return dataclasses.replace(c, expanded=expanded)
 
 
+def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
+    """:func:`correct_file` for a Marlin program: its E carried as a U axis the engine shares out
+    among a move's pieces (:mod:`ncadapt.marlin`), and written back as E."""
+    import io
+
+    from . import marlin
+
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    tr = marlin.translate(data, str(p))
+    buf = io.BytesIO()
+    try:
+        c = _correct(tr.data, str(p), buf.write, field, keep_points=False, dialect="marlin", **options)
+    except (InputError, RefusedError) as e:
+        raise _flat_error(e, tr, str(p), "read with its E as a U axis") from None
+    text, rewritten = marlin.assemble(tr, buf.getvalue())
+    atomic_write(out, text)
+    written = "as it is" if rewritten == 0 else "in place"
+    expanded = {
+        "lines_in": len(data.splitlines()),
+        "blocks": len(tr.straight),
+        "blocks_run": len(tr.straight),
+        "kept": rewritten == 0,
+        "written": written,
+        "lines_rewritten": rewritten,
+    }
+    return dataclasses.replace(c, expanded=expanded)
+
+
 def _flat_error(e, flat, name, how="flattened with --expand"):
     """An error of the flattened program, located at the original line its block comes from."""
     if isinstance(e, InputError):
@@ -332,17 +365,17 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
     piece: memory stays bounded whatever the program's length. A Sinumerik program is run into
     straight G-code first (:func:`ncadapt.sinumerik.translate`); the lines named are its own."""
-    if dialect != "sinumerik":
+    if dialect not in ("sinumerik", "marlin"):
         return _inspect(str(path), str(path), _check_dialect(dialect))
-    from . import sinumerik
+    from . import marlin, sinumerik
 
     try:
         data = Path(path).read_bytes()
     except OSError as e:
         raise InputError(f"cannot read program: {e.strerror}", str(path)) from None
-    tr = sinumerik.translate(data, str(path))
+    tr = sinumerik.translate(data, str(path)) if dialect == "sinumerik" else marlin.translate(data, str(path))
     try:
-        info = _inspect(tr.data, str(path))
+        info = _inspect(tr.data, str(path), "linuxcnc" if dialect == "sinumerik" else "marlin")
     except InputError as e:
         raise _flat_error(e, tr, str(path)) from None
 
@@ -350,7 +383,7 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
         return int(tr.lines[k - 1]) if isinstance(k, int) and 1 <= k <= len(tr.lines) else k
 
     info["lines"] = len(data.splitlines())
-    info["blocks_run"] = tr.blocks_run
+    info["blocks_run"] = getattr(tr, "blocks_run", len(tr.lines))
     info["end_line"] = orig(info["end_line"])
     info["unsupported"] = [{**u, "line": orig(u["line"])} for u in info["unsupported"]]
     info["notes"] = [{**n, "line": orig(n["line"])} for n in info["notes"]]

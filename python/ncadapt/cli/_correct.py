@@ -200,7 +200,9 @@ def correct(
             "in place": f"{e['lines_rewritten']:,} line(s) rewritten in place, every other line as written",
             "straight": f"the corrected program is written straight, {e['lines_rewritten']:,} lines",
         }[e["written"]]
-        ran = "run as straight G-code" if d.name == "sinumerik" else "flattened (--expand)"
+        ran = {"sinumerik": "run as straight G-code", "marlin": "E carried through the correction"}.get(
+            d.name, "flattened (--expand)"
+        )
         summary(f"  {ran}: {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; {how}")
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
