@@ -50,7 +50,7 @@ def straight_motion(data: bytes, tmp_path: Path) -> tuple[np.ndarray, np.ndarray
     """rs274's end points of a straight (RS274NGC) program, consecutive repeats removed (mm), and
     whether the move to each is a rapid."""
     p = tmp_path / f"straight{len(list(tmp_path.iterdir()))}.ngc"
-    p.write_bytes(data)
+    p.write_bytes(data + b"M2\n")  # rs274 wants an end; one after the program's own changes nothing
     canon = rs274.canonical(p)
     assert canon.error is None, canon.error
     ends = canon.ends[:, :3]
@@ -376,3 +376,106 @@ def test_cli_refusal_names_the_line(tmp_path):
     assert r.exit_code == 2
     assert re.search(r"spline\.mpf:2:\d+: error: spline interpolation is not followed", r.output), r.output
     assert not (tmp_path / "o.mpf").exists()
+
+
+# ------------------------------------------------------------------------------ found in review
+def test_a_stop_on_a_line_cut_in_pieces_goes_to_its_last_piece(tmp_path):
+    """M30 (M0, M1, M2, M17) acts after its block's motion: on a rewritten line cut in pieces it
+    must end the last piece, not the first."""
+    p = tmp_path / "end.mpf"
+    p.write_text("N10 G0 X0 Y0 Z0\nN20 G1 X100 Y0 F100 M30 ; the end\nN30 G1 X0\n")
+
+    def bowl(q):
+        d = np.zeros_like(q)
+        d[:, 2] = 1e-6 * q[:, 0] ** 2
+        return d
+
+    correct(p, tmp_path / "out.mpf", bowl)
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    ended = [k for k, t in enumerate(out) if "M30" in t.split(";")[0]]
+    assert len(out) > 4 and ended == [len(out) - 2]  # the last piece of N20, before N30
+    assert out[1].startswith("N20 G1") and out[1].endswith("F100 ; the end")
+
+
+@needs_rs274
+def test_the_motion_mode_written_back_follows_the_run_not_the_text(tmp_path):
+    """N50 (run) is rewritten as G2 or pieces; N70 (not run) is a CIP: N90, which relies on the
+    CIP mode in force when it runs, must get CIP written."""
+    p = tmp_path / "modes.mpf"
+    p.write_text(
+        "N10 G0 X0 Y0 Z0\nN20 R1=1\nN30 G1 X10 F100\nN40 IF R1==1\nN50 CIP X30 Y0 I1=20 J1=10\nN60 ELSE\n"
+        "N70 CIP X30 Y0 I1=20 J1=-10\nN80 ENDIF\nN90 X50 Y0 I1=40 J1=10\nN100 G1 X60\n"
+    )
+
+    def middle(q):
+        d = np.zeros_like(q)
+        d[:, 2] = 0.02 * np.clip(1.0 - np.abs(q[:, 0] - 20.0) / 10.0, 0.0, 1.0)
+        return d
+
+    correct(p, tmp_path / "out.mpf", middle)
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    assert "N90 CIP X50 Y0 I1=40 J1=10" in out
+    tr = sn.translate(p.read_bytes())
+    want = straight_ends(nc.parse(tr.data).correct(middle).data, tmp_path)
+    got = straight_ends(sn.translate((tmp_path / "out.mpf").read_bytes()).data, tmp_path)
+    np.testing.assert_allclose(got, want, atol=1e-4)
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    ("text", "x_mm"),
+    [
+        ("G71\nG0 X25.4 Y0 Z0\nG70\nG1 X=IC(1) F10\n", 50.8),  # 25.4 mm and 1 inch
+        ("G71\nG0 X25.4 Y0 Z0\nG70\nG91 G1 X=AC(2) F10\n", 50.8),
+        ("G71\nTRANS X25.4\nG70\nATRANS X1\nG0 X0 Y0 Z0\n", 50.8),  # the frame stays where it is
+    ],
+)
+def test_a_change_of_units_keeps_positions_and_frames(text, x_mm, tmp_path):
+    ends = straight_ends(sn.translate(text.encode()).data, tmp_path)
+    assert ends[-1][0] == pytest.approx(x_mm, abs=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "says"),
+    [
+        ("G0 X10 Y0 Z0\nG1 F100\nCIP X30 Y0 Z10 I1=20 J1=10\n", 3, "CIP moving Z"),
+        ("R1=0\nG0 X0 Y0 Z0\nGOTOF L1\nFOR R1=1 TO 3\nL1: G1 X=R1 F100\nENDFOR\n", 6, "jump into a loop"),
+        ("G0 X0 Y0 Z0\nG1 X10 F100\nATRANS X5\nG91 X10\n", 4, "SD42440"),
+        ("G0 X0 Y0 Z0\nG1 X10 F100\nATRANS X5\nX=IC(10)\n", 4, "SD42440"),
+        ("G54\nG91 G1 X10 F100\n", 2, "SD42440"),
+        ("G0 X=1EX999\n", 1, "out of range"),
+        ("DEF INT N\nN = 3EX9\n", 2, "INT's range"),
+    ],
+)
+def test_refused_after_review(text, line, says):
+    with pytest.raises(InputError) as e:
+        sn.translate(text.encode(), "p.mpf")
+    assert e.value.line == line and says in e.value.message, e.value
+
+
+def test_an_absolute_move_after_a_frame_change_allows_incremental_ones_again(tmp_path):
+    tr = sn.translate(b"G0 X0 Y0 Z0\nG1 X10 F100\nATRANS X5\nG1 X10\nX=IC(10)\nG91 X1\n")
+    assert [it.rs for it in tr.items if it.kind == "motion"][-3:] == ["G1 X10", "X20", "X1"]
+
+
+@pytest.mark.parametrize(
+    ("text", "xs"),
+    [
+        # CASE dispatch: 4 + 3 is 7
+        (
+            "DEF INT V=4\nG1 X0 F100\nCASE(V+3) OF 7 GOTOF SEVEN 9 GOTOF NINE DEFAULT GOTOF OTHER\nNINE: X9\n"
+            "GOTOF ENDE\nSEVEN: X7\nGOTOF ENDE\nOTHER: X1\nENDE: M30\n",
+            ["X0", "X7"],
+        ),
+        (
+            "DEF INT V=2\nG1 X0 F100\nCASE(V) OF 7 GOTOF A 9 GOTOF B DEFAULT GOTOF C\nA: X7\nB: X9\nC: X3\n",
+            ["X0", "X3"],
+        ),
+        ("DEF INT V=2\nG1 X0 F100\nCASE(V) OF 7 GOTOF A\nX5\nA: X7\n", ["X0", "X5", "X7"]),
+        # a block number without its N is a destination too; GOTOC to nothing goes on
+        ("G1 X0 F100\nGOTOF 90\nX5\nN90 X9\nGOTOC NOWHERE\nX4\n", ["X0", "X9", "X4"]),
+    ],
+)
+def test_case_and_jumps(text, xs):
+    tr = sn.translate(text.encode())
+    assert [it.rs.split()[-1] for it in tr.items if it.kind == "motion"] == xs

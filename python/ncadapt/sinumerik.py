@@ -18,7 +18,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   the machine's), ``DEF INT|REAL|BOOL`` variables, assignments, expressions (``+ - * / DIV MOD``,
   comparisons, ``AND OR XOR NOT``, ``SIN COS TAN ASIN ACOS ATAN2`` in degrees, ``SQRT ABS POT
   TRUNC ROUND MINVAL MAXVAL LN EXP``), ``IF/ELSE/ENDIF``, ``WHILE/ENDWHILE``, ``FOR … TO …/ENDFOR``,
-  ``REPEAT/UNTIL``, ``LOOP/ENDLOOP``, ``GOTOF/GOTOB/GOTO`` to a label or block number, ``IF … GOTOF``;
+  ``REPEAT/UNTIL``, ``LOOP/ENDLOOP``, ``GOTOF/GOTOB/GOTO/GOTOC`` to a label or block number,
+  ``IF … GOTOF``, ``CASE(…) OF … DEFAULT …``;
 - copied as written, without an effect on the path: ``MSG(…)``, ``T="name"``, ``G9 G60 G64 G641
   G642 G643 G644 G645 G601 G602 G603``, ``SOFT BRISK DRIVE FFWON FFWOF CFC CFTCP CFIN STOPRE``,
   ``G340 G341 G450 G451 DIAMOF``, ``ADIS= ADISPOS= LIMS=``, ``TURN=0``;
@@ -30,7 +31,10 @@ splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), ``CT`` tangential ar
 than 0, polar coordinates (``AP= RP= G110 G111 G112``), ``AR=``, threads and tapping, cutter
 compensation ``G41``/``G42``, rotations, scaling and mirroring, ``DIAMON``, system variables
 (``$…``), other axes, a change of work system after a move, an arc without a centre or radius,
-an axis written twice in a block, a loop that runs more than :data:`MAX_BLOCKS` blocks.
+a CIP moving the axis normal to its plane, an incremental value on an axis whose frame changed
+since its last absolute value (setting data SD42440 decides whether the change is travelled), a
+jump into a FOR loop, an axis written twice in a block, a loop that runs more than
+:data:`MAX_BLOCKS` blocks.
 
 The straight program (:attr:`Translation.data`) has one line per thing the program did, each
 ending in a marker ``;@k`` naming its :class:`Item`; the engine keeps the markers, so its output
@@ -50,6 +54,9 @@ from .errors import InputError
 
 #: Most blocks a program may run: a loop that runs more is taken as one that does not end.
 MAX_BLOCKS = 2_000_000
+MM_PER_INCH = 25.4
+#: The largest INT (Siemens: 32-bit signed).
+INT_MAX = 2**31 - 1
 
 _AXES = ("X", "Y", "Z", "A", "B", "C")
 _LINEAR = ("X", "Y", "Z")
@@ -245,13 +252,19 @@ class _Machine:
 
     def set(self, target: tuple, v: float, col: int) -> None:
         if target[0] == "R":
+            if not math.isfinite(v):
+                raise _Error(f"R{int(target[1])}: the value is out of range", col)
             self.r[int(target[1])] = v
             return
         var = self.vars.get(target[1])
         if var is None:
             raise _Error(f"'{target[1]}' is not defined (DEF) in the program", col)
+        if not math.isfinite(v):
+            raise _Error(f"{target[1]}: the value is out of range", col)
         if var[0] == "INT":
             v = float(math.floor(abs(v) + 0.5)) * (1.0 if v >= 0 else -1.0)
+            if abs(v) > INT_MAX:
+                raise _Error(f"{target[1]} = {v:g}: beyond an INT's range (±{INT_MAX})", col)
         elif var[0] == "BOOL":
             v = float(v != 0.0)
         var[1] = v
@@ -392,7 +405,7 @@ def _read(text: str, src: str) -> list[_Line]:
             raise InputError("a skipped block (/): whether it runs is the machine's setting", src, n, at + 1)
         kw = re.match(
             r"(IF|ELSE|ENDIF|WHILE|ENDWHILE|FOR|ENDFOR|REPEAT|UNTIL|LOOP|ENDLOOP|DEF|GOTOF|GOTOB|GOTOC|GOTO"
-            r"|PROC|EXTERN|RET|DEFINE|SAVE)\b",
+            r"|PROC|EXTERN|RET|DEFINE|SAVE|CASE)\b",
             stripped,
         )
         lines.append(_Line(body, at, label, number, kw.group(1) if kw else None))
@@ -442,6 +455,9 @@ class _State:
     wcs: int | None = None
     trans: dict = field(default_factory=lambda: dict.fromkeys(_AXES, 0.0))
     pos: dict = field(default_factory=lambda: dict.fromkeys(_AXES))  # program coordinates; None unknown
+    #: axes whose frame changed since their last absolute value: an incremental value there may
+    #: or may not travel the change (setting data SD42440 $SC_FRAME_OFFSET_INCR_PROG)
+    shifted: set = field(default_factory=set)
 
 
 def _fmt(v: float) -> str:
@@ -464,6 +480,8 @@ class _Block:
     end: bool = False
 
     def put(self, name: str, v: float, how: str, col: int, span: tuple[int, int]) -> None:
+        if not math.isfinite(v):
+            raise _Error(f"{name}: the value is out of range", col)
         into = self.axes if name in _AXES else self.arc
         if name in into:
             raise _Error(f"{name} is written twice in the block", col)
@@ -536,6 +554,8 @@ class _Run:
             return i + 1 if self.value(target) <= stop else self.flow[i][1] + 1
         if kw == "ENDFOR":
             at = self.flow[i][0]
+            if at not in self.for_end:
+                raise _Error("ENDFOR reached without its FOR: a jump into a loop (the control refuses it)", 1)
             ft = _Tokens(self.lines[at].code)
             ft.i = 1
             target = self.target(ft)
@@ -547,6 +567,8 @@ class _Run:
         if kw.startswith("GOTO"):
             t.i = 0
             return self.goto(t, i)
+        if kw == "CASE":
+            return self.case(t, i)
         if kw == "RET":
             return None
         if kw == "PROC":
@@ -594,18 +616,21 @@ class _Run:
                 break
         self.end(t)
 
-    def goto(self, t: _Tokens, i: int) -> int:
+    def goto(self, t: _Tokens, i: int, alone: bool = True) -> int:
+        """The line a GOTOF/GOTOB/GOTO/GOTOC at the tokens' position jumps to (a label, a block
+        number ``N90`` or ``90``); with ``alone`` nothing may follow it."""
         kw = t.peek()[1]
         t.i += 1
         tok = t.peek()
         if tok[0] == "end":
             raise _Error(f"{kw} without a destination", t.col())
         t.i += 1
-        dest = tok[1]
+        dest = "N" + tok[1] if tok[0] == "num" else tok[1]
         if dest == "N" and t.peek()[0] == "num":
             dest = "N" + t.peek()[1]
             t.i += 1
-        self.end(t)
+        if alone:
+            self.end(t)
         found = [
             j
             for j, ln in enumerate(self.lines)
@@ -624,6 +649,26 @@ class _Run:
                 return i + 1
             raise _Error(f"{kw} {dest}: no such label", tok[2] + 1)
         return found[0]
+
+    def case(self, t: _Tokens, i: int) -> int:
+        """``CASE(expr) OF c1 GOTOF L1 c2 GOTOF L2 … DEFAULT GOTOF L``: the jump of the first
+        constant equal to the value, else the DEFAULT's, else the next line."""
+        t.need("(")
+        v = _expr(t, self.m)
+        t.need(")")
+        t.need("OF")
+        chosen = None
+        while t.peek()[0] != "end":
+            if t.take("DEFAULT"):
+                const = None
+            else:
+                const = _unary(t, self.m)
+            if not t.peek()[1].startswith("GOTO"):
+                raise _Error("CASE: expected GOTOF, GOTOB, GOTO or GOTOC", t.col())
+            dest = self.goto(t, i, alone=False)
+            if chosen is None and (const is None or _binary("==", v, const, t.col()) != 0.0):
+                chosen = dest
+        return i + 1 if chosen is None else chosen
 
     # --- a block of words
     def block(self, t: _Tokens, i: int) -> int | None:
@@ -804,12 +849,20 @@ class _Run:
         elif g in _COPY_G:
             b.pre.append(("", f"G{g}"))
         elif g in _UNITS:
+            inch = g in (70, 700)
+            if inch != bool(s.inch):
+                # the position and the frame stay where they are: their numbers change unit
+                k = 1.0 / MM_PER_INCH if inch else MM_PER_INCH
+                s.pos = {a: (v * k if v is not None and a in _LINEAR else v) for a, v in s.pos.items()}
+                s.trans = {a: (v * k if a in _LINEAR else v) for a, v in s.trans.items()}
+            s.inch = inch
             b.pre.append((f"G{_UNITS[g]}", f"G{g}"))
         elif g in (54, 55, 56, 57, 500):
             if s.moved and s.wcs != g:
                 raise _Error(f"G{g} changes the work system after a move: a field is in one system's coordinates", col)
             s.wcs = g
             s.pos = dict.fromkeys(_AXES)
+            s.shifted |= set(_AXES)
             b.pre.append((f"G{g}" if g != 500 else "", f"G{g}"))
         elif g in _PASS_G:
             if g in (17, 18, 19):
@@ -829,6 +882,14 @@ class _Run:
         s = self.s
         p = s.pos[name]
         inc = how == "IC" or (how == "" and not s.absolute)
+        if inc and name in s.shifted:
+            raise _Error(
+                f"{name} incremental after a change of frame or work system: whether the control travels the change "
+                "is its setting (SD42440 $SC_FRAME_OFFSET_INCR_PROG); write the first move after it absolute",
+                col,
+            )
+        if not inc:
+            s.shifted.discard(name)
         if inc == (not s.absolute):  # written in the mode in effect
             return v, (v if s.absolute else (None if p is None else p + v))
         if p is None:
@@ -841,8 +902,9 @@ class _Run:
         col0 = self.lines[i].code_at + 1
         if mode is None:
             raise _Error(
-                "a move before any G0, G1, G2, G3 or CIP: the motion mode a program starts in is the "
-                "machine's setting (machine data); write G0 or G1 before the first move",
+                "a move before any G0, G1, G2, G3 or CIP: the motion mode a program starts in is machine data "
+                "($MC_GCODE_RESET_VALUES: G1 in Siemens' setting, which the machine's maker may change); write G0 "
+                "or G1 before the first move",
                 col0,
             )
         at = self.lines[i].code_at
@@ -889,6 +951,13 @@ class _Run:
         if any(e is None for e in end):
             raise _Error(f"an arc ({mode}) to a position that is not known here", col)
         if mode == "CIP":
+            normal = next(a for a in _LINEAR if a not in (a1, a2))
+            if normal in ends and (s.pos[normal] is None or ends[normal] != s.pos[normal]):
+                raise _Error(
+                    f"CIP moving {normal}: a circle through three points in space, off the plane G{s.plane}, is not "
+                    "followed",
+                    col,
+                )
             names = (c1 + "1", c2 + "1")
             extra = set(arc) - set(names)
             if extra:
@@ -957,6 +1026,8 @@ class _Run:
                 )
             new[a] = new[a] + v if kind == "ATRANS" else v
         for a in _AXES:
+            if new[a] != self.s.trans[a]:
+                self.s.shifted.add(a)
             if self.s.pos[a] is not None:
                 self.s.pos[a] -= new[a] - self.s.trans[a]
         self.s.trans = new
@@ -1001,6 +1072,8 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
 
 # ----------------------------------------------------------------------------------- writing back
 _RADIUS = re.compile(r"(?<![A-Z_=])R(?=[-+]?[.\d])")
+#: The words that stop the program or end it, after the block's motion.
+_STOPS = re.compile(r"(?<![A-Z0-9_.])M0*(?:0|1|2|17|30)(?![\d.])", re.I)
 _MOTION = re.compile(r"(?<![A-Z_0-9.])G0*([0-3])(?![\d.])|\bCIP\b")
 
 
@@ -1054,30 +1127,37 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
                 out.append(it.sn)
         return "".join(t + "\n" for t in out).encode("utf-8", "surrogateescape"), len(out), "straight"
     redo = {tr.items[k].line: int(k) for k in np.flatnonzero(changed)}  # original line → item
-    motion_of = {it.line: it for it in tr.items if it.kind == "motion"}
-    src = tr.source.decode("utf-8", "surrogateescape").splitlines(keepends=True)
-    out, mode, n = [], None, 0
-    for j, raw in enumerate(src):
-        body = raw.rstrip("\r\n")
-        eol = raw[len(body) :] or "\n"
-        code = _code(body)
-        moved = motion_of.get(j)
-        if j in redo:
-            lines = _rewrite(body, tr.items[redo[j]], groups[redo[j]])
-            for t in lines:
+    src = rewrite.lines_of(tr.source)
+    rewritten = {j: _rewrite(src[j][0], tr.items[k], groups[k]) for j, k in redo.items()}
+    # The motion mode each line is read in, in the order the program runs: a line left as written
+    # after a rewritten one that left another mode in force (a CIP written as G2 or as pieces) gets
+    # its own mode written, the same on every run.
+    own = [_last_mode(_code(body), None) for body, _ in src]
+    need: dict[int, set[str]] = {}
+    mode: str | None = None
+    for it in tr.items:
+        j = it.line
+        if j in rewritten:
+            for t in rewritten[j]:
                 mode = _last_mode(_code(t), mode)
-            out += [t + eol for t in lines]
-            n += 1
-            continue
-        own = _last_mode(code, None)
-        if moved is not None and own is None and moved.mode is not None and mode is not None and mode != moved.mode:
-            # the rewritten line before left another motion mode than this line's: write its own
+        elif own[j] is not None:
+            mode = own[j]
+        elif it.kind == "motion" and it.mode is not None:
+            if mode is not None and mode != it.mode:
+                need.setdefault(j, set()).add(it.mode)
+            mode = it.mode
+    out = []
+    for j, (body, eol) in enumerate(src):
+        if j in rewritten:
+            out += [t + (eol or "\n") for t in rewritten[j]]
+        elif j in need:
+            if len(need[j]) > 1:
+                raise NeedsExpand(j + 1, int(tr.runs[j]))
             at = _code_start(body)
-            body = body[:at] + moved.mode + " " + body[at:]
-            own = moved.mode
-        mode = own or mode
-        out.append(body + raw[len(raw.rstrip("\r\n")) :])
-    return "".join(out).encode("utf-8", "surrogateescape"), n, "in place"
+            out.append(body[:at] + next(iter(need[j])) + " " + body[at:] + eol)
+        else:
+            out.append(body + eol)
+    return "".join(out).encode("utf-8", "surrogateescape"), len(rewritten), "in place"
 
 
 def _code(line: str) -> str:
@@ -1110,7 +1190,20 @@ def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
     keep.append(body[at:])
     head = keep[0]
     rest = " ".join(piece.strip() for piece in keep[1:] if piece.strip())
+    # a stop or the program's end acts after the block's motion: it goes to the last piece
+    code_end = rest.find(";") if ";" in rest else len(rest)
+    stops = _STOPS.findall(rest[:code_end])
+    if stops and len(group) > 1:
+        rest = re.sub(r"[ \t]{2,}", " ", _STOPS.sub("", rest[:code_end])).strip() + (
+            " " + rest[code_end:] if code_end < len(rest) else ""
+        )
+        rest = rest.strip()
+    else:
+        stops = []
     sep = "" if not head or head.endswith((" ", "\t")) else " "
     line = head + sep + first + (" " + rest if rest else "")
     assert start == len(head)
-    return [line] + [_sinumerik(t).strip() for t in group[1:]]
+    tail = [_sinumerik(t).strip() for t in group[1:]]
+    if stops:
+        tail[-1] += " " + " ".join(w.strip() for w in stops)
+    return [line, *tail]
