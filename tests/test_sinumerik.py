@@ -170,7 +170,7 @@ def test_int_variables_round_and_for_counts_to_its_end():
         ("G1 X1 X=2 F100\n", 1, "X is written twice"),
         ("G1 X=IC(5) F100\n", 1, "not known here"),
         ("X1 Y1\n", 1, "motion mode"),
-        ("G1 X0 Y0 F100\nCT X10 Y10\n", 2, "tangential arc"),
+        ("G1 X0 Y0 F100\nCT X10 Y10\n", 2, "CT after a move whose direction"),
         ("G1 X0 Y0 F100\nG2 X10 Y0 I5 TURN=2\n", 2, "TURN="),
         ("G54\nG1 X0 Y0 F100\nG55\n", 3, "changes the work system"),
         ("DEF REAL A[3]\n", 1, "arrays"),
@@ -479,3 +479,51 @@ def test_an_absolute_move_after_a_frame_change_allows_incremental_ones_again(tmp
 def test_case_and_jumps(text, xs):
     tr = sn.translate(text.encode())
     assert [it.rs.split()[-1] for it in tr.items if it.kind == "motion"] == xs
+
+
+@needs_rs274
+def test_tangential_arcs_have_the_centres_their_tangents_give(tmp_path):
+    """CT continues the path's direction: worked out by hand, a quarter circle left about (10, 10),
+    three quarters right about (30, 10) (the direction +Y at (20, 10)), a CR arc about (30, 10) by
+    the short way, then right about (50, 10) from the direction +Y at (40, 10)."""
+    p = tmp_path / "ct.ngc"
+    prog = b"G17 G0 X0 Y0 Z0\nG1 X10 F100\nCT X20 Y10\nCT X30 Y0\nG3 X40 Y10 CR=10\nCT X50 Y0\n"
+    p.write_bytes(sn.translate(prog).data + b"M2\n")
+    canon = rs274.canonical(p)
+    arcs = [(a[0], round(a[1], 9), round(a[2], 9)) for a in canon.arcs if a is not None]
+    assert arcs == [(1, 10.0, 10.0), (-1, 30.0, 10.0), (1, 30.0, 10.0), (-1, 50.0, 10.0)]
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("G0 X0 Y0 Z0\nCT X10 Y10\n", "direction"),  # nothing before it in the plane
+        ("G0 X0 Y0 Z0\nG1 Z-1 F100\nCT X10 Y10\n", "direction"),  # a plunge: no direction in G17
+        ("G0 X0 Y0 Z0\nG1 X10 F100\nCT X20 Y0\n", "straight line"),
+        ("G0 X0 Y0 Z0\nG1 X10 F100\nCT X20 Y5 I5\n", "end point only"),
+    ],
+)
+def test_tangential_arcs_refused(text, says):
+    with pytest.raises(InputError, match=says):
+        sn.translate(text.encode())
+
+
+def test_a_ct_line_after_a_rewritten_one_is_written_as_its_arc(tmp_path):
+    p = tmp_path / "ct.mpf"
+    p.write_text("G17 G0 X0 Y0 Z0\nG1 X10 F100\nCT X20 Y10\nX30 Y20\nG0 Z5\n")
+
+    def low(q):  # 0.01 mm up left of X 12, nothing right of X 18
+        d = np.zeros_like(q)
+        d[:, 2] = 0.01 * np.clip((18.0 - q[:, 0]) / 6.0, 0.0, 1.0)
+        return d
+
+    correct(p, tmp_path / "out.mpf", low)
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    # a CT after a rewritten move would start along the rewritten move's last piece, not along
+    # the program's arc: it is written as its own arc (about (30, 10), clockwise)
+    assert "G2 X30 Y20 I10 J0" in out and not any(t.startswith("CT") for t in out)
+    tr = sn.translate(p.read_bytes())
+    want = nc.parse(tr.data).correct(low).data
+    back = sn.translate((tmp_path / "out.mpf").read_bytes())
+    if rs274.RS274 is not None:
+        np.testing.assert_allclose(straight_ends(back.data, tmp_path), straight_ends(want, tmp_path), atol=1e-4)

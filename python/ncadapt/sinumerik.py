@@ -8,7 +8,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``G0 G1 G2 G3`` with ``X Y Z A B C`` (literals or ``X=expr``), ``=AC(…)``/``=IC(…)`` per word,
   arcs by centre (``I J K``, incremental or ``=AC(…)``; a ``K`` in a G17 arc, the centre's
   coordinate along the helix axis, does not change the arc), by radius (``CR=``, negative for more
-  than 180°), or through an intermediate point (``CIP`` with ``I1= J1= K1=``, in the active plane);
+  than 180°), through an intermediate point (``CIP`` with ``I1= J1= K1=``, in the active plane), or
+  tangent to the path before it (``CT``);
 - ``G17 G18 G19``, ``G90 G91``, ``G70 G71 G700 G710`` (inch / metric), ``G54``–``G57`` (before the
   first move), ``G53``/``G153``/``SUPA`` (machine coordinates for the block: kept, not corrected),
   ``G40``, ``G4 F``/``G4 S`` (dwell), ``G93 G94 G95 G96 G97``, ``F S T D M`` words;
@@ -27,7 +28,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 
 Refused at their line (:class:`~ncadapt.InputError`), because the path they make is not
 followed: subprogram and cycle calls (``NAME(…)``, ``CYCLE81(…)``, ``L123``, ``EXTERN``, ``PROC``),
-splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), ``CT`` tangential arcs, ``TURN=`` more
+splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), a ``CT`` whose direction is not known
+or along its chord, ``TURN=`` more
 than 0, polar coordinates (``AP= RP= G110 G111 G112``), ``AR=``, threads and tapping, cutter
 compensation ``G41``/``G42``, rotations, scaling and mirroring, ``DIAMON``, system variables
 (``$…``), other axes, a change of work system after a move, an arc without a centre or radius,
@@ -73,7 +75,6 @@ _REFUSED_WORDS = {
     "BSPLINE": "spline interpolation",
     "CSPLINE": "spline interpolation",
     "POLY": "polynomial interpolation",
-    "CT": "a tangential arc (CT)",
     "DIAMON": "diameter programming (DIAMON)",
     "DIAM90": "diameter programming (DIAM90)",
     "TRAORI": "a 5-axis transformation",
@@ -455,6 +456,8 @@ class _State:
     wcs: int | None = None
     trans: dict = field(default_factory=lambda: dict.fromkeys(_AXES, 0.0))
     pos: dict = field(default_factory=lambda: dict.fromkeys(_AXES))  # program coordinates; None unknown
+    #: the direction the last move ended in (X Y Z), for CT; None when not known
+    tangent: tuple[float, float, float] | None = None
     #: axes whose frame changed since their last absolute value: an incremental value there may
     #: or may not travel the change (setting data SD42440 $SC_FRAME_OFFSET_INCR_PROG)
     shifted: set = field(default_factory=set)
@@ -722,8 +725,8 @@ class _Run:
                 v = _number(num_tok[1]) * (-1.0 if nxt[1] == "-" else 1.0)
                 self.word(text, v, nxt[1] + num_tok[1], col, (c0, num_tok[3]), b)
                 continue
-            if text == "CIP":
-                b.set_motion("CIP", (c0, c1), col)
+            if text in ("CIP", "CT"):
+                b.set_motion(text, (c0, c1), col)
             elif text == "SUPA":
                 b.machine = text
             elif text in _FRAMES:
@@ -921,6 +924,7 @@ class _Run:
             self.items.append(Item(i, "motion", f"G53 {mode} {moves}", None, (), mode, b.machine))
             for a in b.axes:
                 s.pos[a] = None
+            s.tangent = None
             return
         written, ends = {}, {}
         for a, (v, how, sp) in b.axes.items():
@@ -930,6 +934,12 @@ class _Run:
             if b.arc:
                 raise _Error(f"{', '.join(b.arc)} in a straight move ({mode}) is not read", col0)
             words = [b.motion[0]] if b.motion is not None else []
+            start = [s.pos[a] for a in _LINEAR]
+            end = [ends.get(a, p) for a, p in zip(_LINEAR, start, strict=True)]
+            if any(v is None for v in start + end):
+                s.tangent = None
+            elif any(e != q for e, q in zip(end, start, strict=True)):
+                s.tangent = (end[0] - start[0], end[1] - start[1], end[2] - start[2])  # type: ignore[operator]
         else:
             code, tail = self.circle(mode, ends, b.arc, col0)
             words = [code]
@@ -942,7 +952,7 @@ class _Run:
         """The arc's direction (``G2``/``G3``) and its centre (incremental) or radius words."""
         s = self.s
         a1, a2, c1, c2 = _PLANES[s.plane]
-        if mode != "CIP" and "CR" not in arc and c1 not in arc and c2 not in arc:
+        if mode not in ("CIP", "CT") and "CR" not in arc and c1 not in arc and c2 not in arc:
             raise _Error(f"{mode} without a centre ({c1}, {c2}) or a radius (CR=)", col)
         start = (s.pos[a1], s.pos[a2])
         if start[0] is None or start[1] is None:
@@ -950,6 +960,28 @@ class _Run:
         end = (ends.get(a1, start[0]), ends.get(a2, start[1]))
         if any(e is None for e in end):
             raise _Error(f"an arc ({mode}) to a position that is not known here", col)
+        if mode == "CT":
+            if arc:
+                raise _Error(f"CT with {', '.join(sorted(arc))}: a tangential arc takes its end point only", col)
+            t = s.tangent
+            tx, ty = (t[_LINEAR.index(a1)], t[_LINEAR.index(a2)]) if t is not None else (0.0, 0.0)
+            norm = math.hypot(tx, ty)
+            if norm == 0.0:
+                raise _Error(
+                    f"CT after a move whose direction in the plane G{s.plane} is not known here (a first move, a "
+                    "move along the plane's normal, a machine-coordinate move)",
+                    col,
+                )
+            nx, ny = -ty / norm, tx / norm  # the left of the direction
+            dx, dy = end[0] - start[0], end[1] - start[1]
+            dn = dx * nx + dy * ny
+            if abs(dn) <= 1e-9 * max(math.hypot(dx, dy), 1.0):
+                raise _Error("CT along the direction it starts in: a straight line, not an arc", col)
+            r = (dx * dx + dy * dy) / (2.0 * dn)  # signed: left of the direction when positive
+            ux, uy = r * nx, r * ny
+            code = "G3" if dn > 0 else "G2"
+            self._end_tangent(code, start, end, (ux, uy), a1, a2)
+            return code, [f"{c1}{_fmt(ux)}", f"{c2}{_fmt(uy)}"]
         if mode == "CIP":
             normal = next(a for a in _LINEAR if a not in (a1, a2))
             if normal in ends and (s.pos[normal] is None or ends[normal] != s.pos[normal]):
@@ -981,7 +1013,9 @@ class _Run:
                 raise _Error("CIP through three points on a line, or back to its start: no circle", col)
             bb, cc = bx * bx + by * by, cx * cx + cy * cy
             ux, uy = (cy * bb - by * cc) / (2 * cross), (bx * cc - cx * bb) / (2 * cross)
-            return ("G3" if cross > 0 else "G2"), [f"{c1}{_fmt(ux)}", f"{c2}{_fmt(uy)}"]
+            code = "G3" if cross > 0 else "G2"
+            self._end_tangent(code, start, end, (ux, uy), a1, a2)
+            return code, [f"{c1}{_fmt(ux)}", f"{c2}{_fmt(uy)}"]
         other = set(arc) - {"CR", "I", "J", "K"}
         if other:
             raise _Error(f"{', '.join(sorted(other))} in a {mode} arc is not read", col)
@@ -994,13 +1028,31 @@ class _Run:
                 raise _Error(f"CR={how}(…) is not read", col)
             if end == start:
                 raise _Error(f"{mode} CR= with its end at its start: no circle", col)
+            half = math.hypot(end[0] - start[0], end[1] - start[1]) / 2.0
+            if half <= abs(r):
+                # the centre: off the chord's middle, left of it for G3 with CR > 0 (and G2 with CR < 0)
+                h = math.sqrt(r * r - half * half) * (1.0 if (mode == "G3") == (r > 0) else -1.0)
+                cx, cy = (end[0] - start[0]) / (2 * half), (end[1] - start[1]) / (2 * half)
+                off = (half * cx - h * cy, half * cy + h * cx)
+                self._end_tangent(mode, start, end, off, a1, a2)
+            else:
+                s.tangent = None
             return mode, [f"R{_fmt(r)}"]
         centre = []
         for k, c in enumerate((c1, c2)):
             v, how, _ = arc.get(c, (0.0, "", None))
             inc = how != "AC"  # I J K are incremental unless AC: G90 does not change them
             centre.append(v if inc else v - start[k])
+        self._end_tangent(mode, start, end, (centre[0], centre[1]), a1, a2)
         return mode, [f"{c1}{_fmt(centre[0])}", f"{c2}{_fmt(centre[1])}"]
+
+    def _end_tangent(self, code: str, start, end, off, a1: str, a2: str) -> None:
+        """The direction an arc ends in (in its plane), from its centre ``start + off``."""
+        rx, ry = end[0] - start[0] - off[0], end[1] - start[1] - off[1]
+        tx, ty = (-ry, rx) if code == "G3" else (ry, -rx)
+        t = [0.0, 0.0, 0.0]
+        t[_LINEAR.index(a1)], t[_LINEAR.index(a2)] = tx, ty
+        self.s.tangent = (t[0], t[1], t[2])
 
     def dwell(self, b: _Block, i: int) -> None:
         times = [p for p in b.pre if p[1][:1] in ("F", "S")]
@@ -1074,7 +1126,7 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
 _RADIUS = re.compile(r"(?<![A-Z_=])R(?=[-+]?[.\d])")
 #: The words that stop the program or end it, after the block's motion.
 _STOPS = re.compile(r"(?<![A-Z0-9_.])M0*(?:0|1|2|17|30)(?![\d.])", re.I)
-_MOTION = re.compile(r"(?<![A-Z_0-9.])G0*([0-3])(?![\d.])|\bCIP\b")
+_MOTION = re.compile(r"(?<![A-Z_0-9.])G0*([0-3])(?![\d.])|\b(CIP|CT)\b")
 
 
 class NeedsExpand(Exception):
@@ -1093,7 +1145,7 @@ def _sinumerik(rs: str) -> str:
 
 def _last_mode(text: str, mode: str | None) -> str | None:
     for m in _MOTION.finditer(text):
-        mode = f"G{m.group(1)}" if m.group(1) else "CIP"
+        mode = f"G{m.group(1)}" if m.group(1) else m.group(2)
     return mode
 
 
@@ -1127,6 +1179,17 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
                 out.append(it.sn)
         return "".join(t + "\n" for t in out).encode("utf-8", "surrogateescape"), len(out), "straight"
     redo = {tr.items[k].line: int(k) for k in np.flatnonzero(changed)}  # original line → item
+    # A CT arc starts in the direction the move before it ends in: after a rewritten move (cut in
+    # pieces, or moved) that direction is not the program's, so a CT is written as its arc.
+    after_redo = False
+    for k, it in enumerate(tr.items):
+        if it.kind != "motion":
+            continue
+        if it.line not in redo and it.mode == "CT" and after_redo:
+            if tr.runs[it.line] > 1:
+                raise NeedsExpand(it.line + 1, int(tr.runs[it.line]))
+            redo[it.line] = k
+        after_redo = it.line in redo
     src = rewrite.lines_of(tr.source)
     rewritten = {j: _rewrite(src[j][0], tr.items[k], groups[k]) for j, k in redo.items()}
     # The motion mode each line is read in, in the order the program runs: a line left as written
