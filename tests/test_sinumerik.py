@@ -177,7 +177,7 @@ def test_int_variables_round_and_for_counts_to_its_end():
         ("G1 X0 F100\nIF Q > 1\nENDIF\n", 2, "'Q' is not defined"),
         ("G1 X0 F100\n/G1 X5\n", 2, "skipped block"),
         ("G1 X0 Y0 Z5 F100\nMCALL CYCLE81(10, 0, 2, -5)\n", 2, "MCALL"),
-        ("G1 X0 Y0 F100\nCYCLE81(10, 0, 2, -5)\n", 2, "CYCLE81 calls a cycle"),
+        ("G1 X0 Y0 F100\nCYCLE83(10, 0, 2, -5)\n", 2, "CYCLE83 calls a cycle"),
         ("G1 X0 Y0 F100\nL100\n", 2, "L100 calls a subprogram"),
         ("G1 X0 Y0 F100\nG2 X10 Y0\n", 2, "without a centre"),
         ("G1 X0 Y0 F100\nCIP X10 Y0 I1=5 J1=0\n", 2, "three points on a line"),
@@ -527,3 +527,66 @@ def test_a_ct_line_after_a_rewritten_one_is_written_as_its_arc(tmp_path):
     back = sn.translate((tmp_path / "out.mpf").read_bytes())
     if rs274.RS274 is not None:
         np.testing.assert_allclose(straight_ends(back.data, tmp_path), straight_ends(want, tmp_path), atol=1e-4)
+
+
+# ---------------------------------------------------------------------------- drilling cycles
+@needs_rs274
+def test_drilling_cycles_drill_where_siemens_cycles_do(tmp_path):
+    """CYCLE81(RTP, RFP, SDIS, DP, DPR): a rapid to RFP + SDIS, a feed to DP (or RFP - DPR), a rapid
+    to RTP, at the position reached (Siemens, Cycles: CYCLE81); CYCLE82 dwells DTB seconds at the
+    bottom. rs274 runs the straight program (from the retraction plane: G98 G81)."""
+    p = tmp_path / "drill.ngc"
+    p.write_bytes(sn.translate((DATA / "drill.mpf").read_bytes()).data + b"M2\n")
+    canon = rs274.canonical(p)
+    assert canon.error is None, canon.error
+    ends = ncgi.distinct(canon.ends)
+    want = [(10, 20, 50), (10, 20, 2), (10, 20, -10), (10, 20, 50), (30, 20, 50), (30, 20, 2), (30, 20, -8)]
+    np.testing.assert_allclose(ends[: len(want)], want, atol=1e-9)
+    np.testing.assert_allclose(ends[len(want)], (30, 20, 50))
+    assert "G98 G82 R2 Z-8 P1.5" in (tmp_path / "drill.ngc").read_text()  # the dwell, 1.5 s
+
+
+def test_a_field_moves_a_cycle_s_reference_plane_and_depth(tmp_path):
+    def slope(q):
+        d = np.zeros_like(q)
+        d[:, 2] = 0.01 + 0.001 * q[:, 0]
+        return d
+
+    c = correct(DATA / "drill.mpf", tmp_path / "out.mpf", slope)
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    # dz is 0.02 at X10, 0.04 at X30: RFP and DP move by it, DPR (relative to RFP) stays
+    assert out[5] == "N50 CYCLE81(50, 0.02, 2, -9.98) ; first hole"
+    assert out[7] == "N70 CYCLE82(50, 0.04, 2, , 8, 1.5)"
+    assert c.expanded["written"] == "in place"
+    correct(DATA / "drill.mpf", tmp_path / "flat.mpf", slope, expand=True)
+    # --expand writes a program without loops in place too
+    assert (tmp_path / "flat.mpf").read_text() == (tmp_path / "out.mpf").read_text()
+    if rs274.RS274 is not None:  # what is written reads back to the engine's corrected straight program
+        tr = sn.translate((DATA / "drill.mpf").read_bytes())
+        want = straight_ends(nc.parse(tr.data).correct(slope).data, tmp_path)
+        got = straight_ends(sn.translate((tmp_path / "out.mpf").read_bytes()).data, tmp_path)
+        np.testing.assert_allclose(got, want, atol=1e-4)
+
+
+def test_a_cycle_whose_hole_the_field_moves_sideways_is_refused(tmp_path):
+    with pytest.raises(RefusedError) as e:
+        correct(DATA / "drill.mpf", tmp_path / "out.mpf", fields.Shift((0.01, 0.0, 0.0)))
+    assert e.value.details[0]["line"] == 8 and "X or Y" in e.value.message
+    assert not (tmp_path / "out.mpf").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE81(1, 0, 2, -5)\n", "below the safety plane"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE81(50, 0, 2, -5, 3)\n", "different depths"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE81(50, 0, 2)\n", "without a final depth"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE83(50, 0, 2, -5, , -2)\n", "CYCLE83 calls a cycle"),
+        ("G0 X0 Y0 Z50\nG1 F100\nMCALL CYCLE81(50, 0, 2, -5)\n", "MCALL"),
+        ("G0 X0 Y0 Z50\nG18 G1 F100\nCYCLE81(50, 0, 2, -5)\n", "G17 G90"),
+        ("G0 Z50\nG1 F100\nCYCLE81(50, 0, 2, -5)\n", "not known"),
+    ],
+)
+def test_drilling_cycles_refused(text, says):
+    with pytest.raises(InputError, match=says):
+        sn.translate(text.encode())

@@ -282,6 +282,8 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -
         raise _flat_error(e, tr, str(p), "run as straight G-code") from None
     try:
         text, rewritten, written = sinumerik.assemble(tr, buf.getvalue(), expand)
+    except sinumerik.Unwritable as e:
+        raise RefusedError(e.message, [{"line": e.line, "reason": e.message}]) from None
     except sinumerik.NeedsExpand as e:
         raise RefusedError(
             f"line {e.line} runs {e.runs} times (a loop or a jump) and its move is corrected differently on each run: "

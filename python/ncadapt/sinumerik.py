@@ -13,6 +13,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``G17 G18 G19``, ``G90 G91``, ``G70 G71 G700 G710`` (inch / metric), ``G54``–``G57`` (before the
   first move), ``G53``/``G153``/``SUPA`` (machine coordinates for the block: kept, not corrected),
   ``G40``, ``G4 F``/``G4 S`` (dwell), ``G93 G94 G95 G96 G97``, ``F S T D M`` words;
+- drilling cycles ``CYCLE81(RTP, RFP, SDIS, DP, DPR)`` and ``CYCLE82(…, DTB)`` at the position
+  reached (G17 G90), run as G81/G82 from the retraction plane;
 - frames ``TRANS``/``ATRANS`` (translations; ``ROT``, ``SCALE``, ``MIRROR`` without axes reset
   the frame; with axes they are refused);
 - R parameters (``R1``, ``R[expr]``; one read before the program sets it is refused: its value is
@@ -27,7 +29,7 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``M30 M2 M17 RET`` end the program.
 
 Refused at their line (:class:`~ncadapt.InputError`), because the path they make is not
-followed: subprogram and cycle calls (``NAME(…)``, ``CYCLE81(…)``, ``L123``, ``EXTERN``, ``PROC``),
+followed: subprogram and other cycle calls (``NAME(…)``, ``CYCLE83(…)``, ``MCALL``, ``L123``, ``PROC``),
 splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), a ``CT`` whose direction is not known
 or along its chord, ``TURN=`` more
 than 0, polar coordinates (``AP= RP= G110 G111 G112``), ``AR=``, threads and tapping, cutter
@@ -69,8 +71,11 @@ _CENTRE = {"I": "X", "J": "Y", "K": "Z"}
 _COPY_G = {9, 60, 64, 641, 642, 643, 644, 645, 601, 602, 603, 340, 341, 450, 451}
 _COPY_WORDS = {"SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "DIAMOF"}
 _COPY_ASSIGN = {"ADIS", "ADISPOS", "LIMS"}
+#: The drilling cycles read (Siemens standard cycles).
+_CYCLES = ("CYCLE81", "CYCLE82")
 _FRAMES = {"TRANS", "ATRANS", "ROT", "AROT", "SCALE", "ASCALE", "MIRROR", "AMIRROR"}
 _REFUSED_WORDS = {
+    "MCALL": "a modal cycle call (MCALL)",
     "ASPLINE": "spline interpolation",
     "BSPLINE": "spline interpolation",
     "CSPLINE": "spline interpolation",
@@ -165,6 +170,9 @@ class Item:
     spans: tuple[tuple[int, int], ...] = ()
     mode: str | None = None
     machine: str | None = None
+    #: a drilling cycle's call: (name, its arguments' values (None where left out), their spans
+    #: in the original line, the safety clearance)
+    cycle: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -456,6 +464,8 @@ class _State:
     wcs: int | None = None
     trans: dict = field(default_factory=lambda: dict.fromkeys(_AXES, 0.0))
     pos: dict = field(default_factory=lambda: dict.fromkeys(_AXES))  # program coordinates; None unknown
+    #: a drilling cycle ran since the last move (the straight program's G80 left no motion mode)
+    after_cycle: bool = False
     #: the direction the last move ended in (X Y Z), for CT; None when not known
     tangent: tuple[float, float, float] | None = None
     #: axes whose frame changed since their last absolute value: an incremental value there may
@@ -689,6 +699,8 @@ class _Run:
                 self.assignment(text, t, col, c0, b)
                 continue
             if nxt[1] == "(":
+                if text in _CYCLES:
+                    return self.drill(text, t, i)
                 if text != "MSG":
                     raise self.call(text, col)
                 t.i += 2
@@ -756,14 +768,91 @@ class _Run:
         if b.axes or b.arc:
             self.move(i, b)
         elif b.motion is not None:
-            if b.motion[0] in ("G2", "G3", "CIP"):
+            if b.motion[0] in ("G2", "G3", "CIP", "CT"):
                 raise _Error(f"{b.motion[0]} without an end point", at + b.motion[1][0] + 1)
-            self.items.append(Item(i, "state", b.motion[0], b.motion[0]))
+            # a motion code alone: the engine may bring the tool to the corrected height there
+            span = (at + b.motion[1][0], at + b.motion[1][1])
+            self.items.append(Item(i, "motion", b.motion[0], None, (span,), b.motion[0]))
+            self.s.after_cycle = False
         elif b.machine is not None:
             raise _Error(f"{b.machine} without a move", at + 1)
         for rs, sn in b.post:
             self.items.append(Item(i, "state", rs, sn))
         return None if b.end else i + 1
+
+    def drill(self, name: str, t: _Tokens, i: int) -> int:
+        """``CYCLE81(RTP, RFP, SDIS, DP, DPR)`` (and CYCLE82 with DTB, a dwell at the bottom) at the
+        position reached: a rapid to the reference plane plus the safety clearance, a feed to the
+        final depth (DP, or DPR below the reference plane), a rapid to the retraction plane (Siemens,
+        *Cycles*, "CYCLE81 drilling, centering"). Written for the engine as a canned cycle from the
+        retraction plane: ``G0 Z<RTP>``, ``G98 G81 R<RFP+SDIS> Z<DP>`` (G82 with P), ``G80``."""
+        ln, s = self.lines[i], self.s
+        col = ln.code_at + t.peek()[2] + 1
+        if t.i != 0:
+            raise _Error(f"{name} with other words before it: a cycle is called in a block of its own", col)
+        t.i += 2
+        args: list[float | None] = []
+        spans: list[tuple[int, int] | None] = []
+        while True:
+            tok = t.peek()
+            if tok[1] in (",", ")") and tok[0] == "op":
+                args.append(None)
+                spans.append(None)
+            else:
+                a0 = tok[2]
+                args.append(_expr(t, self.m))
+                spans.append((ln.code_at + a0, ln.code_at + t.toks[t.i - 1][3]))
+            if t.take(")"):
+                break
+            t.need(",")
+        self.end(t)
+        n_args = {"CYCLE81": 5, "CYCLE82": 6}[name]
+        if len(args) > n_args:
+            raise _Error(f"{name} takes {n_args} arguments; {len(args)} given", col)
+        args += [None] * (n_args - len(args))
+        spans += [None] * (n_args - len(spans))
+        rtp, rfp, sdis, dp, dpr = args[:5]
+        if rtp is None or rfp is None:
+            raise _Error(f"{name} without its retraction plane (RTP) or reference plane (RFP)", col)
+        sdis = sdis or 0.0
+        if dpr is not None and dp is not None and abs((rfp - dpr) - dp) > 1e-9:
+            raise _Error(f"{name}: DP {dp:g} and DPR {dpr:g} give different depths", col)
+        if dpr is None and dp is None:
+            raise _Error(f"{name} without a final depth (DP or DPR)", col)
+        depth = rfp - abs(dpr) if dpr is not None else dp
+        if s.plane != 17 or not s.absolute:
+            raise _Error(f"{name} in G{s.plane}{'' if s.absolute else ' G91'}: cycles are read in G17 G90", col)
+        if s.pos["X"] is None or s.pos["Y"] is None:
+            raise _Error(f"{name} at a position that is not known here", col)
+        if rtp < rfp + sdis:
+            raise _Error(f"{name}: the retraction plane {rtp:g} is below the safety plane {rfp + sdis:g}", col)
+        if depth >= rfp + sdis:  # type: ignore[operator]
+            raise _Error(f"{name}: the final depth {depth:g} is not below the safety plane", col)
+        code = "G81"
+        extra = ""
+        if name == "CYCLE82":
+            dtb = args[5] or 0.0
+            if dtb < 0:
+                raise _Error(f"{name}: a dwell in spindle turns (DTB < 0) is not read", col)
+            code, extra = "G82", f" P{_fmt(dtb)}"
+        self.items.append(Item(i, "state", f"G0 Z{_fmt(rtp)}", ""))
+        self.items.append(
+            Item(
+                i,
+                "motion",
+                f"G98 {code} R{_fmt(rfp + sdis)} Z{_fmt(depth)}{extra}",  # type: ignore[arg-type]
+                None,
+                (),
+                s.mode,
+                None,
+                (name, tuple(args), tuple(spans), sdis),
+            )
+        )
+        self.items.append(Item(i, "state", "G80", ""))
+        # the cycle gives back the caller's motion mode (a standard cycle is a SAVE subprogram);
+        # G80 leaves none in the straight program, so the next move there names it
+        s.pos["Z"], s.tangent, s.moved, s.after_cycle = rtp, None, True, True
+        return i + 1
 
     def call(self, name: str, col: int) -> _Error:
         what = "a cycle" if re.match(r"(CYCLE|POCKET|SLOT|HOLES|LONGHOLE)", name) else "a subprogram"
@@ -933,7 +1022,7 @@ class _Run:
         if mode in ("G0", "G1"):
             if b.arc:
                 raise _Error(f"{', '.join(b.arc)} in a straight move ({mode}) is not read", col0)
-            words = [b.motion[0]] if b.motion is not None else []
+            words = [b.motion[0]] if b.motion is not None else ([mode] if s.after_cycle else [])
             start = [s.pos[a] for a in _LINEAR]
             end = [ends.get(a, p) for a, p in zip(_LINEAR, start, strict=True)]
             if any(v is None for v in start + end):
@@ -944,7 +1033,7 @@ class _Run:
             code, tail = self.circle(mode, ends, b.arc, col0)
             words = [code]
         words += [f"{a}{_fmt(v)}" for a, v in written.items()] + tail
-        s.moved = True
+        s.moved, s.after_cycle = True, False
         s.pos.update(ends)
         self.items.append(Item(i, "motion", " ".join(words), None, spans, mode, None))
 
@@ -1159,10 +1248,18 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
     :class:`NeedsExpand` is raised without it."""
     groups = rewrite.groups(corrected, len(tr.items))
     changed = rewrite.changed(groups, [it.rs for it in tr.items])
-    for k in np.flatnonzero(changed):
+    for k in map(int, np.flatnonzero(changed)):
         it = tr.items[k]
+        if it.kind == "state" and it.rs.startswith("G0 Z") and k + 1 < len(tr.items) and tr.items[k + 1].cycle:
+            raise Unwritable(
+                it.line + 1,
+                "the rapid to a drilling cycle's retraction plane was corrected (--rapids): "
+                "the cycle's own retraction is not",
+            )
         if it.kind != "motion" or it.machine is not None:
             raise RuntimeError(f"the engine changed line {it.line + 1}, which is not a move it corrects: {groups[k]}")
+        if it.cycle is not None:
+            _cycle_values(it, groups[k])  # refuses what a call cannot say
     if not any(changed):
         return tr.source, 0, "as it is"
     looped = [int(tr.items[k].line) for k in np.flatnonzero(changed) if tr.runs[tr.items[k].line] > 1]
@@ -1173,12 +1270,15 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
         for g, it in zip(groups, tr.items, strict=True):
             if it.machine is not None:
                 out.append(it.rs.replace("G53", it.machine, 1))
+            elif it.cycle is not None:
+                values = _cycle_values(it, g)
+                out.append(f"{it.cycle[0]}({', '.join('' if v is None else _fmt(v) for v in values)})")
             elif it.kind == "motion":
                 out += [_sinumerik(t) for t in g]
             elif it.sn:
                 out.append(it.sn)
         return "".join(t + "\n" for t in out).encode("utf-8", "surrogateescape"), len(out), "straight"
-    redo = {tr.items[k].line: int(k) for k in np.flatnonzero(changed)}  # original line → item
+    redo: dict[int, int] = {tr.items[k].line: int(k) for k in np.flatnonzero(changed)}  # original line → item
     # A CT arc starts in the direction the move before it ends in: after a rewritten move (cut in
     # pieces, or moved) that direction is not the program's, so a CT is written as its arc.
     after_redo = False
@@ -1205,7 +1305,7 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
                 mode = _last_mode(_code(t), mode)
         elif own[j] is not None:
             mode = own[j]
-        elif it.kind == "motion" and it.mode is not None:
+        elif it.kind == "motion" and it.mode is not None and it.cycle is None:
             if mode is not None and mode != it.mode:
                 need.setdefault(j, set()).add(it.mode)
             mode = it.mode
@@ -1241,9 +1341,51 @@ def _code_start(line: str) -> int:
     return at + (len(code[at:]) - len(code[at:].lstrip()))
 
 
+class Unwritable(Exception):
+    """A corrected block that the program's own syntax cannot say (a drilling cycle's hole moved
+    in X or Y): ``line`` (1-based), ``message``."""
+
+    def __init__(self, line: int, message: str):
+        super().__init__(line, message)
+        self.line, self.message = line, message
+
+
+def _cycle_values(it: Item, group: list[str]) -> list[float | None]:
+    """A drilling cycle's arguments after the correction: the engine's cycle block (R and Z moved
+    by the field) as the reference plane (R less the safety clearance) and the final depth; the
+    relative depth DPR, the retraction plane and the rest as written."""
+    name, args, _, sdis = it.cycle  # type: ignore[misc]
+    if len(group) != 1:
+        raise Unwritable(
+            it.line + 1, f"{name}: the correction wrote its hole as moves (--expand-cycles); a call cannot hold them"
+        )
+    words = dict(re.findall(r"([A-Z])([-+]?[\d.]+)", group[0].split(";")[0]))
+    if "X" in words or "Y" in words:
+        raise Unwritable(
+            it.line + 1,
+            f"{name}: the field moves the hole in X or Y, and the call drills where the "
+            "tool stands: move the position before it",
+        )
+    r, z = float(words["R"]), float(words["Z"])
+    values = list(args)
+    values[1] = r - sdis
+    if values[3] is not None:
+        values[3] = z
+    return values
+
+
 def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
     """The original line ``body`` with its move's words replaced by the engine's first line, and
-    the lines the engine added after it."""
+    the lines the engine added after it (a drilling cycle: its reference plane and depth)."""
+    if it.cycle is not None:
+        values, spans = _cycle_values(it, group), it.cycle[2]
+        out, at = [], 0
+        for k in (1, 3):
+            v = values[k]
+            if spans[k] is not None and v is not None:
+                out += [body[at : spans[k][0]], _fmt(v)]
+                at = spans[k][1]
+        return ["".join(out) + body[at:]]
     first = _sinumerik(group[0]).strip()
     start = it.spans[0][0]
     keep, at = [], 0
