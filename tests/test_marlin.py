@@ -65,7 +65,8 @@ def xyz_ends(lines: list[str], start):
     return np.array(out)
 
 
-RELATIVE = """G21 G90
+RELATIVE = """G21
+G90
 M83
 G92 E0
 G1 X0 Y0 Z0.3 F1200
@@ -93,10 +94,11 @@ def test_relative_e_pieces_add_up_to_the_move_and_follow_its_length():
             share = np.array([float(g) for g in got]) / float(e)
             np.testing.assert_allclose(share, lengths / lengths.sum(), atol=2e-5 / float(e))
         start = tuple(ends[-1])
-    assert per[6] == ["G1 E-0.8 F2400 ; retract"]  # a retraction moves nothing the field changes
+    assert per[7] == ["G1 E-0.8 F2400 ; retract"]  # a retraction moves nothing the field changes
 
 
-ABSOLUTE = """G21 G90
+ABSOLUTE = """G21
+G90
 M82
 G92 E0
 G1 X0 Y0 Z0.3 F1200
@@ -129,12 +131,12 @@ def test_absolute_e_pieces_end_at_the_move_and_interpolate_along_it():
 @pytest.mark.parametrize(
     ("program", "u"),
     [
-        # G91 makes E relative too; G90 makes it absolute again (Marlin's set_relative_mode)
-        ("G92 E0\nG91\nG1 X1 E1\nG1 X1 E1\nG90\nG1 X5 E1\n", ["U1", "U2", "U1"]),
+        # G91 makes E relative too (U written as an increment, as X is); G90 makes it absolute again
+        ("G92 E0\nG91\nG1 X1 E1\nG1 X1 E1\nG90\nG1 X5 E1\n", ["U1", "U1", "U1"]),
         # M83 sets E alone: X stays absolute
         ("G92 E0\nG90\nM83\nG1 X1 E1\nG1 X2 E1\n", ["U1", "U2"]),
-        # M82 after G91: E absolute, the axes relative
-        ("G92 E0\nG91\nM82\nG1 X1 E1\nG1 X1 E3\n", ["U1", "U3"]),
+        # M82 after G91: E absolute (U at 1, then 3), the axes relative (U written as increments)
+        ("G92 E0\nG91\nM82\nG1 X1 E1\nG1 X1 E3\n", ["U1", "U2"]),
         # G92 E sets the E coordinate: U keeps counting
         ("G92 E0\nM83\nG1 X1 E2\nG92 E10\nM82\nG1 X2 E11\n", ["U2", "U3"]),
     ],
@@ -169,11 +171,12 @@ def test_zero_correction_and_comments(tmp_path):
     c = nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
     out = (tmp_path / "o.gcode").read_text().splitlines()
     # a shift raises the move that sets Z; the moves after keep it (modal), E and comments as written
-    assert out[3] == "G1 X0 Y0 Z0.35 F1200" and out[4:] == RELATIVE.splitlines()[4:]
+    assert out[4] == "G1 X0 Y0 Z0.35 F1200" and out[5:] == RELATIVE.splitlines()[5:]
     assert c.expanded["written"] == "in place" and c.expanded["lines_rewritten"] == 1
     nc.correct_file(p, tmp_path / "b.gcode", bump, dialect="marlin")
     out = (tmp_path / "b.gcode").read_text().splitlines()
-    assert out[4].endswith("; a long extruding move") and out[5].startswith("X")  # the first piece keeps it
+    # the first piece keeps the comment; every piece has its G1 (stock Marlin reads no modal motion)
+    assert out[5].endswith("; a long extruding move") and out[6].startswith("G1 X")
 
 
 @pytest.mark.parametrize("name", ["cncjs__octocat.gcode", "cncjs__sample.gcode"])
@@ -208,3 +211,66 @@ def test_cli(tmp_path):
     assert "Marlin (3D printer G-code) (detected" in r.output and "E carried through the correction" in r.output
     r = CliRunner().invoke(main, ["inspect", str(p)])
     assert r.exit_code == 0, r.output
+
+
+# ------------------------------------------------------------------------------ found in review
+def test_every_piece_names_its_motion(tmp_path):
+    """Stock Marlin reads no modal motion (GCODE_MOTION_MODES off): a line without G is ignored."""
+    for lines in pieces(RELATIVE):
+        for t in lines:
+            code = t.split(";")[0].strip()
+            assert not code or code[0] in "GM", t
+
+
+def test_e_under_g91_is_shared_out_exactly(tmp_path):
+    text = "G92 E0\nG90\nG1 X0 Y0 Z0.3 F1200\nG91\nG1 X10 Y1 E1\nG1 X2 Y2 E1\nG90\nG1 X20 Y5 E3\n"
+    per = pieces(text, max_segment=1.0)
+    assert len(per[4]) > 3 and sum(word(t, "E") for t in per[4]) == 1  # G91: E relative
+    assert sum(word(t, "E") for t in per[5]) == 1
+    assert word(per[7][-1], "E") == 3 and len(per[7]) > 3  # G90: absolute, the last piece at E3
+    es = [float(word(t, "E")) for t in per[7]]
+    assert es == sorted(es) and es[0] > 2  # from E2 up to E3 along the move
+
+
+def test_the_first_move_after_homing_is_corrected(tmp_path):
+    p = tmp_path / "p.gcode"
+    p.write_text("M83\nG28\nG1 X10 Y3 Z0.3 E1 F1200\nG1 X20 Y3 E1\n")
+    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
+    out = (tmp_path / "o.gcode").read_text().splitlines()
+    assert out[2] == "G1 X10 Y3 Z0.35 E1 F1200" and out[3] == "G1 X20 Y3 E1"
+
+
+def test_a_rewritten_g92_keeps_its_e(tmp_path):
+    p = tmp_path / "p.gcode"
+    p.write_text("G90\nM82\nG92 E0\nG1 X0 Y0 Z0.3 F1200\nG1 X10 E1\nG92 X0 E0\nG1 X10 E1\n")
+    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0.1, 0, 0)), dialect="marlin")
+    out = (tmp_path / "o.gcode").read_text().splitlines()
+    g92 = [t for t in out if t.startswith("G92 X")]
+    assert len(g92) == 1 and g92[0].endswith(" E0"), out
+
+
+def test_an_extruding_g0_is_corrected_as_marlin_moves_it(tmp_path):
+    p = tmp_path / "p.gcode"
+    p.write_text("M83\nG1 X0 Y0 Z0.3 F1200\nG0 X10 Y3 Z0.3 E1\n")
+    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
+    assert (tmp_path / "o.gcode").read_text().splitlines()[2] == "G0 X10 Y3 Z0.35 E1"
+
+
+def test_a_form_feed_in_a_comment_does_not_end_the_line():
+    tr = ml.translate(b"G1 X1 Y0 Z0.2 E0.1 F100 ; note\x0cG1 X10 Y3 E1\nG1 X2\n")
+    assert tr.straight[1:] == ["G1 X1 Y0 Z0.2 U0.1 F100", "G1 X2"]
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("G1 X0 Y0 F100\nG1 G91 X10 Y1 E1\n", "one code a line"),
+        ("G1 X0 Y0 F100\nG2 X10 Y0 I5 J0 E2 P2\n", "ARC_P_CIRCLES"),
+        ("G1 X0 Y0 F100\nG1 X10 Y3 e1\n", "lower-case"),
+        ("G1 X0 Y0 F100\nG1 X10 E0.123456789012\n", "decimals"),
+    ],
+)
+def test_refused_after_review(text, says):
+    with pytest.raises(InputError, match=says) as e:
+        ml.translate(text.encode())
+    assert e.value.line == 2

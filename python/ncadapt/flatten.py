@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .rewrite import split_lines
 
 #: Most blocks a flattened program may hold: a loop that runs more is taken as one that does not end.
 MAX_BLOCKS = 5_000_000
@@ -288,7 +289,7 @@ class _Line:
 
 def _read(text: str, src: str) -> list[_Line]:
     out = []
-    for n, raw in enumerate(text.splitlines(), 1):
+    for n, raw in enumerate(split_lines(text), 1):
         try:
             body, comments = _strip(raw)
         except _Error as e:

@@ -16,12 +16,17 @@ The E mode follows Marlin's firmware (``GcodeSuite::axis_is_relative`` and
 relative; M82 and M83 set E alone until the next G90 or G91. ``G92 E…`` sets the E coordinate
 (``G92 E0`` restarts it); ``G92`` with X Y Z is the engine's. Lines are read one to one.
 
+Under G91 U is written as an increment, as the axes are. Every piece is written with its motion
+code (stock Marlin reads no modal motion), and G0, which extrudes as G1 does in Marlin, is
+corrected as a feed and written as G0. A rewritten ``G92`` keeps its E.
+
 Copied as written (no X Y Z motion): ``G4``, ``G10``/``G11`` (firmware retract), ``T`` tool
 numbers, and the M codes of :data:`COPIED_M` (temperatures, fans, motors, limits, messages,
-progress). ``G28`` and ``G29`` (homing, bed probing) are copied, and the position is unknown after
-them until a move names every axis (as after LinuxCNC's G28). Refused at their line: ``G5``
-(Bézier moves), any other G or M code (a printer's own codes may move the head), a U V W A B C
-word, a checksum (``*``).
+progress). ``G28`` and ``G29`` (homing, bed probing) are copied, and the axes they move are
+unknown after them until a move names them (E stays known). Refused at their line: ``G5``
+(Bézier moves), any other G or M code (a printer's own codes may move the head), a second code
+on a line, ``P`` on an arc, lower-case words, an E with more than 8 decimals, a U V W A B C word,
+a checksum (``*``).
 """
 
 from __future__ import annotations
@@ -41,6 +46,8 @@ COPIED_M = frozenset(
     | {140, 141, 149, 155, 190, 191, 201, 203, 204, 205, 207, 208, 209, 220, 221, 300, 302, 400, 900}
 )
 _WORD = re.compile(r"([A-Za-z])[ \t]*([-+]?(?:\d+\.?\d*|\.\d+))?")
+#: Most decimals an E word may have: the engine writes at most 8, and E must come back exact.
+_MAX_DECIMALS = 8
 #: The straight program's first line, before the program's own.
 _PREAMBLE = "G0 U0"
 
@@ -49,14 +56,19 @@ _PREAMBLE = "G0 U0"
 class Translation:
     """A Marlin program as straight RS274NGC: ``data`` (a preamble ``G0 U0``, then one line per
     line of the program, each with its marker; ``straight`` their texts), ``source``, and for each
-    line of the program the E mode at it (``relative``), the U value of E = 0 (``base``) and U at
-    its start (``start``)."""
+    line of the program how its E is written (``relative``), whether its axes are relative (G91:
+    U is then written as an increment, ``incremental``), the U value of E = 0 (``base``), U at
+    its start (``start``), its motion code (``code``: G0 G1 G2 G3, or None) and, on a G92 line,
+    its E word (``g92_e``)."""
 
     data: bytes
     source: bytes = field(repr=False)
     relative: list[bool] = field(repr=False)
+    incremental: list[bool] = field(repr=False)
     base: list[Decimal] = field(repr=False)
     start: list[Decimal] = field(repr=False)
+    code: list[str | None] = field(repr=False)
+    g92_e: list[str | None] = field(repr=False)
     straight: list[str] = field(repr=False)
 
     @property
@@ -80,30 +92,34 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
     """The straight RS274NGC program of a Marlin program (see the module's text)."""
     text = data.decode("utf-8", "surrogateescape")
     out: list[str] = []
-    relative, bases, starts = [], [], []
-    e_rel = False
+    relative: list[bool] = []
+    incremental: list[bool] = []
+    bases: list[Decimal] = []
+    starts: list[Decimal] = []
+    codes: list[str | None] = []
+    g92s: list[str | None] = []
+    e_rel = xyz_rel = False
     base = Decimal(0)  # U where E reads 0
     u = Decimal(0)  # U now (E = u - base)
-    for n, raw in enumerate(text.splitlines(), 1):
+    for n, raw in enumerate(rewrite.split_lines(text), 1):
         relative.append(e_rel)
+        incremental.append(xyz_rel)
         bases.append(base)
         starts.append(u)
+        codes.append(None)
+        g92s.append(None)
         code = raw.split(";", 1)[0]
         if "*" in code:
             raise InputError("a checksum (*): a host's line, not a program's", name, n, code.index("*") + 1)
-        words = [(m.group(1).upper(), m.group(2), m.start()) for m in _WORD.finditer(code)]
-        bad = re.search(r"[^A-Za-z0-9 \t.+\-]", code) if not (words and words[0][0] == "M") else None
-        if bad:
-            raise InputError(f"'{bad.group()}' is not read", name, n, bad.start() + 1)
+        words = [(m.group(1), m.group(2), m.start()) for m in _WORD.finditer(code)]
         if not words:
+            if code.strip():
+                raise InputError(f"'{code.strip()[:12]}' is not read", name, n, len(code) - len(code.lstrip()) + 1)
             out.append("")
             continue
         letter, num, at = words[0]
-        if letter == "N":
-            raise InputError("line numbers (N) are a host's, not a program's", name, n, at + 1)
-        code_no = float(num) if num else None
-        if letter == "M":
-            m = int(code_no) if code_no is not None and code_no == int(code_no) else None
+        if letter == "M":  # its parameters, free text for some (M117), are the firmware's
+            m = int(num) if num and re.fullmatch(r"\d+", num) else None
             if m is None or m not in COPIED_M:
                 raise InputError(
                     f"M{num} is not a code ncadapt copies (it may move the head or change how moves run)",
@@ -111,49 +127,68 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
                     n,
                     at + 1,
                 )
-            if m == 82:
-                e_rel = False
-            elif m == 83:
-                e_rel = True
+            e_rel = {82: False, 83: True}.get(m, e_rel)
             out.append("")
             continue
+        bad = re.search(r"[^A-Z0-9 \t.+\-]", code)
+        if bad:
+            what = "a lower-case word (Marlin reads capitals)" if bad.group().isalpha() else f"'{bad.group()}'"
+            raise InputError(f"{what} is not read", name, n, bad.start() + 1)
+        if letter == "N":
+            raise InputError("line numbers (N) are a host's, not a program's", name, n, at + 1)
         if letter == "T":
             out.append("")
             continue
-        if letter != "G" or code_no is None:
+        if letter != "G" or num is None:
             raise InputError(f"'{letter}{num or ''}' begins a line: not read", name, n, at + 1)
-        g = code_no
+        g = float(num)
         rest = words[1:]
         for w, v, a in rest:
+            if w in "GMTN":
+                raise InputError(f"{w}{v or ''} after {letter}{num}: Marlin reads one code a line", name, n, a + 1)
             if w in "UVWABC":
                 raise InputError(f"{w}: an axis a printer does not have (E is the extruder)", name, n, a + 1)
-            if v is None and not (g in (28, 29) or g == 29.0):
+            if v is None and g not in (28, 29):
                 raise InputError(f"{w} without a number", name, n, a + 1)
+            if w == "E" and len(v.split(".", 1)[1] if "." in v else "") > _MAX_DECIMALS:
+                raise InputError(
+                    f"E{v}: more than {_MAX_DECIMALS} decimals are not written back exactly", name, n, a + 1
+                )
         if g in (0, 1, 2, 3):
+            if g in (2, 3) and any(w == "P" for w, _, _ in rest):
+                raise InputError(
+                    "P on an arc: Marlin counts its turns by its own setting (ARC_P_CIRCLES)", name, n, at + 1
+                )
             kept = []
             for w, v, _ in rest:
                 if w == "E":
                     e = _dec(v)
-                    u = u + e if e_rel else base + e
-                    kept.append(f"U{_text(u)}")
+                    new = u + e if e_rel else base + e
+                    kept.append(f"U{_text(new - u if xyz_rel else new)}")
+                    u = new
                 else:
                     kept.append(f"{w}{v}")
-            out.append(" ".join([f"G{int(g)}", *kept]))
+            # G0 moves and extrudes as G1 does in Marlin: the engine corrects it as a feed
+            out.append(" ".join(["G1" if g == 0 else f"G{int(g)}", *kept]))
+            codes[-1] = f"G{int(g)}"
         elif g == 92:
             kept = []
             for w, v, _ in rest:
                 if w == "E":
                     base = u - _dec(v)  # E reads v here
+                    g92s[-1] = f"E{v}"
                 else:
                     kept.append(f"{w}{v}")
             out.append(" ".join(["G92", *kept]) if kept else "")
         elif g in (90, 91):
-            e_rel = g == 91
+            e_rel = xyz_rel = g == 91
             out.append(f"G{int(g)}")
         elif g in (20, 21, 17, 18, 19):
             out.append(f"G{int(g)}")
         elif g in (28, 29):
-            out.append("G28")  # homing or probing: where the head ends is the machine's
+            # homing or probing: the axes it moves end where the machine puts them; E stays
+            named = [w for w, _, _ in rest if w in "XYZ"] if g == 28 else []
+            out.append("G53 G0 " + " ".join(f"{a}0" for a in (named or ["X", "Y", "Z"])))
         elif g in (4, 10, 11):
             out.append("")
         elif g == 5:
@@ -162,7 +197,7 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
             raise InputError(f"G{num} is not read", name, n, at + 1)
     # the preamble: U (E's carrier) starts known, so that the first extruding move can be cut
     out.insert(0, _PREAMBLE)
-    return Translation(rewrite.mark(out), data, relative, bases, starts, out)
+    return Translation(rewrite.mark(out), data, relative, incremental, bases, starts, codes, g92s, out)
 
 
 _U = re.compile(r"U([-+]?(?:\d+\.?\d*|\.\d+))")
@@ -171,7 +206,8 @@ _U = re.compile(r"U([-+]?(?:\d+\.?\d*|\.\d+))")
 def assemble(tr: Translation, corrected: bytes) -> tuple[bytes, int]:
     """The Marlin program of the engine's ``corrected`` straight program, and how many lines were
     rewritten: each line whose move changed is written as the corrected pieces (U turned back into
-    E, the line's comment after the first), every other line as written."""
+    E, each piece with its motion code, the line's comment after the first), every other line as
+    written."""
     groups = rewrite.groups(corrected, len(tr.straight))
     changed = rewrite.changed(groups, tr.straight)
     if changed[0]:
@@ -187,23 +223,41 @@ def assemble(tr: Translation, corrected: bytes) -> tuple[bytes, int]:
             continue
         n += 1
         comment = body[body.index(";") :] if ";" in body else ""
-        texts = _to_e(groups[i], tr.relative[i], tr.base[i], tr.start[i])
+        texts = _to_e(groups[i], tr.relative[i], tr.incremental[i], tr.base[i], tr.start[i])
+        texts = _with_codes(texts, tr.code[i])
+        if tr.g92_e[i]:
+            texts[0] = f"{texts[0]} {tr.g92_e[i]}"
         if comment:
             texts[0] = f"{texts[0]} {comment}"
         out += [t + (eol or "\n") for t in texts]
     return "".join(out).encode("utf-8", "surrogateescape"), n
 
 
-def _to_e(lines: list[str], relative: bool, base: Decimal, start: Decimal) -> list[str]:
+def _with_codes(lines: list[str], code: str | None) -> list[str]:
+    """Each piece with its motion code (stock Marlin reads no modal motion: a line without G is
+    ignored), G0 as the program wrote it."""
+    out, last = [], None
+    for t in lines:
+        m = re.match(r"G0*([0-3])(?![\d.])", t)
+        if m:
+            last = f"G{m.group(1)}"
+            t = t[m.end() :].lstrip()
+        written = "G0" if code == "G0" and last == "G1" else last
+        out.append(f"{written} {t}" if written and t else (written or t))
+    return out
+
+
+def _to_e(lines: list[str], relative: bool, incremental: bool, base: Decimal, start: Decimal) -> list[str]:
     """The engine's lines for one move with their U words written as E: under M83 the difference
-    from the U before, under M82 the U less the value U has where E reads 0."""
+    from the U before, under M82 the U less the value U has where E reads 0 (under G91 each U
+    written is an increment)."""
     prev = start
     out = []
     for line in lines:
 
         def to_e(m: re.Match[str]) -> str:
             nonlocal prev
-            u = Decimal(m.group(1))
+            u = prev + Decimal(m.group(1)) if incremental else Decimal(m.group(1))
             e = u - prev if relative else u - base
             prev = u
             return "E" + _text(e)  # exact: decimal arithmetic on the written numbers

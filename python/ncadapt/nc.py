@@ -223,7 +223,7 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
     except OSError as e:
         raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
     flat = flatten(data, str(p), dialect)
-    straight = flat.data.decode("utf-8", "surrogateescape").splitlines()
+    straight = rewrite.split_lines(flat.data.decode("utf-8", "surrogateescape"))
     buf = io.BytesIO()
     try:
         c = _correct(rewrite.mark(straight), str(p), buf.write, field, keep_points=False, dialect=dialect, **options)
@@ -251,14 +251,14 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
         text, written = "".join(t + "\n" for g in groups for t in g).encode("utf-8", "surrogateescape"), "straight"
     atomic_write(out, text)
     expanded = {
-        "lines_in": len(data.splitlines()),
+        "lines_in": _count_lines(data),
         "blocks": len(flat.lines),
         "blocks_run": flat.blocks_run,
         "kept": written == "as it is",
         "written": written,
         "lines_rewritten": len(lines)
         if written == "in place"
-        else (0 if written == "as it is" else len(text.splitlines())),
+        else (0 if written == "as it is" else _count_lines(text)),
     }
     return dataclasses.replace(c, expanded=expanded)
 
@@ -291,19 +291,10 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -
             [{"line": e.line, "runs": e.runs, "reason": "corrected in a loop"}],
         ) from None
 
-    def orig(m):
-        k = int(m.group(2))
-        return f"{m.group(1)}{tr.lines[k - 1] if 1 <= k <= len(tr.lines) else k}"
-
-    at_line = re.compile(r"(\bline )(\d+)")
-    c = dataclasses.replace(
-        c,
-        warnings=tuple(at_line.sub(orig, w) for w in c.warnings),
-        notes=tuple((int(tr.lines[k - 1]) if 1 <= k <= len(tr.lines) else k, m) for k, m in c.notes),
-    )
+    c = _original_lines(c, tr.lines)
     atomic_write(out, text)
     expanded = {
-        "lines_in": len(data.splitlines()),
+        "lines_in": _count_lines(data),
         "blocks": len(tr.items),
         "blocks_run": tr.blocks_run,
         "kept": written == "as it is",
@@ -330,11 +321,12 @@ def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
         c = _correct(tr.data, str(p), buf.write, field, keep_points=False, dialect="marlin", **options)
     except (InputError, RefusedError) as e:
         raise _flat_error(e, tr, str(p), "read with its E as a U axis") from None
+    c = _original_lines(c, tr.lines)
     text, rewritten = marlin.assemble(tr, buf.getvalue())
     atomic_write(out, text)
     written = "as it is" if rewritten == 0 else "in place"
     expanded = {
-        "lines_in": len(data.splitlines()),
+        "lines_in": _count_lines(data),
         "blocks": len(tr.straight),
         "blocks_run": len(tr.straight),
         "kept": rewritten == 0,
@@ -342,6 +334,26 @@ def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
         "lines_rewritten": rewritten,
     }
     return dataclasses.replace(c, expanded=expanded)
+
+
+def _original_lines(c: Correction, lines: np.ndarray) -> Correction:
+    """``c`` with the lines its warnings and notes name, lines of a straight program (1-based),
+    turned into the lines ``lines`` says they come from."""
+
+    def orig(k: int) -> int:
+        return int(lines[k - 1]) if 1 <= k <= len(lines) else k
+
+    at_line = re.compile(r"(\bline )(\d+)")
+    return dataclasses.replace(
+        c,
+        warnings=tuple(at_line.sub(lambda m: f"{m.group(1)}{orig(int(m.group(2)))}", w) for w in c.warnings),
+        notes=tuple((orig(k), m) for k, m in c.notes),
+    )
+
+
+def _count_lines(data: bytes) -> int:
+    """A program's lines, as the engine counts them (LF ends a line)."""
+    return data.count(b"\n") + (0 if data.endswith(b"\n") or not data else 1)
 
 
 def _flat_error(e, flat, name, how="flattened with --expand"):
@@ -384,7 +396,7 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     def orig(k):
         return int(tr.lines[k - 1]) if isinstance(k, int) and 1 <= k <= len(tr.lines) else k
 
-    info["lines"] = len(data.splitlines())
+    info["lines"] = _count_lines(data)
     info["blocks_run"] = getattr(tr, "blocks_run", len(tr.lines))
     info["end_line"] = orig(info["end_line"])
     info["unsupported"] = [{**u, "line": orig(u["line"])} for u in info["unsupported"]]

@@ -26,7 +26,11 @@ def groups(corrected: bytes, n: int) -> list[list[str]]:
     taken off), then the lines the engine added after it."""
     out: list[list[str]] = [[] for _ in range(n)]
     cur = None
-    for raw in corrected.splitlines():
+    lines = corrected.split(b"\n")
+    if lines and lines[-1] == b"":
+        lines.pop()
+    for raw in lines:
+        raw = raw[:-1] if raw.endswith(b"\r") else raw
         m = _MARK.search(raw)
         if m:
             cur = int(m.group(1))
@@ -42,10 +46,23 @@ def changed(gs: list[list[str]], straight: list[str]) -> list[bool]:
     return [len(g) != 1 or g[0] != t.rstrip() for g, t in zip(gs, straight, strict=True)]
 
 
+def split_lines(text: str) -> list[str]:
+    """A program's lines as a control reads them: split at LF (a CR before it is the line's
+    ending), not at the other characters Python's ``splitlines`` takes for line ends (form feed,
+    vertical tab, U+2028 …), which a control reads as part of the line."""
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return [t[:-1] if t.endswith("\r") else t for t in lines]
+
+
 def lines_of(data: bytes) -> list[tuple[str, str]]:
-    """A program's lines, each as (text, its line ending)."""
+    """A program's lines, each as (text, its line ending), split as :func:`split_lines` does."""
     out = []
-    for raw in data.decode("utf-8", "surrogateescape").splitlines(keepends=True):
-        body = raw.rstrip("\r\n")
-        out.append((body, raw[len(body) :]))
+    for raw in data.decode("utf-8", "surrogateescape").split("\n"):
+        out.append((raw[:-1], "\r\n") if raw.endswith("\r") else (raw, "\n"))
+    if out and out[-1][0] == "":
+        out.pop()
+    elif out:
+        out[-1] = (out[-1][0], "")  # the last line without an ending keeps none
     return out

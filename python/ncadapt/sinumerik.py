@@ -399,7 +399,7 @@ def _split(raw: str) -> tuple[str, int]:
 
 def _read(text: str, src: str) -> list[_Line]:
     lines = []
-    for n, raw in enumerate(text.splitlines(), 1):
+    for n, raw in enumerate(rewrite.split_lines(text), 1):
         code, at = _split(raw)
         number, label = None, None
         m = re.match(r"\s*N(\d+)\b\s*", code)
