@@ -590,3 +590,93 @@ def test_a_cycle_whose_hole_the_field_moves_sideways_is_refused(tmp_path):
 def test_drilling_cycles_refused(text, says):
     with pytest.raises(InputError, match=says):
         sn.translate(text.encode())
+
+
+# ------------------------------------------------------------------------------- subprograms
+SUB_MAIN = """; a main program calling a subprogram beside it
+N10 G17 G90 G71 G54
+N20 G0 X0 Y0 Z5
+N30 G1 Z-1 F200
+N40 SQUARE(10, 2)
+N50 G0 Z5
+N60 G0 X50 Y0
+N70 G1 Z-1
+N80 SQUARE(5, 1)
+N90 G0 Z5
+N100 M30
+"""
+SUB_SQUARE = """; a square of side SIDE from where the tool is, PASSES times
+PROC SQUARE(REAL SIDE, INT PASSES) SAVE
+DEF INT K
+FOR K = 1 TO PASSES
+  G91 G1 X=SIDE
+  Y=SIDE
+  X=-SIDE
+  Y=-SIDE
+ENDFOR
+RET
+"""
+
+
+def _sub_files(tmp_path):
+    (tmp_path / "SQUARE.SPF").write_text(SUB_SQUARE)
+    p = tmp_path / "MAIN.MPF"
+    p.write_text(SUB_MAIN)
+    return p
+
+
+@needs_rs274
+def test_a_subprogram_beside_the_program_is_run(tmp_path):
+    """SQUARE runs as the control runs it: its parameters by value, its FOR, G91 inside it, and SAVE
+    giving G90 back; the ends worked out by hand."""
+    p = _sub_files(tmp_path)
+    tr = sn.translate(p.read_bytes(), str(p))
+    got = straight_ends(tr.data, tmp_path)
+    sq = lambda x0, side: [(x0 + side, 0, -1), (x0 + side, side, -1), (x0, side, -1), (x0, 0, -1)]  # noqa: E731
+    want = [(0, 0, 5), (0, 0, -1), *sq(0, 10), *sq(0, 10), (0, 0, 5), (50, 0, 5), (50, 0, -1), *sq(50, 5), (50, 0, 5)]
+    np.testing.assert_allclose(got, np.array(want, dtype=float), atol=1e-9)
+    assert {it.sub for it in tr.items if it.line in (4, 8)} == {"SQUARE"}  # lines N40 and N80
+
+
+def test_a_subprogram_whose_moves_change_needs_expand(tmp_path):
+    p = _sub_files(tmp_path)
+    c = correct(p, tmp_path / "zero.mpf", fields.Shift((0.0, 0.0, 0.0)))
+    assert (tmp_path / "zero.mpf").read_bytes() == p.read_bytes() and c.expanded["written"] == "as it is"
+
+    def slope(q):
+        d = np.zeros_like(q)
+        d[:, 2] = 0.001 * q[:, 0]
+        return d
+
+    with pytest.raises(RefusedError) as e:
+        correct(p, tmp_path / "out.mpf", slope)
+    assert e.value.details[0]["line"] == 5 and "SQUARE" in e.value.message
+    c = correct(p, tmp_path / "out.mpf", slope, expand=True)
+    text = (tmp_path / "out.mpf").read_text()
+    assert c.expanded["written"] == "straight" and "SQUARE" not in text
+    if rs274.RS274 is not None:  # the straight program moves as the engine's corrected one
+        tr = sn.translate(p.read_bytes(), str(p))
+        want = straight_ends(nc.parse(tr.data).correct(slope).data, tmp_path)
+        got = straight_ends(sn.translate(text.encode()).data, tmp_path)
+        np.testing.assert_allclose(got, want, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("sub", "call", "line", "says"),
+    [
+        (None, "SQUARE(10, 2)", 5, "SQUARE.SPF is not beside the program"),
+        ("PROC SQUARE(VAR REAL SIDE)\nRET\n", "SQUARE(10)", 1, "VAR"),
+        ("PROC SQUARE(REAL SIDE)\nRET\n", "SQUARE(10, 2)", 5, "takes 1 argument"),
+        ("PROC OTHER(REAL SIDE)\nRET\n", "SQUARE(10)", 1, "PROC OTHER"),
+        ("PROC SQUARE(REAL SIDE)\nG1 X=SIDE\nM30\n", "SQUARE(10)", 3, "M30 in a subprogram"),
+        ("PROC SQUARE(REAL SIDE) SAVE\nTRANS X5\nRET\n", "SQUARE(10)", 3, "changes a frame"),
+    ],
+)
+def test_subprograms_refused(sub, call, line, says, tmp_path):
+    if sub is not None:
+        (tmp_path / "SQUARE.SPF").write_text(sub)
+    p = tmp_path / "MAIN.MPF"
+    p.write_text(SUB_MAIN.replace("SQUARE(10, 2)", call))
+    with pytest.raises(InputError) as e:
+        sn.translate(p.read_bytes(), str(p))
+    assert (e.value.line, says in e.value.message) == (line, True), e.value

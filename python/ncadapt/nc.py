@@ -285,6 +285,13 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -
     except sinumerik.Unwritable as e:
         raise RefusedError(e.message, [{"line": e.line, "reason": e.message}]) from None
     except sinumerik.NeedsExpand as e:
+        if e.sub is not None:
+            raise RefusedError(
+                f"line {e.line} calls subprogram {e.sub}, whose moves the correction changes (or which finds another "
+                "motion mode than it was written for): the corrected program cannot keep the call; --expand writes "
+                "its moves into the program",
+                [{"line": e.line, "subprogram": e.sub, "reason": "corrected in a subprogram"}],
+            ) from None
         raise RefusedError(
             f"line {e.line} runs {e.runs} times (a loop or a jump) and its move is corrected differently on each run: "
             "the corrected program cannot keep the loop; --expand writes it straight, one block per move run",

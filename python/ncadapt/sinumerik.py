@@ -13,6 +13,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``G17 G18 G19``, ``G90 G91``, ``G70 G71 G700 G710`` (inch / metric), ``G54``–``G57`` (before the
   first move), ``G53``/``G153``/``SUPA`` (machine coordinates for the block: kept, not corrected),
   ``G40``, ``G4 F``/``G4 S`` (dwell), ``G93 G94 G95 G96 G97``, ``F S T D M`` words;
+- subprograms ``NAME(args)``, ``NAME``, ``L123`` in ``NAME.SPF`` beside the program (``PROC`` with
+  INT, REAL, BOOL parameters by value, ``SAVE``), ended by ``RET``, ``M17`` or their end;
 - drilling cycles ``CYCLE81(RTP, RFP, SDIS, DP, DPR)`` and ``CYCLE82(…, DTB)`` at the position
   reached (G17 G90), run as G81/G82 from the retraction plane;
 - frames ``TRANS``/``ATRANS`` (translations; ``ROT``, ``SCALE``, ``MIRROR`` without axes reset
@@ -29,7 +31,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``M30 M2 M17 RET`` end the program.
 
 Refused at their line (:class:`~ncadapt.InputError`), because the path they make is not
-followed: subprogram and other cycle calls (``NAME(…)``, ``CYCLE83(…)``, ``MCALL``, ``L123``, ``PROC``),
+followed: calls of subprograms not beside the program and of other cycles (``CYCLE83(…)``),
+``MCALL``, a program that is itself a ``PROC``, ``VAR`` parameters,
 splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), a ``CT`` whose direction is not known
 or along its chord, ``TURN=`` more
 than 0, polar coordinates (``AP= RP= G110 G111 G112``), ``AR=``, threads and tapping, cutter
@@ -50,6 +53,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -59,6 +63,8 @@ from .errors import InputError
 #: Most blocks a program may run: a loop that runs more is taken as one that does not end.
 MAX_BLOCKS = 2_000_000
 MM_PER_INCH = 25.4
+#: Deepest subprogram nesting followed.
+MAX_DEPTH = 12
 #: The largest INT (Siemens: 32-bit signed).
 INT_MAX = 2**31 - 1
 
@@ -173,6 +179,10 @@ class Item:
     #: a drilling cycle's call: (name, its arguments' values (None where left out), their spans
     #: in the original line, the safety clearance)
     cycle: tuple | None = None
+    #: the subprogram (in another file) it comes from, called at ``line``; None in the program
+    sub: str | None = None
+    #: a move whose block names its motion code
+    explicit: bool = False
 
 
 @dataclass(frozen=True)
@@ -491,6 +501,8 @@ class _Block:
     frame: str | None = None
     dwell: bool = False
     end: bool = False
+    end_code: int = 0
+    call: str | None = None  # an L123 subprogram call
 
     def put(self, name: str, v: float, how: str, col: int, span: tuple[int, int]) -> None:
         if not math.isfinite(v):
@@ -507,8 +519,11 @@ class _Block:
 
 
 class _Run:
-    def __init__(self, lines: list[_Line], src: str):
-        self.lines, self.src = lines, src
+    def __init__(self, lines: list[_Line], src: str, path: Path | None = None):
+        self.lines, self.src, self.path = lines, src, path
+        #: the calls of subprograms in other files: (the caller's lines, name, flow, labels and FOR
+        #: ends, the line to return to, its variables, what SAVE restores, the subprogram's name)
+        self.calls: list[tuple] = []
         self.flow = _match(lines, src)
         self.m = _Machine()
         self.s = _State()
@@ -523,7 +538,8 @@ class _Run:
     # --- flow
     def step(self, i: int) -> int | None:
         ln = self.lines[i]
-        self.runs[i] += 1
+        if not self.calls:
+            self.runs[i] += 1
         kw = ln.keyword
         t = _Tokens(ln.code)
         if kw is None:
@@ -583,7 +599,7 @@ class _Run:
         if kw == "CASE":
             return self.case(t, i)
         if kw == "RET":
-            return None
+            return self.leave() if self.calls else None
         if kw == "PROC":
             raise _Error(
                 "a subprogram (PROC): its parameters come from the program that calls it; correct that one "
@@ -702,7 +718,7 @@ class _Run:
                 if text in _CYCLES:
                     return self.drill(text, t, i)
                 if text != "MSG":
-                    raise self.call(text, col)
+                    return self.enter(text, t, i, col)
                 t.i += 2
                 depth = 1
                 while depth and t.peek()[0] != "end":
@@ -752,7 +768,8 @@ class _Run:
             elif text in self.m.vars:
                 raise _Error(f"'{text}' without a value", col)
             elif re.fullmatch(r"[A-Z_][A-Z0-9_]{2,}", text) and not re.fullmatch(r"[A-Z]\d+[A-Z].*", text):
-                raise self.call(text, col)
+                t.i -= 1
+                return self.enter(text, t, i, col)
             else:
                 raise _Error(f"'{text}' is not read", col)
         if b.frame is not None:
@@ -772,12 +789,25 @@ class _Run:
                 raise _Error(f"{b.motion[0]} without an end point", at + b.motion[1][0] + 1)
             # a motion code alone: the engine may bring the tool to the corrected height there
             span = (at + b.motion[1][0], at + b.motion[1][1])
-            self.items.append(Item(i, "motion", b.motion[0], None, (span,), b.motion[0]))
+            self.items.append(Item(i, "motion", b.motion[0], None, (span,), b.motion[0], explicit=True))
             self.s.after_cycle = False
         elif b.machine is not None:
             raise _Error(f"{b.machine} without a move", at + 1)
         for rs, sn in b.post:
             self.items.append(Item(i, "state", rs, sn))
+        if b.call is not None:
+            if b.axes or b.arc or b.motion or b.pre or b.post:
+                raise _Error(f"{b.call} with other words: a subprogram is called in a block of its own", at + 1)
+            t.i = len(t.toks)
+            return self.enter(b.call, None, i, at + 1)
+        if b.end and self.calls:
+            if b.end_code != 17:
+                raise _Error(
+                    f"M{b.end_code} in a subprogram: whether it returns or ends the program is machine data; end "
+                    "it with M17 or RET",
+                    at + 1,
+                )
+            return self.leave()
         return None if b.end else i + 1
 
     def drill(self, name: str, t: _Tokens, i: int) -> int:
@@ -854,6 +884,114 @@ class _Run:
         s.pos["Z"], s.tangent, s.moved, s.after_cycle = rtp, None, True, True
         return i + 1
 
+    def enter(self, name: str, t: _Tokens | None, i: int, col: int) -> int:
+        """Call subprogram ``name`` (``NAME(args)``, ``NAME``, ``L123``): the file ``NAME.SPF``
+        beside the program, its ``PROC`` parameters given the arguments (by value; 0 where left
+        out), its own variables, R parameters shared. Returns its first line's index."""
+        if t is not None:
+            if t.i != 0:
+                raise _Error(f"{name} with other words before it: a subprogram is called in a block of its own", col)
+            t.i = 1
+        if self.path is None:
+            raise self.call(name, col)
+        found = sorted(p for p in self.path.parent.iterdir() if p.name.upper() == f"{name}.SPF" and p.is_file())
+        if not found:
+            raise _Error(
+                f"{name} calls a subprogram, and {name}.SPF is not beside the program (a subprogram elsewhere, "
+                "or a cycle, is not read: the motion it makes is not known)",
+                col,
+            )
+        args: list[float | None] = []
+        if t is not None and t.take("("):
+            while not t.take(")"):
+                args.append(None if t.peek()[1] in (",", ")") else _expr(t, self.m))
+                if t.peek()[1] != ")":
+                    t.need(",")
+        if t is not None:
+            self.end(t)
+        if len(self.calls) >= MAX_DEPTH:
+            raise _Error(f"subprograms nested deeper than {MAX_DEPTH}", col)
+        path = found[0]
+        lines = _read(path.read_bytes().decode("utf-8", "surrogateescape"), str(path))
+        proc = next((k for k, ln in enumerate(lines) if ln.keyword == "PROC"), None)
+        params, save = self.proc(lines[proc], name, str(path), proc) if proc is not None else ([], False)
+        if len(args) > len(params):
+            raise _Error(f"{name} takes {len(params)} argument(s); {len(args)} given", col)
+        local: dict[str, list] = {}
+        caller = self.m.vars
+        self.m.vars = local
+        for k, (typ, pname) in enumerate(params):
+            local[pname] = [typ, 0.0]
+            v = args[k] if k < len(args) else None
+            if v is not None:
+                self.m.set(("V", pname), v, col)
+        snapshot = (self.s.mode, self.s.plane, self.s.absolute, self.s.inch, dict(self.s.trans)) if save else None
+        self.calls.append((self.lines, self.src, self.flow, self.labels, self.for_end, i + 1, caller, snapshot, name))
+        self.lines, self.src = lines, str(path)
+        self.flow = _match(lines, str(path))
+        self.labels = {}
+        for k, ln in enumerate(lines):
+            if ln.label is not None:
+                self.labels.setdefault(ln.label, k)
+        self.for_end = {}
+        return 0 if proc is None else proc + 1
+
+    def proc(self, ln: _Line, name: str, src: str, at: int) -> tuple[list[tuple[str, str]], bool]:
+        """A PROC line's parameters (type, name) and whether it has SAVE."""
+        t = _Tokens(ln.code)
+        t.i = 1
+        try:
+            if t.peek()[1] != name:
+                raise _Error(f"the file holds PROC {t.peek()[1]}, not {name}", t.col())
+            t.i += 1
+            params = []
+            if t.take("("):
+                while not t.take(")"):
+                    if t.peek()[1] == "VAR":
+                        raise _Error("a VAR parameter (by reference) is not read", t.col())
+                    typ = t.peek()[1]
+                    if typ not in ("INT", "REAL", "BOOL"):
+                        raise _Error(f"a parameter of type {typ}: only INT, REAL and BOOL are read", t.col())
+                    t.i += 1
+                    pname = t.peek()
+                    if pname[0] != "name" or t.peek(1)[1] in ("[", "="):
+                        raise _Error("expected a parameter's name (arrays and defaults are not read)", t.col())
+                    params.append((typ, pname[1]))
+                    t.i += 1
+                    if t.peek()[1] != ")":
+                        t.need(",")
+            save = False
+            while t.peek()[0] != "end":
+                word = t.peek()[1]
+                if word == "SAVE":
+                    save = True
+                elif word not in ("DISPLOF", "DISPLON", "SBLOF", "SBLON", "ACTBLOCNO"):
+                    raise _Error(f"PROC attribute {word} is not read", t.col())
+                t.i += 1
+        except _Error as e:
+            raise InputError(e.message, src, at + 1, ln.code_at + e.col) from None
+        return params, save
+
+    def leave(self) -> int:
+        """Return from a subprogram (RET, M17, its end): the caller's line after the call; with
+        SAVE, the caller's motion mode, plane and G90/G91 again."""
+        lines, src, flow, labels, for_end, back, caller, snapshot, name = self.calls.pop()
+        if snapshot is not None:
+            mode, plane, absolute, inch, trans = snapshot
+            if trans != self.s.trans or inch != self.s.inch:
+                raise _Error(
+                    f"{name} (SAVE) changes a frame or the units: what the control gives back is not followed", 1
+                )
+            self.s.mode, self.s.plane, self.s.absolute = mode, plane, absolute
+            self.items.append(Item(0, "state", f"G{plane}", f"G{plane}"))
+            self.items.append(Item(0, "state", "G90" if absolute else "G91", "G90" if absolute else "G91"))
+            if mode is not None:
+                self.items.append(Item(0, "state", "", mode))  # the next move names it (below)
+                self.s.after_cycle = True
+        self.lines, self.src, self.flow, self.labels, self.for_end = lines, src, flow, labels, for_end
+        self.m.vars = caller
+        return back
+
     def call(self, name: str, col: int) -> _Error:
         what = "a cycle" if re.match(r"(CYCLE|POCKET|SLOT|HOLES|LONGHOLE)", name) else "a subprogram"
         return _Error(f"{name} calls {what} that is not read: the motion it makes is not known", col)
@@ -912,8 +1050,8 @@ class _Run:
             if v != m:
                 raise _Error(f"M{text} is not read", col)
             if m in (2, 17, 30):
-                b.post.append(("M2", f"M{m}"))
-                b.end = True
+                b.post.append(("M2" if not self.calls else "", f"M{m}"))
+                b.end, b.end_code = True, m
             elif m in (0, 1):
                 b.post.append((f"M{m}", f"M{m}"))
             else:
@@ -923,7 +1061,7 @@ class _Run:
         elif letter in ("T", "D"):
             b.pre.append(("", f"{letter}{text}"))
         elif letter == "L":
-            raise _Error(f"L{text} calls a subprogram that is not read: the motion it makes is not known", col)
+            b.call = f"L{text}"
         else:
             raise _Error(f"{letter}{text} is not read", col)
 
@@ -1035,7 +1173,7 @@ class _Run:
         words += [f"{a}{_fmt(v)}" for a, v in written.items()] + tail
         s.moved, s.after_cycle = True, False
         s.pos.update(ends)
-        self.items.append(Item(i, "motion", " ".join(words), None, spans, mode, None))
+        self.items.append(Item(i, "motion", " ".join(words), None, spans, mode, None, explicit=b.motion is not None))
 
     def circle(self, mode: str, ends: dict, arc: dict, col: int) -> tuple[str, list[str]]:
         """The arc's direction (``G2``/``G3``) and its centre (incremental) or radius words."""
@@ -1182,22 +1320,33 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
     """The straight RS274NGC program a Sinumerik program runs (see the module's text)."""
     text = data.decode("utf-8", "surrogateescape")
     lines = _read(text, name)
-    run = _Run(lines, name)
+    path = Path(name) if name and not name.startswith("<") else None
+    run = _Run(lines, name, path if path is not None and path.is_file() else None)
     if any(re.search(r"\bA?TRANS\b", ln.code) for ln in lines):
         # the programmable frame is empty when a program starts (the control deletes it at reset
         # and at the end of a program): the engine follows the translations from there
         run.items.append(Item(0, "state", "G52 X0 Y0 Z0", ""))
     i, blocks = 0, 0
-    while i < len(lines):
+    while True:
+        if i >= len(run.lines):
+            if not run.calls:
+                break
+            i = run.leave()  # a subprogram's end returns as RET does
+            continue
         blocks += 1
         if blocks > MAX_BLOCKS:
             raise InputError(
-                f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", name, i + 1
+                f"the program runs more than {MAX_BLOCKS:,} blocks: a loop that does not end?", run.src, i + 1
             )
+        top = run.calls[0] if run.calls else None
+        n0 = len(run.items)
         try:
             nxt = run.step(i)
         except _Error as e:
-            raise InputError(e.message, name, i + 1, e.col) from None
+            raise InputError(e.message, run.src, i + 1, e.col) from None
+        if top is not None:  # the items a subprogram makes belong to the program's line that calls it
+            for it in run.items[n0:]:
+                it.line, it.sub = top[5] - 1, top[8]
         if nxt is None:
             break
         i = nxt
@@ -1219,12 +1368,13 @@ _MOTION = re.compile(r"(?<![A-Z_0-9.])G0*([0-3])(?![\d.])|\b(CIP|CT)\b")
 
 
 class NeedsExpand(Exception):
-    """A corrected line runs more than once with different corrections: only the program written
-    straight (``expand``) holds them. ``line`` (1-based), ``runs``."""
+    """A corrected line runs more than once with different corrections, or is in a subprogram
+    (``sub``, called at ``line``): only the program written straight (``expand``) holds them.
+    ``line`` (1-based), ``runs``."""
 
-    def __init__(self, line: int, runs: int):
-        super().__init__(line, runs)
-        self.line, self.runs = line, runs
+    def __init__(self, line: int, runs: int, sub: str | None = None):
+        super().__init__(line, runs, sub)
+        self.line, self.runs, self.sub = line, runs, sub
 
 
 def _sinumerik(rs: str) -> str:
@@ -1262,9 +1412,10 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
             _cycle_values(it, groups[k])  # refuses what a call cannot say
     if not any(changed):
         return tr.source, 0, "as it is"
-    looped = [int(tr.items[k].line) for k in np.flatnonzero(changed) if tr.runs[tr.items[k].line] > 1]
+    looped = [k for k in map(int, np.flatnonzero(changed)) if tr.runs[tr.items[k].line] > 1 or tr.items[k].sub]
     if looped and not expand:
-        raise NeedsExpand(looped[0] + 1, int(tr.runs[looped[0]]))
+        it = tr.items[looped[0]]
+        raise NeedsExpand(it.line + 1, int(tr.runs[it.line]), it.sub)
     if looped:
         out = []
         for g, it in zip(groups, tr.items, strict=True):
@@ -1286,8 +1437,8 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
         if it.kind != "motion":
             continue
         if it.line not in redo and it.mode == "CT" and after_redo:
-            if tr.runs[it.line] > 1:
-                raise NeedsExpand(it.line + 1, int(tr.runs[it.line]))
+            if tr.runs[it.line] > 1 or it.sub:
+                raise NeedsExpand(it.line + 1, int(tr.runs[it.line]), it.sub)
             redo[it.line] = k
         after_redo = it.line in redo
     src = rewrite.lines_of(tr.source)
@@ -1300,7 +1451,12 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
     mode: str | None = None
     for it in tr.items:
         j = it.line
-        if j in rewritten:
+        if it.sub is not None:  # a subprogram's moves run as written, in the mode they find
+            if it.kind == "motion" and it.mode is not None and it.cycle is None:
+                if not it.explicit and mode is not None and mode != it.mode:
+                    raise NeedsExpand(j + 1, int(tr.runs[j]), it.sub)
+                mode = it.mode
+        elif j in rewritten:
             for t in rewritten[j]:
                 mode = _last_mode(_code(t), mode)
         elif own[j] is not None:
