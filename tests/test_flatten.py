@@ -278,9 +278,24 @@ def test_m98_subprograms_as_rs274_runs_them(tmp_path):
         ("M98 P30012\nM30\nO12\nM99\n", 1, "a longer P that counts passes"),
         ("M98 P1 X2.\nM30\nO1\nM99\n", 1, "with a X word"),
         ("O1\nM98 P2\nM30\nO2\nM99 P5\n", 5, "M99 with P or L"),
-        ("#100 = 2.\nG0 X#100\n", 1, "Fanuc Macro B"),
-        ("G65 P9010 A1.\n", 1, "Fanuc Macro B"),
-        ("WHILE [1 LT 2] DO1\nEND1\n", 1, "Fanuc Macro B"),
+        # Fanuc Macro B: what the control does not say, or what is not followed
+        ("G0 X#1\n", 1, "read before the program sets it"),  # vacant: the control would drop the word
+        ("G0 X#500\n", 1, "keeps its value on the machine"),
+        ("G0 X#5021\n", 1, "system variable"),
+        ("#3000 = 1\n", 1, "system variable"),  # an alarm
+        ("G0 X#0\n", 1, "vacant"),
+        ("G0 X#<a>\n", 1, "LinuxCNC's"),
+        ("G65 P9010 A1.\n", 1, "no such program"),
+        ("WHILE [1 LT 2] DO1\n", 1, "DO 1 without its END 1"),
+        ("WHILE [1 LT 2] DO4\nEND4\n", 1, "1, 2 and 3"),
+        ("DO1\nEND2\n", 2, "END 2 without its DO 2"),
+        ("GOTO 20\nN10 G0 X1.\n", 1, "no block N20"),
+        ("#1 = 1.\nIF [#1 GT 0] X1.\n", 2, "without GOTO or THEN"),
+        ("#1 = ATAN[-1.]/[-1.]\n", 1, "6004#0"),  # -135 or 225: the control's parameter
+        ("#1 = ASIN[-0.5]\n", 1, "6004#0"),
+        ("#1 = 2. G0 X1.\n", 1, "a macro statement"),
+        ("G66 P9010 A1.\nO9010\nM99\n", 1, "G66/G67"),
+        ("G65 P1 I1. J2. I3.\nO1\nM99\n", 1, "argument specification II"),
     ],
 )
 def test_subprogram_refusals(prog, line, message):
@@ -367,3 +382,65 @@ def test_a_line_changed_in_a_loop_writes_the_program_flat(tmp_path):
     want = ca.ends[:, :3].copy()
     want[feed] += _slope(want[feed])
     np.testing.assert_allclose(cb.ends[:, :3], want, atol=1e-4)
+
+
+MACRO = """%
+O1000
+G21 G90 G17
+#100 = 3 (holes)
+#101 = 0
+G0 X0. Y0. Z5.
+WHILE [#101 LT #100] DO 1
+  G65 P9010 X[#101 * 10.] Y5. R2. Z-1. A7.
+  #101 = #101 + 1
+END 1
+IF [#101 EQ 3] GOTO 50
+G0 X99. Y99.
+N50 G0 Z10.
+#1 = 4.
+IF [#1 GT 3] THEN #1 = #1 - 1.5
+G0 X#1
+M30
+O9010 (a hole at X Y, from R down to Z; A is #1 here)
+G0 X#24 Y#25
+G1 Z#26 F100.
+G0 Z#18
+#102 = #1
+M99
+%
+"""
+
+
+def test_fanuc_macro_b_runs_as_the_manual_says():
+    """Fanuc Custom Macro B (Fanuc 0i-MF operator's manual, "Custom macro"): common variables
+    #100-#199 shared, G65's arguments in a new set of locals (X #24, Y #25, Z #26, R #18, A #1)
+    given back at M99, WHILE [..] DO m / END m, IF [..] GOTO n to an N number, IF [..] THEN, and
+    expressions without brackets on the right of '='. The motion worked out by hand."""
+    flat = fl.flatten(MACRO.encode(), "p.nc", "fanuc")
+    got = flat.data.decode().splitlines()
+    holes = [f"G0 X{x}. Y5." for x in (0, 10, 20)]
+    want = ["%", "G21 G90 G17", "(holes)", "G0 X0. Y0. Z5."]
+    for h in holes:
+        want += [h, "G1 Z-1. F100.", "G0 Z2."]
+    want += ["G0 Z10.", "G0 X2.5", "M30"]  # the macro's #1 (A7.) did not touch the caller's #1
+    assert got == want
+    # each block's line: the holes come from the macro's lines, N50 after the GOTO
+    assert flat.lines.tolist() == [1, 3, 4, 6] + [19, 20, 21] * 3 + [13, 16, 17]
+    # the G65 line and the statements are fixed: they cannot be replaced by a block
+    assert flat.fixed[7] and flat.fixed[8] and flat.fixed[14] and not flat.fixed[12]
+
+
+def test_fanuc_macro_program_corrected_in_place_or_straight(tmp_path):
+    """A move computed from a variable outside the loop is rewritten in place; the macro's moves,
+    run three times, make the program straight."""
+    src = tmp_path / "p.nc"
+    src.write_text("%\nO1\nG21 G90 G17\n#1 = -1.\nG0 X0. Y0. Z5.\nG1 Z#1 F100.\nG1 X10.\nM30\n%\n")
+    c = nc.correct_file(src, tmp_path / "o.nc", _slope, dialect="fanuc", expand=True)
+    assert c.expanded["written"] == "in place"
+    out = (tmp_path / "o.nc").read_text().splitlines()
+    assert out[3] == "#1 = -1." and out[5] == "G1 Z-0.99 F100." and out[6] == "G1 X10. Z-0.97"
+    src.write_text(MACRO)
+    c = nc.correct_file(src, tmp_path / "o.nc", _slope, dialect="fanuc", expand=True)
+    assert c.expanded["written"] == "straight"
+    z = [t for t in (tmp_path / "o.nc").read_text().splitlines() if t.startswith("G1 Z")]
+    assert z == ["G1 Z-0.99 F100.", "G1 Z-0.97 F100.", "G1 Z-0.95 F100."]  # -1 + 0.01 + 0.002 X

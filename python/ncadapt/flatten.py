@@ -138,8 +138,11 @@ def _strip(raw: str) -> tuple[str, list[str]]:
 class _Parser:
     """Reads the words of one line (without comments, lower case) against the parameters `read`."""
 
-    def __init__(self, text: str, read):
+    def __init__(self, text: str, read, fanuc: bool = False):
         self.s, self.k, self.read = text, 0, read
+        # LinuxCNC's numbered parameters; Fanuc's variables: #0 (vacant) to the system's
+        self.lo, self.hi = (0, 99999) if fanuc else (1, 5602)
+        self.fanuc = fanuc
 
     def peek(self, n: int = 1) -> str:
         return self.s[self.k : self.k + n]
@@ -191,8 +194,13 @@ class _Parser:
                 self.need("[")
                 b = self.expr()
                 self.need("]")
-                return math.degrees(math.atan2(a, b))
-            if name == "exists":
+                v = math.degrees(math.atan2(a, b))
+                if self.fanuc and v < 0:
+                    raise _Error(
+                        f"ATAN of {a:g}/{b:g} is {v:g} or {v + 360:g}: the control's parameter (6004#0) decides", at + 1
+                    )
+                return v
+            if name == "exists" and not self.fanuc:
                 self.k += 6
                 self.need("[")
                 ref = self.param_ref()
@@ -204,15 +212,22 @@ class _Parser:
                 x = self.expr()
                 self.need("]")
                 try:
-                    return float(_FUNCS[name](x))
+                    v = float(_FUNCS[name](x))
                 except (ValueError, OverflowError):
                     raise _Error(f"{name.upper()}[{x:g}] has no value", at + 1) from None
+                if self.fanuc and name == "asin" and v < 0:
+                    raise _Error(
+                        f"ASIN[{x:g}] is {v:g} or {v + 360:g}: the control's parameter (6004#0) decides", at + 1
+                    )
+                return v
             raise _Error(f"unknown function or word '{name}' in a value", at + 1)
         return self.number()
 
     def param_ref(self):
         """The parameter after '#': its number (int) or its name (str, lower case)."""
         self.need("#")
+        if self.fanuc and self.peek() == "<":
+            raise _Error("named parameters #<…> are LinuxCNC's, not Fanuc's", self.k + 1)
         if self.take("<"):
             end = self.s.find(">", self.k)
             if end < 0:
@@ -222,8 +237,8 @@ class _Parser:
             return name
         at = self.k
         v = self.read(self.param_ref()) if self.peek() == "#" else self.value()
-        if v != int(v) or not 1 <= v <= 5602:
-            raise _Error(f"parameter number {v:g} is not a whole number from 1 to 5602", at + 1)
+        if v != int(v) or not self.lo <= v <= self.hi:
+            raise _Error(f"parameter number {v:g} is not a whole number from {self.lo} to {self.hi}", at + 1)
         return int(v)
 
     def expr(self, level: int = 0) -> float:
@@ -285,9 +300,13 @@ class _Line:
     label: str | None = None  # an O-word's label
     keyword: str | None = None
     rest: str = ""  # after the keyword
+    number: int | None = None  # its N number (Fanuc's GOTO goes to it)
 
 
-def _read(text: str, src: str) -> list[_Line]:
+_FANUC_FLOW = re.compile(r"(?:n(\d+))?(?:(if)(\[.*)|(while)(\[.*)|(goto)(.*)|do(\d+)|end(\d+))?$")
+
+
+def _read(text: str, src: str, fanuc: bool = False) -> list[_Line]:
     out = []
     for n, raw in enumerate(split_lines(text), 1):
         try:
@@ -297,6 +316,19 @@ def _read(text: str, src: str) -> list[_Line]:
         if body.startswith("/"):
             body = body[1:]
         line = _Line(body, comments)
+        if fanuc:
+            num = re.match(r"n(\d+)", body)
+            if num:
+                line.number = int(num.group(1))
+            m = _FANUC_FLOW.match(body)
+            if m and any(m.group(k) for k in (2, 4, 6, 8, 9)):
+                if m.group(2) or m.group(4) or m.group(6):
+                    line.keyword = "f" + (m.group(2) or m.group(4) or m.group(6))
+                    line.rest = m.group(3) or m.group(5) or m.group(7) or ""
+                else:
+                    line.keyword, line.label = ("fdo", m.group(8)) if m.group(8) else ("fend", m.group(9))
+                out.append(line)
+                continue
         prog = re.fullmatch(r"(?:n\d+)?o(\d+)", body)
         if prog:  # a program number (Fanuc's O1234; M98 P1234 calls it)
             line.label, line.keyword = str(int(prog.group(1))), "program"
@@ -320,6 +352,7 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict, dict]:
     subs: dict[str, int] = {}
     programs: dict[int, int] = {}
     stack: list[tuple[str, str, int, list[int]]] = []  # (label, kind, line, branch lines)
+    loops: list[tuple[str, int]] = []  # Fanuc's open DO m: (m, line)
     for i, ln in enumerate(lines):
         kw, lab = ln.keyword, ln.label
         if kw is None:
@@ -327,6 +360,26 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict, dict]:
 
         def fail(msg, i=i):
             raise InputError(msg, src, i + 1)
+
+        if kw in ("fwhile", "fdo"):
+            if kw == "fwhile":
+                m = re.search(r"do(\d+)$", ln.rest)
+                if not m:
+                    fail("WHILE […] without DO m")
+                lab = m.group(1)
+            if not 1 <= int(lab) <= 3:
+                fail(f"DO {lab}: the loop numbers are 1, 2 and 3")
+            loops.append((lab, i))
+            continue
+        if kw == "fend":
+            if not loops or loops[-1][0] != lab:
+                fail(f"END {lab} without its DO {lab}" + (f" (DO {loops[-1][0]} is open)" if loops else ""))
+            _, start = loops.pop()
+            jumps[start] = {"start": start, "end": i}
+            jumps[i] = {"start": start, "end": i}
+            continue
+        if kw in ("fif", "fgoto"):
+            continue
 
         if kw == "program":
             if int(lab) in programs:
@@ -378,6 +431,8 @@ def _match(lines: list[_Line], src: str) -> tuple[dict, dict, dict]:
     if stack:
         lab, kind, start, _ = stack[-1]
         raise InputError(f"o{lab} {kind} without its end", src, start + 1)
+    if loops:
+        raise InputError(f"DO {loops[-1][0]} without its END {loops[-1][0]}", src, loops[-1][1] + 1)
     return jumps, subs, programs
 
 
@@ -420,9 +475,55 @@ class _Machine:
             self.frames[-1][ref] = v
 
 
+#: G65's arguments (argument specification I): the letter's local variable.
+FANUC_ARGUMENTS = {"a": 1, "b": 2, "c": 3, "i": 4, "j": 5, "k": 6, "d": 7, "e": 8, "f": 9, "h": 11, "m": 13}
+FANUC_ARGUMENTS |= {"q": 17, "r": 18, "s": 19, "t": 20, "u": 21, "v": 22, "w": 23, "x": 24, "y": 25, "z": 26}
+
+
+class _FanucMachine:
+    """Fanuc Macro B's variables: #1-#33 local (a set per G65 call level), #100-#199 and
+    #500-#999 common. #0 is vacant, #1000 and up are the system's. A variable read before the
+    program sets it is refused: it is vacant (the control leaves a word written with it out, and
+    reads it as 0 in a sum), or, from #500, kept on the machine between programs."""
+
+    def __init__(self):
+        self.levels: list[dict[int, float]] = [{}]
+        self.common: dict[int, float] = {}
+        self.set_numbered = np.zeros(1, bool)  # (the machine's codes change no macro variable)
+
+    def _store(self, ref, writing: bool) -> dict[int, float]:
+        if not isinstance(ref, int):
+            raise _Error("named parameters #<…> are LinuxCNC's, not Fanuc's")
+        if 1 <= ref <= 33:
+            return self.levels[-1]
+        if 100 <= ref <= 199 or 500 <= ref <= 999:
+            return self.common
+        if ref == 0:
+            raise _Error(
+                "#0 is vacant: it is always empty" if writing else "#0 (vacant): a word written with it is left out"
+            )
+        raise _Error(f"#{ref} is a system variable (or none): {'setting' if writing else 'its value is'} the machine's")
+
+    def read(self, ref, exists: bool = False):
+        if exists:
+            raise _Error("EXISTS is LinuxCNC's, not Fanuc's")
+        store = self._store(ref, False)
+        if ref not in store:
+            if ref >= 500:
+                raise _Error(f"#{ref} keeps its value on the machine between programs; the program does not set it")
+            raise _Error(
+                f"#{ref} is read before the program sets it: it is vacant (a word written with it is left out)"
+            )
+        return store[ref]
+
+    def write(self, ref, v: float) -> None:
+        self._store(ref, True)[ref] = v
+
+
 def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> Flat:
     """The straight G-code that an RS274NGC program runs (see the module's text); in the ``fanuc``
-    dialect its M98/M99 subprograms (Macro B variables and flow are refused). Words written as
+    dialect its M98/M99 subprograms and Custom Macro B (variables, G65, IF/GOTO, WHILE/DO/END).
+    Words written as
     numbers are written as they are; computed values with six decimals (and a decimal point in the
     Fanuc dialect, where a number without one counts least input increments).
 
@@ -437,7 +538,7 @@ def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> 
     """
     if dialect not in ("linuxcnc", "fanuc"):
         raise ValueError(f"flatten reads LinuxCNC's and Fanuc's programs, not {dialect}")
-    lines = _read(data.decode("utf-8", "surrogateescape"), name)
+    lines = _read(data.decode("utf-8", "surrogateescape"), name, dialect == "fanuc")
     run = _Run(lines, *_match(lines, name), fanuc=dialect == "fanuc")
     i, blocks = 0, 0
     while i < len(lines):
@@ -473,7 +574,9 @@ class _Run:
 
     def __init__(self, lines: list[_Line], jumps: dict, subs: dict, programs: dict, *, fanuc: bool):
         self.lines, self.jumps, self.subs, self.programs, self.fanuc = lines, jumps, subs, programs, fanuc
-        self.mac = _Machine()
+        self.mac: _Machine | _FanucMachine = _FanucMachine() if fanuc else _Machine()
+        # the program (its O line's index) each line belongs to, for Fanuc's GOTO
+        self.region = np.maximum.accumulate([i if ln.keyword == "program" else 0 for i, ln in enumerate(lines)] or [0])
         # ("o", line to return to, saved #1-#30, loop counters) for an O-word call,
         # ("m98", line to return to, the subprogram's first line, passes left) for M98
         self.calls: list[tuple] = []
@@ -495,13 +598,13 @@ class _Run:
     def step(self, i: int) -> int | None:
         """Run line i; the next line's index, or None at the program's end."""
         ln, lines, mac, calls, counters = self.lines[i], self.lines, self.mac, self.calls, self.counters
-        if self.fanuc and (
-            "#" in ln.text
-            or ln.keyword not in (None, "program")
-            or re.search(r"g0*65(?![\d.])|\bif\[|while\[|goto|\bend\d", ln.text)
-        ):
-            raise _Error("Fanuc Macro B (# variables, G65, IF/GOTO, WHILE/DO/END): not flattened")
         kw = ln.keyword
+        if self.fanuc and kw not in (None, "program"):
+            if kw.startswith("f"):
+                return self.macro_flow(ln, i)
+            raise _Error(f"O-word {kw}: LinuxCNC's flow, not Fanuc's")
+        if self.fanuc and re.search(r"g0*6[67](?![\d.])", ln.text):
+            raise _Error("G66/G67 modal macro calls are not flattened")
         if kw is None:
             return self.block(ln, i)
         if kw == "program":
@@ -574,6 +677,81 @@ class _Run:
             return end if lines[start].keyword in ("repeat", "do") else start
         raise _Error(f"o{ln.label} {kw}: not followed")
 
+    def macro_flow(self, ln: _Line, i: int) -> int:
+        """Fanuc Macro B's IF [..] GOTO n, IF [..] THEN #v = .., GOTO n, WHILE [..] DO m, DO m, END m."""
+        kw, mac = ln.keyword, self.mac
+        if kw in ("fdo", "fend"):
+            start = self.jumps[i]["start"]
+            if kw == "fdo" or self.lines[start].keyword == "fdo":
+                return i + 1 if kw == "fdo" else start + 1
+            return start  # END m: the WHILE again
+        p = _Parser(ln.rest, mac.read, True)
+        if kw == "fgoto":
+            return self.goto(p, i)
+        if not p.peek() == "[":
+            raise _Error(f"{kw[1:].upper()} needs [a condition]", p.k + 1)
+        cond = p.value() != 0.0
+        if kw == "fwhile":
+            return i + 1 if cond else self.jumps[i]["end"] + 1
+        if p.take("goto"):
+            return self.goto(p, i) if cond else i + 1
+        if p.take("then"):
+            ref = p.param_ref()
+            p.need("=")
+            v = p.expr()
+            if p.peek():
+                raise _Error(f"unexpected '{p.s[p.k :]}' after THEN", p.k + 1)
+            if cond:
+                mac.write(ref, v)
+            self.fixed.add(i)
+            return i + 1
+        raise _Error("IF […] without GOTO or THEN", p.k + 1)
+
+    def goto(self, p: "_Parser", i: int) -> int:
+        """GOTO n: the block N n of the program the line is in, searched forward, then from the
+        program's start."""
+        at = p.k
+        n = p.value()
+        if p.peek():
+            raise _Error(f"unexpected '{p.s[p.k :]}' after GOTO", p.k + 1)
+        if n != int(n) or n < 0:
+            raise _Error(f"GOTO {n:g}: a block number is a whole number", at + 1)
+        region = self.region[i]
+        found = [j for j, ln in enumerate(self.lines) if ln.number == int(n) and self.region[j] == region]
+        if not found:
+            raise _Error(f"GOTO {int(n)}: no block N{int(n)} in this program", at + 1)
+        later = [j for j in found if j > i]
+        return (later or found)[0]
+
+    def macro(self, words, i: int) -> int:
+        """G65 P<program> [L<times>] <arguments>: program O<program> of the file, with a new set of
+        local variables holding the arguments (argument specification I: A #1, B #2, C #3, I #4,
+        J #5, K #6, D #7 …, Z #26), until its M99."""
+        mac = self.mac
+        assert isinstance(mac, _FanucMachine)
+        got = dict(words)
+        letters = [c for c, _ in words]
+        if [c for c in letters if c == "g"] != ["g"]:
+            raise _Error("G65 with another G code")
+        if any(letters.count(c) > 1 for c in "ijk"):
+            raise _Error("G65 with I, J, K given more than once (argument specification II): not flattened")
+        pv, lv = got.get("p"), got.get("l", 1.0)
+        if pv is None or pv != int(pv) or int(pv) not in self.programs:
+            raise _Error(f"G65 P{pv if pv is None else f'{pv:g}'}: no such program O… in this file")
+        if lv != int(lv) or lv < 1:
+            raise _Error(f"G65 L{lv:g}: the times are a whole number >= 1")
+        other = [c for c in letters if c not in FANUC_ARGUMENTS and c not in "gpl"]
+        if other:
+            raise _Error(f"G65 with {other[0].upper()}: not an argument")
+        if len(self.calls) >= MAX_DEPTH:
+            raise _Error(f"macros nested deeper than {MAX_DEPTH}")
+        args = {FANUC_ARGUMENTS[c]: v for c, v in words if c in FANUC_ARGUMENTS}
+        start = self.programs[int(pv)] + 1
+        self.calls.append(("g65", i + 1, start, int(lv), args))
+        mac.levels.append(dict(args))
+        self.fixed.add(i)
+        return start
+
     def block(self, ln: _Line, i: int) -> int | None:
         """A block of words and parameter settings: written with its values, the settings applied
         after the line is read (as LinuxCNC does); M98/M99 call and end subprograms."""
@@ -582,7 +760,7 @@ class _Run:
             self.out.append("%")
             self.origin.append(i)
             return i + 1
-        p = _Parser(ln.text, mac.read)
+        p = _Parser(ln.text, mac.read, self.fanuc)
         words: list[tuple[str, float]] = []
         texts: list[str] = []
         sets = []
@@ -591,7 +769,8 @@ class _Run:
             if c == "#":
                 ref = p.param_ref()
                 p.need("=")
-                sets.append((ref, p.value()))
+                # LinuxCNC takes one value ([…] for an expression); Fanuc an expression as it stands
+                sets.append((ref, p.expr() if self.fanuc else p.value()))
             elif c.isalpha() or c in "@^":
                 p.k += 1
                 at = p.k
@@ -606,10 +785,14 @@ class _Run:
                     texts.append(c.upper() + written)
             else:
                 raise _Error(f"unexpected '{c}'", p.k + 1)
+        if self.fanuc and sets and words:
+            raise _Error("a macro statement (#… = …) and NC words in one block: not flattened")
         for ref, v in sets:
             mac.write(ref, v)
         if sets:
             self.fixed.add(i)
+        if self.fanuc and any(c == "g" and round(v * 10) == 650 for c, v in words):
+            return self.macro(words, i)
         ms = [round(v) for c, v in words if c == "m"]
         gs = [round(v * 10) for c, v in words if c == "g"]
         if any(g in (700, 710, 711, 720, 721) for g in gs):
@@ -637,9 +820,16 @@ class _Run:
         if round(got["m"]) == 99:
             if "p" in got or "l" in got:
                 raise _Error("M99 with P or L (a jump within the program): not flattened")
-            if not calls or calls[-1][0] != "m98":
+            if not calls or calls[-1][0] not in ("m98", "g65"):
                 raise _Error("M99 outside a subprogram call (a main program's M99 repeats it without end)")
-            _, back, start, left = calls.pop()
+            kind, back, start, left, *args = calls.pop()
+            if kind == "g65":
+                self.mac.levels.pop()  # type: ignore[union-attr]
+                if left > 1:
+                    calls.append(("g65", back, start, left - 1, *args))
+                    self.mac.levels.append(dict(args[0]))  # type: ignore[union-attr]
+                    return start
+                return back
             if left > 1:
                 calls.append(("m98", back, start, left - 1))
                 return start
