@@ -523,9 +523,9 @@ class _FanucMachine:
 def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> Flat:
     """The straight G-code that an RS274NGC program runs (see the module's text); in the ``fanuc``
     dialect its M98/M99 subprograms and Custom Macro B (variables, G65, IF/GOTO, WHILE/DO/END).
-    Words written as
-    numbers are written as they are; computed values with six decimals (and a decimal point in the
-    Fanuc dialect, where a number without one counts least input increments).
+    Words written as numbers are written as they are; computed values with six decimals (and a
+    decimal point in the Fanuc dialect, where a number without one counts least input
+    increments).
 
     Examples
     --------
@@ -707,7 +707,7 @@ class _Run:
             return i + 1
         raise _Error("IF […] without GOTO or THEN", p.k + 1)
 
-    def goto(self, p: "_Parser", i: int) -> int:
+    def goto(self, p: _Parser, i: int) -> int:
         """GOTO n: the block N n of the program the line is in, searched forward, then from the
         program's start."""
         at = p.k
