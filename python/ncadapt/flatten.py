@@ -1,5 +1,6 @@
 """Flatten an RS274NGC program: parameters, expressions and O-word flow evaluated into straight
-G-code, as LinuxCNC's interpreter runs them.
+G-code, as LinuxCNC's interpreter runs them (and, in the Fanuc dialect, M98/M99 subprograms and
+Custom Macro B: see :func:`flatten` and :class:`_FanucMachine`).
 
 ``ncadapt correct --expand`` corrects the flattened program: every block the program runs, in the
 order it runs them, with its words' values computed (``X[2*#1]`` → ``X8``), numbered, named and

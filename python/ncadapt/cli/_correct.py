@@ -99,7 +99,8 @@ def _shift(ctx, param, value):
     "--expand",
     is_flag=True,
     help="Flatten the program's parameters, expressions and O-word flow (LinuxCNC's: o-word subroutines, "
-    "if/while/repeat) and its M98/M99 subprograms (LinuxCNC's and Fanuc's) into straight G-code as the control "
+    "if/while/repeat), its M98/M99 subprograms (LinuxCNC's and Fanuc's) and Fanuc Custom Macro B (variables, G65, "
+    "IF/GOTO, WHILE/DO) into straight G-code as the control "
     "runs them, and correct and write that. Without it such programs are refused. A Sinumerik program is always "
     "run (its R parameters, variables, IF/WHILE/FOR and GOTO) and its corrected lines rewritten in place; a line "
     "corrected differently on each pass of a loop needs --expand, which then writes the program straight.",
