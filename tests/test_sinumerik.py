@@ -680,3 +680,82 @@ def test_subprograms_refused(sub, call, line, says, tmp_path):
     with pytest.raises(InputError) as e:
         sn.translate(p.read_bytes(), str(p))
     assert (e.value.line, says in e.value.message) == (line, True), e.value
+
+
+# ------------------------------------------------------------------------ found in the second review
+def _bowl(q):
+    d = np.zeros_like(q)
+    d[:, 2] = 1e-6 * q[:, 0] ** 2
+    return d
+
+
+def test_an_incremental_word_the_correction_adds_after_a_frame_change_is_refused(tmp_path):
+    p = tmp_path / "p.mpf"
+    p.write_text("G0 X0 Y0 Z0\nG1 Z0 F100\nTRANS X5 Z1\nG0 X0\nG91 G1 X10\n")
+    with pytest.raises(RefusedError) as e:
+        correct(p, tmp_path / "o.mpf", _bowl)
+    assert e.value.details[0]["line"] == 5 and "SD42440" in e.value.message
+
+
+def test_stops_before_the_move_and_words_in_strings(tmp_path):
+    p = tmp_path / "p.mpf"
+    p.write_text('G0 X0 Y0 Z0\nN20 M30 G1 X100 F100\n')
+    correct(p, tmp_path / "o.mpf", _bowl)
+    out = (tmp_path / "o.mpf").read_text().splitlines()
+    assert "M30" not in out[1] and out[-1].endswith(" M30") and len(out) > 3
+    p.write_text('G0 X0 Y0 Z0\nN20 G1 X100 F100 MSG("done M30 G2")\nN30 X0\n')
+    correct(p, tmp_path / "o.mpf", _bowl)
+    out = (tmp_path / "o.mpf").read_text().splitlines()
+    assert out[1].endswith('MSG("done M30 G2")') and not any(t.endswith(" M30") for t in out)
+    n30 = [t for t in out if t.startswith("N30")]
+    assert n30 and "G2" not in n30[0]  # the G2 in the string set no mode
+
+
+def test_a_subprogram_s_m17_is_not_written_into_the_straight_program(tmp_path):
+    (tmp_path / "SUBA.SPF").write_text("PROC SUBA\nG1 X20\nM17\n")
+    p = tmp_path / "MAIN.MPF"
+    p.write_text("N10 G0 X0 Y0 Z0\nN20 G1 X10 F100\nN30 SUBA\nN40 G1 X30\nN50 M30\n")
+    correct(p, tmp_path / "o.mpf", _bowl, expand=True)
+    out = (tmp_path / "o.mpf").read_text().splitlines()
+    assert "M17" not in out and out[-1] == "M30" and any(t.startswith("G1 X30") for t in out)
+
+
+def test_save_gives_back_the_mode_the_call_found(tmp_path):
+    """N30 is rewritten as G1 chords; SUBA (SAVE) moves in G1 and G2; the control gives back the
+    mode in force at the call, G1 as written, so N50 (a CR arc relying on N30's G2) gets its G2."""
+    (tmp_path / "SUBA.SPF").write_text("PROC SUBA SAVE\nG1 X15\nG2 X20 Y0 CR=2.5\nRET\n")
+    p = tmp_path / "MAIN.MPF"
+    p.write_text("N10 G0 X0 Y0 Z0\nN20 G1 F100\nN30 G2 X10 Y0 CR=5\nN40 SUBA\nN50 X30 Y0 CR=5\n")
+
+    def left(q):
+        d = np.zeros_like(q)
+        d[:, 2] = 0.02 * np.clip((10.0 - q[:, 0]) / 10.0, 0.0, 1.0) * (q[:, 0] < 10.0)
+        return d
+
+    correct(p, tmp_path / "o.mpf", left)
+    out = (tmp_path / "o.mpf").read_text().splitlines()
+    assert "N50 G2 X30 Y0 CR=5" in out
+    back = sn.translate((tmp_path / "o.mpf").read_bytes(), str(tmp_path / "o.mpf"))
+    assert [it.mode for it in back.items if it.kind == "motion"][-1] == "G2"
+    correct(p, tmp_path / "x.mpf", _bowl, expand=True)
+    assert not any(t.strip() in ("G2", "G3", "CIP", "CT") for t in (tmp_path / "x.mpf").read_text().splitlines())
+
+
+def test_a_safety_plane_raised_above_the_retraction_plane_is_refused(tmp_path):
+    p = tmp_path / "p.mpf"
+    p.write_text("G0 X0 Y0 Z2\nG1 F100\nCYCLE81(2, 0, 2, -5)\n")
+    with pytest.raises(RefusedError, match="above the retraction"):
+        correct(p, tmp_path / "o.mpf", fields.Shift((0.0, 0.0, 0.1)))
+
+
+@pytest.mark.parametrize(
+    "text", ["R1=1EX300 DIV 1EX-300\n", "R1=R[1EX400]\n", "R1=R[1EX400-1EX400]\n", "R1=1EX400 MOD 2\n"]
+)
+def test_values_out_of_range_are_refused_not_crashing(text):
+    with pytest.raises(InputError):
+        sn.translate(text.encode())
+
+
+def test_a_negative_dpr_is_its_magnitude():
+    tr = sn.translate(b"G0 X0 Y0 Z10\nG1 F100\nCYCLE81(10, 0, 2, -5, -5)\n")
+    assert "G98 G81 R2 Z-5" in tr.data.decode()

@@ -183,6 +183,12 @@ class Item:
     sub: str | None = None
     #: a move whose block names its motion code
     explicit: bool = False
+    #: a move under G91, and the axes whose frame changed since their last absolute value before
+    #: it (an incremental word the correction adds on one of them is not the program's to write)
+    incremental: bool = False
+    shifted: frozenset = frozenset()
+    #: ``push``/``pop``: a subprogram's call and return (``pop_save``: one with SAVE)
+    mark: str | None = None
 
 
 @dataclass(frozen=True)
@@ -263,7 +269,7 @@ class _Machine:
         return v[1]
 
     def get_r(self, k: float, col: int) -> float:
-        if k != int(k) or k < 0:
+        if not math.isfinite(k) or k != int(k) or k < 0:
             raise _Error(f"R{k} is not an R parameter", col)
         if int(k) not in self.r:
             raise _Error(f"R{int(k)} is read before the program sets it: its value is the machine's", col)
@@ -271,6 +277,8 @@ class _Machine:
 
     def set(self, target: tuple, v: float, col: int) -> None:
         if target[0] == "R":
+            if not math.isfinite(target[1]) or target[1] != int(target[1]) or target[1] < 0:
+                raise _Error(f"R[{target[1]:g}] is not an R parameter", col)
             if not math.isfinite(v):
                 raise _Error(f"R{int(target[1])}: the value is out of range", col)
             self.r[int(target[1])] = v
@@ -304,6 +312,16 @@ def _expr(t: _Tokens, m: _Machine, level: int = 0) -> float:
 
 
 def _binary(op: str, a: float, b: float, col: int) -> float:
+    try:
+        v = _operate(op, a, b, col)
+    except (OverflowError, ValueError):
+        v = math.nan
+    if not math.isfinite(v):
+        raise _Error(f"{a:g} {op} {b:g}: out of range", col)
+    return v
+
+
+def _operate(op: str, a: float, b: float, col: int) -> float:
     if op in ("/", "DIV", "MOD") and b == 0.0:
         raise _Error("division by zero", col)
     match op:
@@ -845,7 +863,7 @@ class _Run:
         if rtp is None or rfp is None:
             raise _Error(f"{name} without its retraction plane (RTP) or reference plane (RFP)", col)
         sdis = sdis or 0.0
-        if dpr is not None and dp is not None and abs((rfp - dpr) - dp) > 1e-9:
+        if dpr is not None and dp is not None and abs((rfp - abs(dpr)) - dp) > 1e-9:
             raise _Error(f"{name}: DP {dp:g} and DPR {dpr:g} give different depths", col)
         if dpr is None and dp is None:
             raise _Error(f"{name} without a final depth (DP or DPR)", col)
@@ -927,6 +945,7 @@ class _Run:
                 self.m.set(("V", pname), v, col)
         snapshot = (self.s.mode, self.s.plane, self.s.absolute, self.s.inch, dict(self.s.trans)) if save else None
         self.calls.append((self.lines, self.src, self.flow, self.labels, self.for_end, i + 1, caller, snapshot, name))
+        self.items.append(Item(i, "state", "", "", sub=name, mark="push"))
         self.lines, self.src = lines, str(path)
         self.flow = _match(lines, str(path))
         self.labels = {}
@@ -985,9 +1004,8 @@ class _Run:
             self.s.mode, self.s.plane, self.s.absolute = mode, plane, absolute
             self.items.append(Item(0, "state", f"G{plane}", f"G{plane}"))
             self.items.append(Item(0, "state", "G90" if absolute else "G91", "G90" if absolute else "G91"))
-            if mode is not None:
-                self.items.append(Item(0, "state", "", mode))  # the next move names it (below)
-                self.s.after_cycle = True
+            self.s.after_cycle = mode is not None  # the next move names the mode given back
+        self.items.append(Item(0, "state", "", "", mark="pop_save" if snapshot is not None else "pop"))
         self.lines, self.src, self.flow, self.labels, self.for_end = lines, src, flow, labels, for_end
         self.m.vars = caller
         return back
@@ -1050,7 +1068,7 @@ class _Run:
             if v != m:
                 raise _Error(f"M{text} is not read", col)
             if m in (2, 17, 30):
-                b.post.append(("M2" if not self.calls else "", f"M{m}"))
+                b.post.append(("M2", f"M{m}") if not self.calls else ("", ""))
                 b.end, b.end_code = True, m
             elif m in (0, 1):
                 b.post.append((f"M{m}", f"M{m}"))
@@ -1153,6 +1171,7 @@ class _Run:
                 s.pos[a] = None
             s.tangent = None
             return
+        shifted_before = frozenset(s.shifted)
         written, ends = {}, {}
         for a, (v, how, sp) in b.axes.items():
             written[a], ends[a] = self.value_of(a, v, how, self.lines[i].code_at + sp[0] + 1)
@@ -1173,7 +1192,20 @@ class _Run:
         words += [f"{a}{_fmt(v)}" for a, v in written.items()] + tail
         s.moved, s.after_cycle = True, False
         s.pos.update(ends)
-        self.items.append(Item(i, "motion", " ".join(words), None, spans, mode, None, explicit=b.motion is not None))
+        self.items.append(
+            Item(
+                i,
+                "motion",
+                " ".join(words),
+                None,
+                spans,
+                mode,
+                None,
+                explicit=b.motion is not None,
+                incremental=not s.absolute,
+                shifted=shifted_before,
+            )
+        )
 
     def circle(self, mode: str, ends: dict, arc: dict, col: int) -> tuple[str, list[str]]:
         """The arc's direction (``G2``/``G3``) and its centre (incremental) or radius words."""
@@ -1328,11 +1360,8 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
         run.items.append(Item(0, "state", "G52 X0 Y0 Z0", ""))
     i, blocks = 0, 0
     while True:
-        if i >= len(run.lines):
-            if not run.calls:
-                break
-            i = run.leave()  # a subprogram's end returns as RET does
-            continue
+        if i >= len(run.lines) and not run.calls:
+            break
         blocks += 1
         if blocks > MAX_BLOCKS:
             raise InputError(
@@ -1341,7 +1370,7 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
         top = run.calls[0] if run.calls else None
         n0 = len(run.items)
         try:
-            nxt = run.step(i)
+            nxt = run.step(i) if i < len(run.lines) else run.leave()  # a subprogram's end returns as RET
         except _Error as e:
             raise InputError(e.message, run.src, i + 1, e.col) from None
         if top is not None:  # the items a subprogram makes belong to the program's line that calls it
@@ -1383,7 +1412,7 @@ def _sinumerik(rs: str) -> str:
 
 
 def _last_mode(text: str, mode: str | None) -> str | None:
-    for m in _MOTION.finditer(text):
+    for m in _MOTION.finditer(re.sub(r'"[^"]*"', '""', text)):
         mode = f"G{m.group(1)}" if m.group(1) else m.group(2)
     return mode
 
@@ -1410,6 +1439,14 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
             raise RuntimeError(f"the engine changed line {it.line + 1}, which is not a move it corrects: {groups[k]}")
         if it.cycle is not None:
             _cycle_values(it, groups[k])  # refuses what a call cannot say
+        if it.incremental and it.shifted:
+            named = {a for t in groups[k] for a in re.findall(r"(?<![A-Z])([XYZ])[-+.\d]", t.split(";")[0])}
+            if named & it.shifted:
+                raise Unwritable(
+                    it.line + 1,
+                    f"the correction writes an incremental {', '.join(sorted(named & it.shifted))} after a change of "
+                    "frame or work system: whether the control travels the change is its setting (SD42440)",
+                )
     if not any(changed):
         return tr.source, 0, "as it is"
     looped = [k for k in map(int, np.flatnonzero(changed)) if tr.runs[tr.items[k].line] > 1 or tr.items[k].sub]
@@ -1449,8 +1486,17 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
     own = [_last_mode(_code(body), None) for body, _ in src]
     need: dict[int, set[str]] = {}
     mode: str | None = None
+    at_calls: list[str | None] = []
     for it in tr.items:
         j = it.line
+        if it.mark == "push":
+            at_calls.append(mode)
+            continue
+        if it.mark in ("pop", "pop_save"):
+            given_back = at_calls.pop()
+            if it.mark == "pop_save":  # SAVE: the control gives back the mode the call found
+                mode = given_back
+            continue
         if it.sub is not None:  # a subprogram's moves run as written, in the mode they find
             if it.kind == "motion" and it.mode is not None and it.cycle is None:
                 if not it.explicit and mode is not None and mode != it.mode:
@@ -1523,11 +1569,41 @@ def _cycle_values(it: Item, group: list[str]) -> list[float | None]:
             "tool stands: move the position before it",
         )
     r, z = float(words["R"]), float(words["Z"])
+    if r > args[0]:
+        raise Unwritable(
+            it.line + 1,
+            f"{name}: the field raises the safety plane to {r:g}, above the retraction "
+            f"plane {args[0]:g}, where the cycle retracts: raise RTP",
+        )
     values = list(args)
     values[1] = r - sdis
     if values[3] is not None:
         values[3] = z
     return values
+
+
+def _comment_at(text: str) -> int:
+    """Where a line's comment starts (a ';' outside strings), or its length."""
+    quoted = False
+    for k, c in enumerate(text):
+        if c == '"':
+            quoted = not quoted
+        elif c == ";" and not quoted:
+            return k
+    return len(text)
+
+
+def _take_stops(text: str) -> tuple[str, list[str]]:
+    """``text`` without the words that stop or end the program (outside strings and the
+    comment), and those words."""
+    end = _comment_at(text)
+    parts = re.split(r'("[^"]*")', text[:end])  # strings at the odd places
+    stops: list[str] = []
+    for k in range(0, len(parts), 2):
+        stops += [w.strip() for w in _STOPS.findall(parts[k])]
+        if stops:
+            parts[k] = re.sub(r"[ \t]{2,}", " ", _STOPS.sub("", parts[k]))
+    return "".join(parts) + text[end:], stops
 
 
 def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
@@ -1543,7 +1619,6 @@ def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
                 at = spans[k][1]
         return ["".join(out) + body[at:]]
     first = _sinumerik(group[0]).strip()
-    start = it.spans[0][0]
     keep, at = [], 0
     for s0, s1 in it.spans:
         keep.append(body[at:s0])
@@ -1551,20 +1626,16 @@ def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
     keep.append(body[at:])
     head = keep[0]
     rest = " ".join(piece.strip() for piece in keep[1:] if piece.strip())
-    # a stop or the program's end acts after the block's motion: it goes to the last piece
-    code_end = rest.find(";") if ";" in rest else len(rest)
-    stops = _STOPS.findall(rest[:code_end])
-    if stops and len(group) > 1:
-        rest = re.sub(r"[ \t]{2,}", " ", _STOPS.sub("", rest[:code_end])).strip() + (
-            " " + rest[code_end:] if code_end < len(rest) else ""
-        )
+    stops: list[str] = []
+    if len(group) > 1:
+        # a stop or the program's end acts after the block's motion: it goes to the last piece
+        head, before = _take_stops(head)
+        rest, after = _take_stops(rest)
+        stops = before + after
         rest = rest.strip()
-    else:
-        stops = []
     sep = "" if not head or head.endswith((" ", "\t")) else " "
     line = head + sep + first + (" " + rest if rest else "")
-    assert start == len(head)
     tail = [_sinumerik(t).strip() for t in group[1:]]
     if stops:
-        tail[-1] += " " + " ".join(w.strip() for w in stops)
+        tail[-1] += " " + " ".join(stops)
     return [line, *tail]
