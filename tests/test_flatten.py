@@ -306,7 +306,7 @@ def test_subprogram_refusals(prog, line, message):
 
 def test_fanuc_numbers_keep_their_points():
     # a number without a decimal point stays as written, for the Fanuc reader to refuse
-    assert fl.flatten(b"O1\nG0 X10 Y2.5\nM30\n", "p", "fanuc").data == b"G0 X10 Y2.5\nM30\n"
+    assert fl.flatten(b"O1\nG0 X10 Y2.5\nM30\n", "p", "fanuc").data == b"O1\nG0 X10 Y2.5\nM30\n"
 
 
 STRUCTURED = """(a part in two features; parameters, a subroutine called once and a branch)
@@ -419,13 +419,13 @@ def test_fanuc_macro_b_runs_as_the_manual_says():
     flat = fl.flatten(MACRO.encode(), "p.nc", "fanuc")
     got = flat.data.decode().splitlines()
     holes = [f"G0 X{x}. Y5." for x in (0, 10, 20)]
-    want = ["%", "G21 G90 G17", "(holes)", "G0 X0. Y0. Z5."]
+    want = ["%", "O1000", "G21 G90 G17", "(holes)", "G0 X0. Y0. Z5."]
     for h in holes:
         want += [h, "G1 Z-1. F100.", "G0 Z2."]
-    want += ["G0 Z10.", "G0 X2.5", "M30"]  # the macro's #1 (A7.) did not touch the caller's #1
+    want += ["G0 Z10.", "G0 X2.5", "M30", "%"]  # the macro's #1 (A7.) did not touch the caller's #1
     assert got == want
     # each block's line: the holes come from the macro's lines, N50 after the GOTO
-    assert flat.lines.tolist() == [1, 3, 4, 6] + [19, 20, 21] * 3 + [13, 16, 17]
+    assert flat.lines.tolist() == [1, 2, 3, 4, 6] + [19, 20, 21] * 3 + [13, 16, 17, 24]
     # the G65 line and the statements are fixed: they cannot be replaced by a block
     assert flat.fixed[7] and flat.fixed[8] and flat.fixed[14] and not flat.fixed[12]
 
@@ -444,3 +444,15 @@ def test_fanuc_macro_program_corrected_in_place_or_straight(tmp_path):
     assert c.expanded["written"] == "straight"
     z = [t for t in (tmp_path / "o.nc").read_text().splitlines() if t.startswith("G1 Z")]
     assert z == ["G1 Z-0.99 F100.", "G1 Z-0.97 F100.", "G1 Z-0.95 F100."]  # -1 + 0.01 + 0.002 X
+
+
+def test_a_g65_argument_without_a_point_is_refused():
+    """Fanuc reads `G65 P9010 X40` as 0.040 mm (IS-B) unless parameter DPI says units: refused,
+    as the Fanuc reader refuses such a word; a point, a zero or a variable is a value."""
+    prog = "O1\nG65 P9010 X40 Y30.\nM30\nO9010\nG0 X#24 Y#25\nM99\n"
+    with pytest.raises(InputError, match="G65 argument X40 without a decimal point") as e:
+        fl.flatten(prog.encode(), "p.nc", "fanuc")
+    assert e.value.line == 2
+    ok = fl.flatten(prog.replace("X40 ", "X40. ").encode(), "p.nc", "fanuc").data.decode()
+    assert "G0 X40. Y30." in ok
+    assert "G0 X0. Y30." in fl.flatten(prog.replace("X40 ", "X0 ").encode(), "p.nc", "fanuc").data.decode()

@@ -699,7 +699,7 @@ def test_an_incremental_word_the_correction_adds_after_a_frame_change_is_refused
 
 def test_stops_before_the_move_and_words_in_strings(tmp_path):
     p = tmp_path / "p.mpf"
-    p.write_text('G0 X0 Y0 Z0\nN20 M30 G1 X100 F100\n')
+    p.write_text("G0 X0 Y0 Z0\nN20 M30 G1 X100 F100\n")
     correct(p, tmp_path / "o.mpf", _bowl)
     out = (tmp_path / "o.mpf").read_text().splitlines()
     assert "M30" not in out[1] and out[-1].endswith(" M30") and len(out) > 3

@@ -555,6 +555,11 @@ def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> 
         if nxt is None:
             break
         i = nxt
+    if dialect == "fanuc":
+        last = next((k for k in range(len(lines) - 1, -1, -1) if lines[k].text or lines[k].comments), None)
+        if last is not None and lines[last].text == "%" and run.out[-1:] != ["%"]:
+            run.out.append("%")  # the program's end of tape
+            run.origin.append(last)
     body = "".join(t + "\n" for t in run.out)
     origin = np.asarray(run.origin, dtype=np.int64)
     fixed = np.zeros(len(lines), dtype=bool)
@@ -609,6 +614,10 @@ class _Run:
         if kw is None:
             return self.block(ln, i)
         if kw == "program":
+            if self.fanuc and not calls and not any(t.startswith("O") for t in self.out):
+                # the main program's number (a Fanuc control files the program under it)
+                self.out.append(" ".join([f"O{ln.label}", *ln.comments]))
+                self.origin.append(i)
             return i + 1  # a program number: where M98 enters, no block
         j = self.jumps.get(i, {})
         if kw == "sub":
@@ -764,6 +773,7 @@ class _Run:
         p = _Parser(ln.text, mac.read, self.fanuc)
         words: list[tuple[str, float]] = []
         texts: list[str] = []
+        pointless: list[str] = []  # words written as a number without a decimal point
         sets = []
         while p.peek():
             c = p.peek()
@@ -779,6 +789,8 @@ class _Run:
                 if c != "n":
                     words.append((c, v))
                     written = p.s[at : p.k]
+                    if _LITERAL.fullmatch(written) and "." not in written and float(written) != 0.0:
+                        pointless.append(c.upper() + written)
                     if not _LITERAL.fullmatch(written):
                         written = _fmt(v, c)
                         if self.fanuc and c not in "gmnopst" and "." not in written:
@@ -793,6 +805,12 @@ class _Run:
         if sets:
             self.fixed.add(i)
         if self.fanuc and any(c == "g" and round(v * 10) == 650 for c, v in words):
+            args = [w for w in pointless if w[0] not in "GPL"]
+            if args:
+                raise _Error(
+                    f"G65 argument {args[0]} without a decimal point: the control reads it in least input increments "
+                    f"(0.001 mm on IS-B) unless its parameter says units; write the point ({args[0]}.)"
+                )
             return self.macro(words, i)
         ms = [round(v) for c, v in words if c == "m"]
         gs = [round(v * 10) for c, v in words if c == "g"]

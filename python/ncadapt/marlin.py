@@ -120,6 +120,14 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
         letter, num, at = words[0]
         if letter == "M":  # its parameters, free text for some (M117), are the firmware's
             m = int(num) if num and re.fullmatch(r"\d+", num) else None
+            if m == 420:
+                raise InputError(
+                    "M420 turns on the printer's own bed levelling, which would add to the correction: take it out "
+                    "(or level with the printer and not with ncadapt)",
+                    name,
+                    n,
+                    at + 1,
+                )
             if m is None or m not in COPIED_M:
                 raise InputError(
                     f"M{num} is not a code ncadapt copies (it may move the head or change how moves run)",

@@ -194,18 +194,89 @@ def correct_file(
         return _correct_flat(p, out, field, dialect, options)
     with atomic_open(out) as f:
         with _BackgroundWriter(f) as w:
-            c = _correct(
-                str(p),
-                str(p),
-                w.write,
-                field,
-                keep_points=False,
-                out_file=f,
-                dialect=_check_dialect(dialect),
-                read_ahead=read_ahead,
-                **options,
-            )
+            try:
+                c = _correct(
+                    str(p),
+                    str(p),
+                    w.write,
+                    field,
+                    keep_points=False,
+                    out_file=f,
+                    dialect=_check_dialect(dialect),
+                    read_ahead=read_ahead,
+                    **options,
+                )
+            except InputError as e:
+                raise _macro_hint(e, p, dialect) from None
     return c
+
+
+#: A Fanuc Custom Macro B statement (the engine reads the words of straight G-code only).
+_MACRO_B = re.compile(r"^\s*(?:N\d+\s*)?(?:IF\s*\[|WHILE\s*\[|DO\s*\d|END\s*\d|GOTO|#\d)|G0*65(?![\d.])", re.I)
+
+
+def _macro_hint(e: InputError, p: Path, dialect: str) -> InputError:
+    """``e``, or where it falls on a Fanuc Custom Macro B statement, the refusal that names it and
+    ``--expand``."""
+    if dialect != "fanuc" or not e.line:
+        return e
+    try:
+        with open(p, "rb") as f:
+            for k, raw in enumerate(f, 1):
+                if k == e.line:
+                    text = raw.decode("utf-8", "replace").split("(", 1)[0].strip()
+                    break
+            else:
+                return e
+    except OSError:
+        return e
+    if not _MACRO_B.search(text):
+        return e
+    return InputError(
+        f"Fanuc Custom Macro B ({text[:40]}): `ncadapt correct --expand` runs the program's variables and flow "
+        "and writes the moves they make",
+        str(p),
+        e.line,
+        1,
+    )
+
+
+def _read_program(p: Path) -> bytes:
+    try:
+        return p.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+
+
+def _correct_straight(straight: bytes, flat, p: Path, field, dialect: str, how: str, options: dict):
+    """Correct a straight program (``flat.lines``: the program's line of each of its lines) in
+    memory: the correction (its warnings and notes on the program's lines) and the engine's
+    output. An error names the program's line."""
+    import io
+
+    buf = io.BytesIO()
+    try:
+        c = _correct(straight, str(p), buf.write, field, keep_points=False, dialect=dialect, **options)
+    except (InputError, RefusedError) as e:
+        raise _flat_error(e, flat, str(p), how) from None
+    return _original_lines(c, flat.lines), buf.getvalue()
+
+
+def _written(c: Correction, out: Path, data: bytes, text: bytes, written: str, rewritten: int, blocks: int, run: int):
+    """Write ``text`` to ``out`` and say how (``Correction.expanded``); the lines read and
+    written are the program's and the output's (the other figures the straight program's)."""
+    atomic_write(out, text)
+    n_in, n_out = _count_lines(data), _count_lines(text)
+    c = dataclasses.replace(c, lines_in=n_in, lines_out=n_out, lines_added=max(0, n_out - n_in))
+    expanded = {
+        "lines_in": _count_lines(data),
+        "blocks": blocks,
+        "blocks_run": run,
+        "kept": written == "as it is",
+        "written": written,
+        "lines_rewritten": rewritten,
+    }
+    return dataclasses.replace(c, expanded=expanded)
 
 
 def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Correction:
@@ -213,27 +284,20 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
     (:func:`ncadapt.flatten.flatten`) and corrected; written as it is when no block changed, with
     its changed lines rewritten in place when each of them runs once and sets no parameter (its
     parameters, O-words and every other line kept), and flat otherwise."""
-    import io
-
     from . import rewrite
     from .flatten import flatten
 
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    data = _read_program(p)
     flat = flatten(data, str(p), dialect)
     straight = rewrite.split_lines(flat.data.decode("utf-8", "surrogateescape"))
-    buf = io.BytesIO()
-    try:
-        c = _correct(rewrite.mark(straight), str(p), buf.write, field, keep_points=False, dialect=dialect, **options)
-    except (InputError, RefusedError) as e:
-        raise _flat_error(e, flat, str(p)) from None
-    groups = rewrite.groups(buf.getvalue(), len(straight))
+    c, corrected = _correct_straight(
+        rewrite.mark(straight), flat, p, field, dialect, "flattened with --expand", options
+    )
+    groups = rewrite.groups(corrected, len(straight))
     changed = rewrite.changed(groups, straight)
     lines = {int(flat.lines[k]) - 1: k for k, ch in enumerate(changed) if ch}  # original line → flat line
     if not lines:
-        text, written = data, "as it is"
+        text, written, n = data, "as it is", 0
     elif all(flat.runs[i] == 1 and not flat.fixed[i] for i in lines):
         out_lines = []
         for i, (body, eol) in enumerate(rewrite.lines_of(data)):
@@ -246,101 +310,52 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
             g = groups[lines[i]]
             out_lines += [head + g[0].strip() + (eol or "\n")]
             out_lines += [t.strip() + (eol or "\n") for t in g[1:]]
-        text, written = "".join(out_lines).encode("utf-8", "surrogateescape"), "in place"
+        text, written, n = "".join(out_lines).encode("utf-8", "surrogateescape"), "in place", len(lines)
     else:
         text, written = "".join(t + "\n" for g in groups for t in g).encode("utf-8", "surrogateescape"), "straight"
-    atomic_write(out, text)
-    expanded = {
-        "lines_in": _count_lines(data),
-        "blocks": len(flat.lines),
-        "blocks_run": flat.blocks_run,
-        "kept": written == "as it is",
-        "written": written,
-        "lines_rewritten": len(lines)
-        if written == "in place"
-        else (0 if written == "as it is" else _count_lines(text)),
-    }
-    return dataclasses.replace(c, expanded=expanded)
+        n = _count_lines(text)
+    return _written(c, out, data, text, written, n, len(flat.lines), flat.blocks_run)
 
 
 def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -> Correction:
     """:func:`correct_file` for a Sinumerik program: run into straight RS274NGC
     (:func:`ncadapt.sinumerik.translate`), corrected, and written back in Sinumerik's syntax."""
-    import io
-
     from . import sinumerik
 
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    data = _read_program(p)
     tr = sinumerik.translate(data, str(p))
-    buf = io.BytesIO()
+    c, corrected = _correct_straight(tr.data, tr, p, field, "linuxcnc", "run as straight G-code", options)
     try:
-        c = _correct(tr.data, str(p), buf.write, field, keep_points=False, dialect="linuxcnc", **options)
-    except (InputError, RefusedError) as e:
-        raise _flat_error(e, tr, str(p), "run as straight G-code") from None
-    try:
-        text, rewritten, written = sinumerik.assemble(tr, buf.getvalue(), expand)
+        text, rewritten, written = sinumerik.assemble(tr, corrected, expand)
     except sinumerik.Unwritable as e:
-        raise RefusedError(e.message, [{"line": e.line, "reason": e.message}]) from None
+        raise RefusedError(f"{p}:{e.line}: {e.message}", [{"line": e.line, "reason": e.message}]) from None
     except sinumerik.NeedsExpand as e:
         if e.sub is not None:
             raise RefusedError(
-                f"line {e.line} calls subprogram {e.sub}, whose moves the correction changes (or which finds another "
+                f"{p}:{e.line}: the line calls subprogram {e.sub}, whose moves the correction changes (or which finds another "
                 "motion mode than it was written for): the corrected program cannot keep the call; --expand writes "
                 "its moves into the program",
                 [{"line": e.line, "subprogram": e.sub, "reason": "corrected in a subprogram"}],
             ) from None
         raise RefusedError(
-            f"line {e.line} runs {e.runs} times (a loop or a jump) and its move is corrected differently on each run: "
+            f"{p}:{e.line}: the line runs {e.runs} times (a loop or a jump) and its move is corrected differently on each run: "
             "the corrected program cannot keep the loop; --expand writes it straight, one block per move run",
             [{"line": e.line, "runs": e.runs, "reason": "corrected in a loop"}],
         ) from None
-
-    c = _original_lines(c, tr.lines)
-    atomic_write(out, text)
-    expanded = {
-        "lines_in": _count_lines(data),
-        "blocks": len(tr.items),
-        "blocks_run": tr.blocks_run,
-        "kept": written == "as it is",
-        "written": written,
-        "lines_rewritten": rewritten,
-    }
-    return dataclasses.replace(c, expanded=expanded)
+    return _written(c, out, data, text, written, rewritten, len(tr.items), tr.blocks_run)
 
 
 def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
     """:func:`correct_file` for a Marlin program: its E carried as a U axis the engine shares out
     among a move's pieces (:mod:`ncadapt.marlin`), and written back as E."""
-    import io
-
     from . import marlin
 
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
+    data = _read_program(p)
     tr = marlin.translate(data, str(p))
-    buf = io.BytesIO()
-    try:
-        c = _correct(tr.data, str(p), buf.write, field, keep_points=False, dialect="marlin", **options)
-    except (InputError, RefusedError) as e:
-        raise _flat_error(e, tr, str(p), "read with its E as a U axis") from None
-    c = _original_lines(c, tr.lines)
-    text, rewritten = marlin.assemble(tr, buf.getvalue())
-    atomic_write(out, text)
+    c, corrected = _correct_straight(tr.data, tr, p, field, "marlin", "read with its E as a U axis", options)
+    text, rewritten = marlin.assemble(tr, corrected)
     written = "as it is" if rewritten == 0 else "in place"
-    expanded = {
-        "lines_in": _count_lines(data),
-        "blocks": len(tr.straight),
-        "blocks_run": len(tr.straight),
-        "kept": rewritten == 0,
-        "written": written,
-        "lines_rewritten": rewritten,
-    }
-    return dataclasses.replace(c, expanded=expanded)
+    return _written(c, out, data, text, written, rewritten, len(tr.straight), len(tr.straight))
 
 
 def _original_lines(c: Correction, lines: np.ndarray) -> Correction:
@@ -354,7 +369,7 @@ def _original_lines(c: Correction, lines: np.ndarray) -> Correction:
     return dataclasses.replace(
         c,
         warnings=tuple(at_line.sub(lambda m: f"{m.group(1)}{orig(int(m.group(2)))}", w) for w in c.warnings),
-        notes=tuple((orig(k), m) for k, m in c.notes),
+        notes=tuple(dict.fromkeys((orig(k), m) for k, m in c.notes)),  # once per line of the program
     )
 
 
@@ -387,13 +402,13 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     piece: memory stays bounded whatever the program's length. A Sinumerik program is run into
     straight G-code first (:func:`ncadapt.sinumerik.translate`); the lines named are its own."""
     if dialect not in ("sinumerik", "marlin"):
-        return _inspect(str(path), str(path), _check_dialect(dialect))
+        try:
+            return _inspect(str(path), str(path), _check_dialect(dialect))
+        except InputError as e:
+            raise _macro_hint(e, Path(path), dialect) from None
     from . import marlin, sinumerik
 
-    try:
-        data = Path(path).read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read program: {e.strerror}", str(path)) from None
+    data = _read_program(Path(path))
     tr = sinumerik.translate(data, str(path)) if dialect == "sinumerik" else marlin.translate(data, str(path))
     try:
         info = _inspect(tr.data, str(path), "linuxcnc" if dialect == "sinumerik" else "marlin")

@@ -99,8 +99,8 @@ _REFUSED_G = {
     331: "tapping (G331)",
     332: "tapping (G332)",
     63: "tapping (G63)",
-    41: "cutter radius compensation (G41): its offset path is not followed for Sinumerik programs",
-    42: "cutter radius compensation (G42): its offset path is not followed for Sinumerik programs",
+    41: "cutter radius compensation (G41) in a Sinumerik program",
+    42: "cutter radius compensation (G42) in a Sinumerik program",
     110: "polar coordinates (G110)",
     111: "polar coordinates (G111)",
     112: "polar coordinates (G112)",
@@ -913,6 +913,8 @@ class _Run:
         if self.path is None:
             raise self.call(name, col)
         found = sorted(p for p in self.path.parent.iterdir() if p.name.upper() == f"{name}.SPF" and p.is_file())
+        if not found and re.match(r"(CYCLE|POCKET|SLOT|HOLES|LONGHOLE)\d", name):
+            raise self.call(name, col)
         if not found:
             raise _Error(
                 f"{name} calls a subprogram, and {name}.SPF is not beside the program (a subprogram elsewhere, "
