@@ -56,10 +56,13 @@ class Correction:
     warnings: tuple[str, ...] = ()
     #: Remarks on blocks kept but not corrected (G53 moves, G28/G30 returns): (line, message).
     notes: tuple[tuple[int, str], ...] = ()
-    #: The program was flattened first (``expand``): ``lines_in`` its lines, ``blocks`` the
-    #: flattened program's, ``blocks_run`` the blocks it ran (flow lines included), ``kept`` no
-    #: block changed and the program was written as it is; None otherwise. The other figures are
-    #: those of the flattened program.
+    #: The program was run into a straight program first (``expand``; a Sinumerik or Marlin
+    #: program always): ``lines_in`` its lines, ``blocks`` the straight program's, ``blocks_run``
+    #: the blocks it ran (flow lines included), ``written`` how it was written (``as it is``,
+    #: ``in place``, ``straight``), ``lines_rewritten`` the lines rewritten in place (or written
+    #: straight), ``kept`` no block changed; None otherwise. ``lines_in``/``lines_out`` of the
+    #: correction are then the program's and the output's, its other figures the straight
+    #: program's.
     expanded: dict | None = None
 
     def as_dict(self) -> dict:

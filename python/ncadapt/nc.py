@@ -419,7 +419,9 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
         return int(tr.lines[k - 1]) if isinstance(k, int) and 1 <= k <= len(tr.lines) else k
 
     info["lines"] = _count_lines(data)
-    info["blocks_run"] = getattr(tr, "blocks_run", len(tr.lines))
+    info["blocks_run"] = getattr(tr, "blocks_run", len(tr.lines) - 1)
+    if dialect == "marlin":  # the straight program's preamble (G0 U0) is not the program's
+        info["motions"]["rapid"] -= 1
     info["end_line"] = orig(info["end_line"])
     info["unsupported"] = [{**u, "line": orig(u["line"])} for u in info["unsupported"]]
     info["notes"] = [{**n, "line": orig(n["line"])} for n in info["notes"]]
