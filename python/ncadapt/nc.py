@@ -248,7 +248,15 @@ def _read_program(p: Path) -> bytes:
         raise InputError(f"cannot read program: {e.strerror}", str(p)) from None
 
 
-def _correct_straight(straight: bytes, flat, p: Path, field, dialect: str, how: str, options: dict):
+#: What the engine calls the moves it keeps in machine coordinates, in the words of the programs
+#: whose straight programs write them as G53.
+_MACHINE_MOVES = {
+    "sinumerik": "machine-coordinate move (SUPA, G53, G153)",
+    "marlin": "homing or bed probing (G28, G29)",
+}
+
+
+def _correct_straight(straight: bytes, flat, p: Path, field, dialect: str, how: str, options: dict, of=None):
     """Correct a straight program (``flat.lines``: the program's line of each of its lines) in
     memory: the correction (its warnings and notes on the program's lines) and the engine's
     output. An error names the program's line."""
@@ -259,7 +267,12 @@ def _correct_straight(straight: bytes, flat, p: Path, field, dialect: str, how: 
         c = _correct(straight, str(p), buf.write, field, keep_points=False, dialect=dialect, **options)
     except (InputError, RefusedError) as e:
         raise _flat_error(e, flat, str(p), how) from None
-    return _original_lines(c, flat.lines), buf.getvalue()
+    c = _original_lines(c, flat.lines)
+    if of in _MACHINE_MOVES:
+        c = dataclasses.replace(
+            c, notes=tuple((k, m.replace("G53 machine-coordinate move", _MACHINE_MOVES[of])) for k, m in c.notes)
+        )
+    return c, buf.getvalue()
 
 
 def _written(c: Correction, out: Path, data: bytes, text: bytes, written: str, rewritten: int, blocks: int, run: int):
@@ -324,7 +337,7 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -
 
     data = _read_program(p)
     tr = sinumerik.translate(data, str(p))
-    c, corrected = _correct_straight(tr.data, tr, p, field, "linuxcnc", "run as straight G-code", options)
+    c, corrected = _correct_straight(tr.data, tr, p, field, "linuxcnc", "run as straight G-code", options, "sinumerik")
     try:
         text, rewritten, written = sinumerik.assemble(tr, corrected, expand)
     except sinumerik.Unwritable as e:
@@ -352,7 +365,7 @@ def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
 
     data = _read_program(p)
     tr = marlin.translate(data, str(p))
-    c, corrected = _correct_straight(tr.data, tr, p, field, "marlin", "read with its E as a U axis", options)
+    c, corrected = _correct_straight(tr.data, tr, p, field, "marlin", "read with its E as a U axis", options, "marlin")
     text, rewritten = marlin.assemble(tr, corrected)
     written = "as it is" if rewritten == 0 else "in place"
     return _written(c, out, data, text, written, rewritten, len(tr.straight), len(tr.straight))
