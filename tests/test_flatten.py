@@ -456,3 +456,67 @@ def test_a_g65_argument_without_a_point_is_refused():
     ok = fl.flatten(prog.replace("X40 ", "X40. ").encode(), "p.nc", "fanuc").data.decode()
     assert "G0 X40. Y30." in ok
     assert "G0 X0. Y30." in fl.flatten(prog.replace("X40 ", "X0 ").encode(), "p.nc", "fanuc").data.decode()
+
+
+# ------------------------------------------------------------------------------ found in review
+@pytest.mark.parametrize(
+    ("expr", "want"),
+    [
+        ("FIX[-1.2]", -1.0),  # Fanuc: the fraction dropped
+        ("FUP[-1.2]", -2.0),  # raised away from zero
+        ("FIX[1.7]", 1.0),
+        ("FUP[1.2]", 2.0),
+        ("1 + 2 AND 3", 3.0),  # AND with *, bit by bit: 1 + (2 AND 3)
+        ("6 AND 3", 2.0),
+        ("5 OR 2", 7.0),
+        ("6 XOR 3", 5.0),
+    ],
+)
+def test_fanuc_functions_and_logic(expr, want):
+    (line,) = fl.flatten(f"#1 = {expr}\nG0 X#1\n".encode(), "p.nc", "fanuc").data.decode().splitlines()
+    assert float(line.split("X")[1]) == want
+
+
+def test_fanuc_eq_is_exact():
+    out = fl.flatten(b"#8 = 0.00005\nIF [#8 EQ 0] GOTO 10\nG0 X1.\nN10 G0 Y1.\n", "p.nc", "fanuc").data.decode()
+    assert out.splitlines() == ["G0 X1.", "G0 Y1."]
+
+
+@pytest.mark.parametrize(
+    ("prog", "line", "message"),
+    [
+        ("#7 = 1.2345\nG0 X[ROUND[#7]]\n", 2, "least input increment"),
+        ("#1 = 3 GT 2\n", 1, "in a value"),  # a comparison belongs in a condition
+        ("#1 = 2 ** 3\n", 1, "unexpected"),
+        ("#1 = TAN[90]\n", 1, "no value"),
+        ("#1 = ATAN[0]/[0]\n", 1, "no value"),
+        ("#1 = 1.5 AND 1\n", 1, "bit by bit"),
+        ("#1 = 0\nGOTO 5\nWHILE [#1 LT 2] DO1\nN5 G0 X#1\n#1 = #1 + 1\nEND1\n", 2, "into a DO loop"),
+    ],
+)
+def test_fanuc_refusals_after_review(prog, line, message):
+    with pytest.raises(InputError) as e:
+        fl.flatten(prog.encode(), "p.nc", "fanuc")
+    assert e.value.line == line and message in e.value.message
+
+
+def test_a_linuxcnc_program_setting_an_offset_parameter_is_refused():
+    with pytest.raises(InputError, match="machine's state") as e:
+        fl.flatten(b"#5241 = 2\nG55\nG0 X0\n", "p.ngc")
+    assert e.value.line == 1
+
+
+@needs_rs274
+def test_block_delete_stays_on_flat_and_rewritten_lines(tmp_path):
+    src = tmp_path / "p.ngc"
+    src.write_text(
+        "G21 G90\nG0 X0 Y0 Z1\n#1 = 0\no1 repeat [2]\n/G1 X[#1 + 1] Y0 Z-1 F100\n#1 = [#1 + 1]\no1 endrepeat\nM2\n"
+    )
+    nc.correct_file(src, tmp_path / "o.ngc", _slope, expand=True)
+    body = (tmp_path / "o.ngc").read_text().splitlines()
+    moves = body[body.index("G0 X0 Y0 Z1") + 1 : body.index("M2")]
+    assert len(moves) > 2 and all(t.startswith("/") for t in moves)  # every piece of a deleted block
+    src.write_text("G21 G90\nG0 X0 Y0 Z1\n#1 = 1\n/G1 X[#1] Y0 Z-1 F100\nM2\n")
+    nc.correct_file(src, tmp_path / "o.ngc", _slope, expand=True)
+    text = (tmp_path / "o.ngc").read_text()
+    assert text.splitlines()[3].startswith("/G1 X") and "//" not in text  # rewritten in place, one /

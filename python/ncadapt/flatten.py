@@ -60,6 +60,9 @@ _FUNCS = {
 # binary operators by precedence, lowest first (LinuxCNC: ** > * / MOD > + - > comparisons > logic)
 _LEVELS = [("and", "or", "xor"), ("eq", "ne", "gt", "ge", "lt", "le"), ("+", "-"), ("*", "/", "mod"), ("**",)]
 _OPS = sorted({op for lv in _LEVELS for op in lv}, key=len, reverse=True)
+# Fanuc Macro B (0i-F operator's manual, "Arithmetic and logic operation"): comparisons only in
+# conditions, OR and XOR with + and -, AND with * / MOD; the logic works bit by bit on integers
+_FANUC_LEVELS = [("eq", "ne", "gt", "ge", "lt", "le"), ("+", "-", "or", "xor"), ("*", "/", "mod", "and")]
 # G codes (× 10) after which the machine's parameters (#5000 up) hold what the machine did: probing
 # G38.x, offsets G10, G52, G54-G59.3, G92-G92.3, stored positions G28.1/G30.1, tool lengths G43/G49
 _MACHINE_CODES = {
@@ -144,6 +147,7 @@ class _Parser:
         # LinuxCNC's numbered parameters; Fanuc's variables: #0 (vacant) to the system's
         self.lo, self.hi = (0, 99999) if fanuc else (1, 5602)
         self.fanuc = fanuc
+        self.address = False  # reading an NC word's value (not a macro statement)
 
     def peek(self, n: int = 1) -> str:
         return self.s[self.k : self.k + n]
@@ -195,6 +199,8 @@ class _Parser:
                 self.need("[")
                 b = self.expr()
                 self.need("]")
+                if self.fanuc and a == 0.0 and b == 0.0:
+                    raise _Error("ATAN[0]/[0] has no value", at + 1)
                 v = math.degrees(math.atan2(a, b))
                 if self.fanuc and v < 0:
                     raise _Error(
@@ -212,6 +218,15 @@ class _Parser:
                 self.need("[")
                 x = self.expr()
                 self.need("]")
+                if self.fanuc and name in ("fix", "fup"):
+                    # Fanuc: FIX drops the fraction, FUP raises it away from zero (FUP[-1.2] = -2)
+                    return float(math.trunc(x)) if name == "fix" else math.copysign(math.ceil(abs(x)), x) + 0.0
+                if self.fanuc and name == "round" and self.address:
+                    raise _Error(
+                        "ROUND in an address rounds to the control's least input increment: write the value", at + 1
+                    )
+                if self.fanuc and name == "tan" and abs(math.cos(math.radians(x))) < 1e-12:
+                    raise _Error(f"TAN[{x:g}] has no value", at + 1)
                 try:
                     v = float(_FUNCS[name](x))
                 except (ValueError, OverflowError):
@@ -243,17 +258,31 @@ class _Parser:
         return int(v)
 
     def expr(self, level: int = 0) -> float:
-        if level == len(_LEVELS):
+        levels = _FANUC_LEVELS if self.fanuc else _LEVELS
+        if level == len(levels):
             return self.value()
         left = self.expr(level + 1)
         while True:
             op = next((o for o in _OPS if self.s.startswith(o, self.k)), None)
-            if op is None or op not in _LEVELS[level]:
+            if op is None or op not in levels[level]:
                 return left
             at = self.k
             self.k += len(op)
             right = self.expr(level + 1)
-            left = _binary(op, left, right, at)
+            left = _fanuc_binary(op, left, right, at) if self.fanuc else _binary(op, left, right, at)
+
+
+def _fanuc_binary(op: str, a: float, b: float, at: int) -> float:
+    """Fanuc's operators: EQ and NE exact (its manual: compare ABS[a - b] with a tolerance), AND
+    OR XOR bit by bit on whole numbers."""
+    if op in ("eq", "ne"):
+        return float((a == b) == (op == "eq"))
+    if op in ("and", "or", "xor"):
+        if a != int(a) or b != int(b):
+            raise _Error(f"{op.upper()} of {a:g} and {b:g}: the control works bit by bit on whole numbers", at + 1)
+        x, y = int(a), int(b)
+        return float({"and": x & y, "or": x | y, "xor": x ^ y}[op])
+    return _binary(op, a, b, at)
 
 
 def _binary(op: str, a: float, b: float, at: int) -> float:
@@ -302,6 +331,7 @@ class _Line:
     keyword: str | None = None
     rest: str = ""  # after the keyword
     number: int | None = None  # its N number (Fanuc's GOTO goes to it)
+    deleted: bool = False  # a block-delete line (/): run as executed, written with its /
 
 
 _FANUC_FLOW = re.compile(r"(?:n(\d+))?(?:(if)(\[.*)|(while)(\[.*)|(goto)(.*)|do(\d+)|end(\d+))?$")
@@ -314,9 +344,10 @@ def _read(text: str, src: str, fanuc: bool = False) -> list[_Line]:
             body, comments = _strip(raw)
         except _Error as e:
             raise InputError(e.message, src, n, e.col) from None
-        if body.startswith("/"):
+        deleted = body.startswith("/")
+        if deleted:
             body = body[1:]
-        line = _Line(body, comments)
+        line = _Line(body, comments, deleted=deleted)
         if fanuc:
             num = re.match(r"n(\d+)", body)
             if num:
@@ -469,6 +500,11 @@ class _Machine:
 
     def write(self, ref, v: float) -> None:
         if isinstance(ref, int):
+            if 5161 <= ref <= 5390 or 5400 <= ref <= 5428:
+                raise _Error(
+                    f"setting #{ref} changes the machine's state (stored positions, offsets, tool data, the "
+                    "position): write the G10, G92 or G43 that does it"
+                )
             self.numbered[ref], self.set_numbered[ref] = v, True
         elif ref.startswith("_"):
             self.globals[ref] = v
@@ -708,7 +744,7 @@ class _Run:
         if p.take("then"):
             ref = p.param_ref()
             p.need("=")
-            v = p.expr()
+            v = p.expr(1)
             if p.peek():
                 raise _Error(f"unexpected '{p.s[p.k :]}' after THEN", p.k + 1)
             if cond:
@@ -731,7 +767,12 @@ class _Run:
         if not found:
             raise _Error(f"GOTO {int(n)}: no block N{int(n)} in this program", at + 1)
         later = [j for j in found if j > i]
-        return (later or found)[0]
+        dest = (later or found)[0]
+        for start, jump in self.jumps.items():
+            if self.lines[start].keyword in ("fwhile", "fdo") and start < dest <= jump["end"]:
+                if not start <= i <= jump["end"]:
+                    raise _Error(f"GOTO {int(n)} into a DO loop (the control refuses a branch into a loop)", at + 1)
+        return dest
 
     def macro(self, words, i: int) -> int:
         """G65 P<program> [L<times>] <arguments>: program O<program> of the file, with a new set of
@@ -781,11 +822,13 @@ class _Run:
                 ref = p.param_ref()
                 p.need("=")
                 # LinuxCNC takes one value ([…] for an expression); Fanuc an expression as it stands
-                sets.append((ref, p.expr() if self.fanuc else p.value()))
+                sets.append((ref, p.expr(1) if self.fanuc else p.value()))  # Fanuc: no comparison here
             elif c.isalpha() or c in "@^":
                 p.k += 1
                 at = p.k
+                p.address = True
                 v = p.value()
+                p.address = False
                 if c != "n":
                     words.append((c, v))
                     written = p.s[at : p.k]
@@ -823,7 +866,8 @@ class _Run:
             self.fixed.add(i)
             return self.subprogram(words, i)
         if words or ln.comments:
-            self.out.append(" ".join(t for t in (" ".join(texts), *ln.comments) if t))
+            block = " ".join(t for t in (" ".join(texts), *ln.comments) if t)
+            self.out.append(("/" if ln.deleted and words else "") + block)
             self.origin.append(i)
         if len(self.out) > MAX_BLOCKS:
             raise _Error(f"the flattened program has more than {MAX_BLOCKS:,} blocks")

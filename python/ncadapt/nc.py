@@ -321,7 +321,10 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
             m = re.match(r"[ \t]*/?[ \t]*(?:[Nn][ \t]*\d+[ \t]*)?", body)
             head = m.group() if m else ""
             g = groups[lines[i]]
-            out_lines += [head + g[0].strip() + (eol or "\n")]
+            first = g[0].strip()
+            if "/" in head and first.startswith("/"):
+                first = first[1:].lstrip()  # the line's own block delete is in its head
+            out_lines += [head + first + (eol or "\n")]
             out_lines += [t.strip() + (eol or "\n") for t in g[1:]]
         text, written, n = "".join(out_lines).encode("utf-8", "surrogateescape"), "in place", len(lines)
     else:
