@@ -40,7 +40,7 @@ def value(expr: str) -> float:
         ("[2 + 3 * 4 ** 2]", 50.0),  # ** before * before +
         ("[2 ** 3 ** 2]", 64.0),  # left to right
         ("[10 - 4 - 3]", 3.0),
-        ("[-7 MOD 3]", 2.0),  # the divisor's sign
+        ("[-7 MOD 3]", 2.0),  # from 0 up to the divisor
         ("[7 MOD -3]", 1.0),
         ("[1 EQ 1.00005]", 1.0),  # within 0.0001
         ("[1 EQ 1.0002]", 0.0),
@@ -491,6 +491,7 @@ def test_fanuc_eq_is_exact():
         ("#1 = TAN[90]\n", 1, "no value"),
         ("#1 = ATAN[0]/[0]\n", 1, "no value"),
         ("#1 = 1.5 AND 1\n", 1, "bit by bit"),
+        ("#1 = -7 MOD 3\n", 1, "negative"),
         ("#1 = 0\nGOTO 5\nWHILE [#1 LT 2] DO1\nN5 G0 X#1\n#1 = #1 + 1\nEND1\n", 2, "into a DO loop"),
     ],
 )

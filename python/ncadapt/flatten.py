@@ -17,7 +17,7 @@ number, an O-word without its match), and a program that runs more than :data:`M
 
 The rules are LinuxCNC 2.9's (its documentation, "O Codes" and "Numbered Parameters" /
 "Expressions"): parameters set on a line take effect after the line is read, so its other words
-see the old values; EQ and NE compare within 0.0001; MOD's result takes the divisor's sign;
+see the old values; EQ and NE compare within 0.0001; MOD's result is from 0 up to the divisor's size;
 ROUND rounds halves away from zero; FIX and FUP are floor and ceiling; trigonometry in degrees;
 #1–#30 are a subroutine's arguments and locals, named parameters without a leading underscore
 local to their subroutine.
@@ -277,6 +277,8 @@ def _fanuc_binary(op: str, a: float, b: float, at: int) -> float:
     OR XOR bit by bit on whole numbers."""
     if op in ("eq", "ne"):
         return float((a == b) == (op == "eq"))
+    if op == "mod" and (a < 0 or b < 0):
+        raise _Error(f"{a:g} MOD {b:g}: the sign of a remainder of negative numbers is not followed", at + 1)
     if op in ("and", "or", "xor"):
         if a != int(a) or b != int(b):
             raise _Error(f"{op.upper()} of {a:g} and {b:g}: the control works bit by bit on whole numbers", at + 1)
