@@ -59,8 +59,8 @@ docs: install-test
 # examples) and the CLI contract on mutated inputs and extreme options (make test: 100 per target,
 # about 3,500 cases; here 300 per target, about 10,500)
 fuzz: install-test
-	NCADAPT_FUZZ_EXAMPLES=2000 $(PY) -m pytest -q tests/test_fuzz_programs.py
-	NCADAPT_CLI_FUZZ_EXAMPLES=300 $(PY) -m pytest -q tests/test_cli_fuzz.py
+	NCADAPT_HYPOTHESIS=explore NCADAPT_FUZZ_EXAMPLES=2000 $(PY) -m pytest -q tests/test_fuzz_programs.py
+	NCADAPT_HYPOTHESIS=explore NCADAPT_CLI_FUZZ_EXAMPLES=300 $(PY) -m pytest -q tests/test_cli_fuzz.py
 
 # bCNC is the peer of the benchmark: only its CNC.py is used, so its GUI dependencies are skipped
 bench: install-test

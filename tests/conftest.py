@@ -2,6 +2,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# `make test` draws the same examples on every run, so a check passes or fails for the code and not
+# for the draw; `make fuzz` explores afresh (NCADAPT_HYPOTHESIS=explore).
+settings.register_profile("test", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(__import__("os").environ.get("NCADAPT_HYPOTHESIS", "test"))
 
 sys.path.insert(0, str(Path(__file__).parent))
 
