@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from rs274 import Move
 
@@ -140,6 +141,15 @@ def along(shape, points, normals, reach=1.0):
 def xyz_csv(path, pts):
     path.write_text("x,y,z\n" + "".join(f"{float(x)!r},{float(y)!r},{float(z)!r}\n" for x, y, z in pts))
     return path
+
+
+def refused_at(read, text: str, name: str, line: int, says: str, *args) -> None:
+    """``read(data, name, *args)`` refuses the program at ``line`` with a message containing ``says``."""
+    from ncadapt.errors import InputError
+
+    with pytest.raises(InputError) as e:
+        read(text.encode(), name, *args)
+    assert (e.value.line, says in e.value.message) == (line, True), e.value
 
 
 def rms(a) -> float:

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from helpers import refused_at
 from ncadapt import fields, nc, rewrite
 from ncadapt import marlin as ml
 from ncadapt.cli import main
@@ -158,9 +159,7 @@ def test_e_modes_follow_marlin(program, u):
     ],
 )
 def test_refused_at_its_line(text, line, says):
-    with pytest.raises(InputError) as e:
-        ml.translate(text.encode(), "p.gcode")
-    assert e.value.line == line and says in e.value.message
+    refused_at(ml.translate, text, "p.gcode", line, says)
 
 
 def test_zero_correction_and_comments(tmp_path):

@@ -19,6 +19,7 @@ from click.testing import CliRunner
 
 import ncgi
 import rs274
+from helpers import refused_at
 from ncadapt import fields, nc
 from ncadapt import sinumerik as sn
 from ncadapt.cli import main
@@ -189,10 +190,7 @@ def test_int_variables_round_and_for_counts_to_its_end():
     ],
 )
 def test_refused_at_its_line(text, line, says):
-    with pytest.raises(InputError) as e:
-        sn.translate(text.encode(), "p.mpf")
-    assert e.value.line == line
-    assert says in e.value.message
+    refused_at(sn.translate, text, "p.mpf", line, says)
 
 
 def test_a_loop_that_does_not_end_is_refused(monkeypatch):
