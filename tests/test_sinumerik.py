@@ -10,6 +10,7 @@ and adds G91 values to zero). LinuxCNC's rs274 runs the straight program the eng
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -205,7 +206,7 @@ def test_a_loop_that_does_not_end_is_refused(monkeypatch):
         ("sinumerik__cead_simple.mpf", 2, "G2 without a centre"),
         ("sinumerik__cead_spline.mpf", 10, "spline interpolation"),
         ("sinumerik__cead_trans.mpf", 1, "motion mode"),
-        ("sinumerik__syil_TEST.MPF", 13, "WARMUP_CYCLE calls a subprogram"),
+        ("sinumerik__syil_TEST.MPF", 13, "WARMUP_CYCLE calls a subprogram"),  # its folder not given
         ("sinumerik__syil_WARMUP_CYCLE.SPF", 9, "PROC"),
     ],
 )
@@ -662,7 +663,7 @@ def test_a_subprogram_whose_moves_change_needs_expand(tmp_path):
 @pytest.mark.parametrize(
     ("sub", "call", "line", "says"),
     [
-        (None, "SQUARE(10, 2)", 5, "SQUARE.SPF is not beside the program"),
+        (None, "SQUARE(10, 2)", 5, "neither SQUARE.SPF nor _N_SQUARE_SPF is in"),
         ("PROC SQUARE(VAR REAL SIDE)\nRET\n", "SQUARE(10)", 1, "VAR"),
         ("PROC SQUARE(REAL SIDE)\nRET\n", "SQUARE(10, 2)", 5, "takes 1 argument"),
         ("PROC OTHER(REAL SIDE)\nRET\n", "SQUARE(10)", 1, "PROC OTHER"),
@@ -678,6 +679,83 @@ def test_subprograms_refused(sub, call, line, says, tmp_path):
     with pytest.raises(InputError) as e:
         sn.translate(p.read_bytes(), str(p))
     assert (e.value.line, says in e.value.message) == (line, True), e.value
+
+
+def _subprogram_folder(tmp_path, name="SQUARE.SPF"):
+    """MAIN.MPF in one folder, its subprogram SQUARE in another (the machine's subprogram folder)."""
+    (tmp_path / "prog").mkdir()
+    (tmp_path / "subs").mkdir()
+    (tmp_path / "subs" / name).write_text(SUB_SQUARE)
+    p = tmp_path / "prog" / "MAIN.MPF"
+    p.write_text(SUB_MAIN)
+    return p, tmp_path / "subs"
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", ["SQUARE.SPF", "_N_SQUARE_SPF", "square.spf"])
+def test_a_subprogram_in_a_folder_given_is_run(tmp_path, name):
+    """Found in the folder given under the file names a control or a copy of it uses; it runs as
+    when it is beside the program (the ends worked out by hand, above)."""
+    p, subs = _subprogram_folder(tmp_path, name)
+    with pytest.raises(InputError, match="--subprograms DIR"):
+        sn.translate(p.read_bytes(), str(p))
+    tr = sn.translate(p.read_bytes(), str(p), [subs])
+    assert tr.subprograms == {"SQUARE": str(subs / name)}
+    (tmp_path / "prog" / "SQUARE.SPF").write_text(SUB_SQUARE)
+    beside = sn.translate(p.read_bytes(), str(p), [subs])  # the program's own folder comes first
+    assert beside.subprograms == {"SQUARE": str(tmp_path / "prog" / "SQUARE.SPF")}
+    np.testing.assert_allclose(straight_ends(tr.data, tmp_path), straight_ends(beside.data, tmp_path), atol=1e-12)
+
+
+def test_a_subprogram_twice_in_a_folder_is_refused(tmp_path):
+    p, subs = _subprogram_folder(tmp_path)
+    (subs / "_N_SQUARE_SPF").write_text(SUB_SQUARE.replace("X=SIDE", "X=2*SIDE"))
+    with pytest.raises(InputError) as e:
+        sn.translate(p.read_bytes(), str(p), [subs])
+    assert e.value.line == 5 and "which one runs is not known" in e.value.message
+
+
+def test_the_command_line_takes_the_subprogram_folder(tmp_path):
+    p, subs = _subprogram_folder(tmp_path)
+    out, js = tmp_path / "out.mpf", tmp_path / "c.json"
+    args = ["correct", str(p), "--shift", "0,0,0", "-o", str(out), "--json", str(js)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and "SQUARE" in r.output and not out.exists()
+    r = CliRunner().invoke(main, [*args, "--subprograms", str(subs)])
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes() == p.read_bytes() and f"subprogram SQUARE: {subs / 'SQUARE.SPF'}" in r.output
+    payload = json.loads(js.read_text())
+    assert payload["expanded"]["subprograms"] == {"SQUARE": str(subs / "SQUARE.SPF")}
+    assert payload["options"]["subprograms"] == [str(subs)]
+    r = CliRunner().invoke(main, ["inspect", str(p), "--subprograms", str(subs)])
+    assert r.exit_code == 0 and "subprogram SQUARE" in r.output, r.output
+    g = tmp_path / "p.ngc"
+    g.write_text("G0 X0\n")
+    r = CliRunner().invoke(main, ["inspect", str(g), "--subprograms", str(subs)])
+    assert r.exit_code == 2 and "for Sinumerik programs" in r.output
+
+
+@needs_rs274
+def test_the_corpus_warmup_routine_runs_its_subprogram(tmp_path):
+    """syil's TEST.MPF calls WARMUP_CYCLE(3600, 5), which the repository keeps in another folder.
+    Siemens' rules, by hand: CYCLES (INT) = 5/15 rounds to 0, IF CYCLES < 1 makes it 1, so the FOR
+    loop runs once: the 13 SUPA moves of its body, in inches (G70), between the caller's SUPA moves
+    to Z0 and X0 Y0. nc-gcode-interpreter, which runs no subprograms, runs the body given the same
+    parameters and agrees."""
+    caller, sub = source("sinumerik__syil_TEST.MPF"), source("sinumerik__syil_WARMUP_CYCLE.SPF")
+    (tmp_path / "subroutines").mkdir()
+    (tmp_path / "subroutines" / "WARMUP_CYCLE.SPF").write_bytes(sub.read_bytes())
+    tr = sn.translate(caller.read_bytes(), str(caller), [tmp_path / "subroutines"])
+    body = [(0, 0, -4), (-5, 0, -4), (-5, -5, -4), (-5, -5, 0), (0, -5, 0), (0, 0, 0)]
+    body += [(-5, -5, 0), (-5, -5, -4), (0, 0, -4), (0, 0, 0), (0, -5, 0), (-5, 0, 0), (0, 0, 0)]
+    got = straight_ends(tr.data, tmp_path) / 25.4
+    np.testing.assert_allclose(got, np.array(body, dtype=float), atol=1e-9)  # the caller's moves are at 0
+    if ncgi.AVAILABLE:
+        text = [ln for ln in sub.read_text().splitlines() if not ln.lstrip().startswith(("PROC", "RET"))]
+        want = ncgi.ends("DEF REAL _RPM, _DURATION\n_RPM = 3600\n_DURATION = 5\n" + "\n".join(text) + "\n")
+        np.testing.assert_allclose(want, np.array(body, dtype=float), atol=ncgi.tolerance(want))
+    c = correct(caller, tmp_path / "zero.mpf", fields.Shift((0.0, 0.0, 0.0)), subprograms=[tmp_path / "subroutines"])
+    assert (tmp_path / "zero.mpf").read_bytes() == caller.read_bytes() and c.expanded["written"] == "as it is"
 
 
 # ------------------------------------------------------------------------ found in the second review

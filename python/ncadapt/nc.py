@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -156,6 +156,7 @@ def correct_file(
     dialect: str = "linuxcnc",
     read_ahead=None,
     expand: bool = False,
+    subprograms: Sequence[str | os.PathLike] = (),
     **options,
 ) -> Correction:
     """Correct the program in file ``path`` and write it to ``output``, reading and writing it
@@ -172,7 +173,9 @@ def correct_file(
     then written as it is when no block changed; with its changed lines rewritten in place when
     each runs once (its structure and every other line kept); and otherwise straight, one line per
     block run (a Sinumerik program only with ``expand``, else :class:`RefusedError` naming the
-    line). ``Correction.expanded`` says which (``written``) and how many blocks.
+    line). ``Correction.expanded`` says which (``written``) and how many blocks. A subprogram a
+    Sinumerik program calls is looked for beside it, then in the folders ``subprograms``
+    (``Correction.expanded["subprograms"]`` names the files read).
 
     The output is written atomically: when a check refuses (an unsupported construct, a
     displacement over the limit, a point outside the field), nothing is written. Raises
@@ -185,7 +188,7 @@ def correct_file(
             read_ahead.cancel()
         if dialect == "marlin":
             return _correct_marlin(p, out, field, options)
-        return _correct_sinumerik(p, out, field, expand, options)
+        return _correct_sinumerik(p, out, field, expand, subprograms, options)
     if expand:
         if dialect not in ("linuxcnc", "fanuc"):
             raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
@@ -333,13 +336,13 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
     return _written(c, out, data, text, written, n, len(flat.lines), flat.blocks_run)
 
 
-def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -> Correction:
+def _correct_sinumerik(p: Path, out: Path, field, expand: bool, subprograms, options: dict) -> Correction:
     """:func:`correct_file` for a Sinumerik program: run into straight RS274NGC
     (:func:`ncadapt.sinumerik.translate`), corrected, and written back in Sinumerik's syntax."""
     from . import sinumerik
 
     data = _read_program(p)
-    tr = sinumerik.translate(data, str(p))
+    tr = sinumerik.translate(data, str(p), subprograms)
     c, corrected = _correct_straight(tr.data, tr, p, field, "linuxcnc", "run as straight G-code", options, "sinumerik")
     try:
         text, rewritten, written = sinumerik.assemble(tr, corrected, expand)
@@ -358,7 +361,8 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, options: dict) -
             "the corrected program cannot keep the loop; --expand writes it straight, one block per move run",
             [{"line": e.line, "runs": e.runs, "reason": "corrected in a loop"}],
         ) from None
-    return _written(c, out, data, text, written, rewritten, len(tr.items), tr.blocks_run)
+    c = _written(c, out, data, text, written, rewritten, len(tr.items), tr.blocks_run)
+    return dataclasses.replace(c, expanded={**c.expanded, "subprograms": tr.subprograms})
 
 
 def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
@@ -413,10 +417,14 @@ def _flat_error(e, flat, name, how="flattened with --expand"):
     )
 
 
-def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
+def inspect_file(
+    path: str | os.PathLike, dialect: str = "linuxcnc", subprograms: Sequence[str | os.PathLike] = ()
+) -> dict:
     """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
     piece: memory stays bounded whatever the program's length. A Sinumerik program is run into
-    straight G-code first (:func:`ncadapt.sinumerik.translate`); the lines named are its own."""
+    straight G-code first (:func:`ncadapt.sinumerik.translate`, its subprograms looked for beside
+    it and in ``subprograms``; ``subprograms`` in the result names the files read); the lines
+    named are its own."""
     if dialect not in ("sinumerik", "marlin"):
         try:
             return _inspect(str(path), str(path), _check_dialect(dialect))
@@ -425,7 +433,11 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     from . import marlin, sinumerik
 
     data = _read_program(Path(path))
-    tr = sinumerik.translate(data, str(path)) if dialect == "sinumerik" else marlin.translate(data, str(path))
+    tr = (
+        sinumerik.translate(data, str(path), subprograms)
+        if dialect == "sinumerik"
+        else marlin.translate(data, str(path))
+    )
     try:
         info = _inspect(tr.data, str(path), "linuxcnc" if dialect == "sinumerik" else "marlin")
     except InputError as e:
@@ -441,6 +453,8 @@ def inspect_file(path: str | os.PathLike, dialect: str = "linuxcnc") -> dict:
     info["end_line"] = orig(info["end_line"])
     info["unsupported"] = [{**u, "line": orig(u["line"])} for u in info["unsupported"]]
     info["notes"] = [{**n, "line": orig(n["line"])} for n in info["notes"]]
+    if isinstance(tr, sinumerik.Translation):
+        info["subprograms"] = tr.subprograms
     return info
 
 

@@ -13,8 +13,10 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``G17 G18 G19``, ``G90 G91``, ``G70 G71 G700 G710`` (inch / metric), ``G54``–``G57`` (before the
   first move), ``G53``/``G153``/``SUPA`` (machine coordinates for the block: kept, not corrected),
   ``G40``, ``G4 F``/``G4 S`` (dwell), ``G93 G94 G95 G96 G97``, ``F S T D M`` words;
-- subprograms ``NAME(args)``, ``NAME``, ``L123`` in ``NAME.SPF`` beside the program (``PROC`` with
-  INT, REAL, BOOL parameters by value, ``SAVE``), ended by ``RET``, ``M17`` or their end;
+- subprograms ``NAME(args)``, ``NAME``, ``L123`` in a file ``NAME.SPF`` (or the control's own name
+  ``_N_NAME_SPF``), searched as the control searches: beside the program first, then in the
+  subprogram folders given (``subprograms``, in order); ``PROC`` with INT, REAL, BOOL parameters
+  by value, ``SAVE``; ended by ``RET``, ``M17`` or their end;
 - drilling cycles ``CYCLE81(RTP, RFP, SDIS, DP, DPR)`` and ``CYCLE82(…, DTB)`` at the position
   reached (G17 G90), run as G81/G82 from the retraction plane;
 - frames ``TRANS``/``ATRANS`` (translations; ``ROT``, ``SCALE``, ``MIRROR`` without axes reset
@@ -31,7 +33,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 - ``M30 M2 M17 RET`` end the program.
 
 Refused at their line (:class:`~ncadapt.InputError`), because the path they make is not
-followed: calls of subprograms not beside the program and of other cycles (``CYCLE83(…)``),
+followed: calls of subprograms found in none of those folders (or twice in one) and of other
+cycles (``CYCLE83(…)``),
 ``MCALL``, a program that is itself a ``PROC``, ``VAR`` parameters,
 splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), a ``CT`` whose direction is not known
 or along its chord, ``TURN=`` more
@@ -51,7 +54,9 @@ says which corrected lines belong to which original line (:func:`assemble`).
 from __future__ import annotations
 
 import math
+import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -203,6 +208,8 @@ class Translation:
     runs: np.ndarray
     blocks_run: int
     source: bytes = field(repr=False, default=b"")
+    #: the subprograms the program called, by name: the file each was read from
+    subprograms: dict[str, str] = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------------- expressions
@@ -537,8 +544,11 @@ class _Block:
 
 
 class _Run:
-    def __init__(self, lines: list[_Line], src: str, path: Path | None = None):
-        self.lines, self.src, self.path = lines, src, path
+    def __init__(self, lines: list[_Line], src: str, folders: list[Path]):
+        self.lines, self.src = lines, src
+        #: where a called subprogram is looked for, in order; and the files read, by name
+        self.folders = folders
+        self.read: dict[str, str] = {}
         #: the calls of subprograms in other files: (the caller's lines, name, flow, labels and FOR
         #: ends, the line to return to, its variables, what SAVE restores, the subprogram's name)
         self.calls: list[tuple] = []
@@ -903,24 +913,14 @@ class _Run:
         return i + 1
 
     def enter(self, name: str, t: _Tokens | None, i: int, col: int) -> int:
-        """Call subprogram ``name`` (``NAME(args)``, ``NAME``, ``L123``): the file ``NAME.SPF``
-        beside the program, its ``PROC`` parameters given the arguments (by value; 0 where left
+        """Call subprogram ``name`` (``NAME(args)``, ``NAME``, ``L123``): the file :meth:`find`
+        finds, its ``PROC`` parameters given the arguments (by value; 0 where left
         out), its own variables, R parameters shared. Returns its first line's index."""
         if t is not None:
             if t.i != 0:
                 raise _Error(f"{name} with other words before it: a subprogram is called in a block of its own", col)
             t.i = 1
-        if self.path is None:
-            raise self.call(name, col)
-        found = sorted(p for p in self.path.parent.iterdir() if p.name.upper() == f"{name}.SPF" and p.is_file())
-        if not found and re.match(r"(CYCLE|POCKET|SLOT|HOLES|LONGHOLE)\d", name):
-            raise self.call(name, col)
-        if not found:
-            raise _Error(
-                f"{name} calls a subprogram, and {name}.SPF is not beside the program (a subprogram elsewhere, "
-                "or a cycle, is not read: the motion it makes is not known)",
-                col,
-            )
+        path = self.find(name, col)
         args: list[float | None] = []
         if t is not None and t.take("("):
             while not t.take(")"):
@@ -931,7 +931,7 @@ class _Run:
             self.end(t)
         if len(self.calls) >= MAX_DEPTH:
             raise _Error(f"subprograms nested deeper than {MAX_DEPTH}", col)
-        path = found[0]
+        self.read.setdefault(name, str(path))
         lines = _read(path.read_bytes().decode("utf-8", "surrogateescape"), str(path))
         proc = next((k for k, ln in enumerate(lines) if ln.keyword == "PROC"), None)
         params, save = self.proc(lines[proc], name, str(path), proc) if proc is not None else ([], False)
@@ -956,6 +956,26 @@ class _Run:
                 self.labels.setdefault(ln.label, k)
         self.for_end = {}
         return 0 if proc is None else proc + 1
+
+    def find(self, name: str, col: int) -> Path:
+        """The file of subprogram ``name``: ``NAME.SPF`` or ``_N_NAME_SPF`` (any case) in the first
+        folder that holds one; two such files in that folder are refused (which the control takes is
+        not known), and so is a name in none."""
+        names = {f"{name}.SPF", f"_N_{name}_SPF"}
+        for folder in self.folders:
+            found = sorted(p for p in folder.iterdir() if p.name.upper() in names and p.is_file())
+            if len(found) > 1:
+                raise _Error(f"{name}: {' and '.join(map(str, found))} both hold it; which one runs is not known", col)
+            if found:
+                return found[0]
+        if re.match(r"(CYCLE|POCKET|SLOT|HOLES|LONGHOLE)\d", name) or not self.folders:
+            raise self.call(name, col)
+        raise _Error(
+            f"{name} calls a subprogram, and neither {name}.SPF nor _N_{name}_SPF is in "
+            f"{', '.join(map(str, self.folders))} (a subprogram elsewhere, or a cycle, is not read: the motion it "
+            "makes is not known; --subprograms DIR names a folder to search)",
+            col,
+        )
 
     def proc(self, ln: _Line, name: str, src: str, at: int) -> tuple[list[tuple[str, str]], bool]:
         """A PROC line's parameters (type, name) and whether it has SAVE."""
@@ -1350,12 +1370,19 @@ class _Run:
         return i + 1
 
 
-def translate(data: bytes, name: str = "<program>") -> Translation:
-    """The straight RS274NGC program a Sinumerik program runs (see the module's text)."""
+def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | os.PathLike] = ()) -> Translation:
+    """The straight RS274NGC program a Sinumerik program runs (see the module's text). A called
+    subprogram is looked for beside the program (when ``name`` is its file), then in each folder
+    of ``subprograms``."""
     text = data.decode("utf-8", "surrogateescape")
     lines = _read(text, name)
     path = Path(name) if name and not name.startswith("<") else None
-    run = _Run(lines, name, path if path is not None and path.is_file() else None)
+    folders = [path.parent] if path is not None and path.is_file() else []
+    for d in map(Path, subprograms):
+        if not d.is_dir():
+            raise InputError(f"subprogram folder {d} is not a folder", str(d))
+        folders.append(d)
+    run = _Run(lines, name, folders)
     if any(re.search(r"\bA?TRANS\b", ln.code) for ln in lines):
         # the programmable frame is empty when a program starts (the control deletes it at reset
         # and at the end of a program): the engine follows the translations from there
@@ -1388,6 +1415,7 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
         run.runs,
         blocks,
         data,
+        run.read,
     )
 
 

@@ -371,6 +371,23 @@ def progress_bar(description: str, total: int):
 
 
 #: ``--dialect`` of the commands that read an NC program.
+subprograms_option = click.option(
+    "--subprograms",
+    "subprograms",
+    multiple=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    metavar="DIR",
+    help="A folder of Sinumerik subprograms (NAME.SPF or _N_NAME_SPF), searched after the program's own folder, "
+    "in the order given (repeatable): the machine's subprogram folder, copied. A call found in none is refused.",
+)
+
+
+def no_subprograms(subprograms, d) -> None:
+    """``--subprograms`` is for Sinumerik programs: given for another, it would be ignored."""
+    if subprograms and d.name != "sinumerik":
+        raise click.UsageError(f"--subprograms is for Sinumerik programs; this program is read as {d.describe()}")
+
+
 dialect_option = click.option(
     "--dialect",
     type=click.Choice(dialects.CHOICES),

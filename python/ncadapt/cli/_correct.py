@@ -14,7 +14,9 @@ from ._common import (
     dialect_option,
     echo_err,
     handle_errors,
+    no_subprograms,
     progress,
+    subprograms_option,
     summary,
     write_json,
 )
@@ -116,6 +118,7 @@ def _shift(ctx, param, value):
     type=click.Choice(["mm", "inch"]),
     help="Units of the tool table's numbers (the machine's; the table does not say).",
 )
+@subprograms_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
 def correct(
@@ -136,6 +139,7 @@ def correct(
     expand,
     tool_table,
     tool_units,
+    subprograms,
     json_path,
 ):
     """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
@@ -149,6 +153,7 @@ def correct(
     if (tool_table is None) != (tool_units is None):
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = dialects.resolve(program, dialect)
+    no_subprograms(subprograms, d)
     if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
         raise click.UsageError(
             f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
@@ -190,6 +195,7 @@ def correct(
             read_ahead=ahead,
             tools=tools,
             expand=expand,
+            subprograms=subprograms,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
@@ -205,6 +211,8 @@ def correct(
             d.name, "flattened (--expand)"
         )
         summary(f"  {ran}: {e['lines_in']:,} lines ran {e['blocks_run']:,} blocks; {how}")
+        for name, path in e.get("subprograms", {}).items():
+            summary(f"  subprogram {name}: {path}")
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
         f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"
@@ -247,5 +255,6 @@ def correct(
             "expand": expand,
             "tool_table": None if tool_table is None else str(tool_table),
             "tool_units": tool_units,
+            "subprograms": [str(f) for f in subprograms],
         }
         write_json(json_path, payload)

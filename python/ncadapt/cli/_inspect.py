@@ -7,19 +7,29 @@ from pathlib import Path
 import click
 
 from .. import dialects, nc
-from ._common import check_outputs, dialect_option, handle_errors, summary, write_json
+from ._common import (
+    check_outputs,
+    dialect_option,
+    handle_errors,
+    no_subprograms,
+    subprograms_option,
+    summary,
+    write_json,
+)
 
 
 @click.command()
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @dialect_option
+@subprograms_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON.")
 @handle_errors
-def inspect(program, dialect, json_path):
+def inspect(program, dialect, subprograms, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
     d = dialects.resolve(program, dialect)
-    info = nc.inspect_file(program, d.name)
+    no_subprograms(subprograms, d)
+    info = nc.inspect_file(program, d.name, subprograms)
     info["dialect"] = d.as_dict()
     m = info["motions"]
     summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
@@ -43,6 +53,8 @@ def inspect(program, dialect, json_path):
             summary(f"    line {u['line']}:{u['col']}: {u['construct']}{extra}")
     else:
         summary("  unsupported constructs: none")
+    for name, path in info.get("subprograms", {}).items():
+        summary(f"  subprogram {name}: {path}")
     for n in info["notes"]:
         summary(f"  note: line {n['line']}: {n['message']}")
     if json_path is not None:
