@@ -711,8 +711,8 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         folder.mkdir(exist_ok=True)
         (folder / entry.file).write_bytes(flat.data)
         _run(dataclasses.replace(entry, root=folder), work, r)
-        if r.outcome == "accepted":
-            r.outcome = "accepted (--expand)"
+        if r.outcome.startswith("accepted"):
+            r.outcome = r.outcome.replace("accepted", "accepted (--expand)", 1)
         return
     if uns:
         u = uns[0]
@@ -725,10 +725,21 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         if not r.identity:
             r.identity_detail = _first_difference(prog.data, zero.data)
         grid = gentle_field(prog.inspect()["extents"]["feed"])
-        outs = {
-            "shift": prog.correct(fields.Shift(SHIFT), max_segment=MAX_SEGMENT),
-            "grid": prog.correct(grid, max_segment=MAX_SEGMENT),
-        }
+        expand_cycles = False
+        try:
+            outs = {
+                "shift": prog.correct(fields.Shift(SHIFT), max_segment=MAX_SEGMENT),
+                "grid": prog.correct(grid, max_segment=MAX_SEGMENT),
+            }
+        except InputError as e:
+            if "use --expand-cycles" not in e.message:
+                raise
+            # as the user is told: the cycles written as the moves they make
+            expand_cycles = True
+            outs = {
+                "shift": prog.correct(fields.Shift(SHIFT), max_segment=MAX_SEGMENT, expand_cycles=True),
+                "grid": prog.correct(grid, max_segment=MAX_SEGMENT, expand_cycles=True),
+            }
     except RefusedError as e:
         r.outcome = f"refused: {_first_line(e)}"
         r.reason, r.refusal_line = _generic(e.message), _refusal_line(e)
@@ -737,7 +748,7 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.outcome = f"refused: line {e.line}: {e.message}"
         r.reason, r.refusal_line = _generic(e.message), e.line
         return
-    r.outcome = "accepted"
+    r.outcome = "accepted (--expand-cycles)" if expand_cycles else "accepted"
     fieldof = {"shift": fields.Shift(SHIFT), "grid": grid}
     if RS274 is None:
         r.motion = "no rs274"

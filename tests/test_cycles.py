@@ -548,3 +548,72 @@ def test_cycle_moves_are_bounded():
         with pytest.raises(InputError, match="more than the 1000000 allowed for one block") as e:
             nc.parse(f"G21 G90 G0 X0 Y0 Z10\n{bad}\n")
         assert e.value.line == 2
+
+
+# ------------------------------------------------------------------- polar words (LinuxCNC's @ ^)
+POLAR = """G21 G90 G17 G0 X0 Y0 Z5
+G0 X25 Y0
+G98 G81 R1 Z-4 F100
+^120
+^240
+G90 G0 @10 ^33
+G91 G81 @10 R1 Z-4 L5
+G90 G0 X40 Y0
+G91 G81 ^21.17647 R1 Z-4 L17
+G90 G80
+G0 Z5
+M2
+"""
+
+
+def _lifted(x, y):
+    return (0.0, 0.0, 0.03 + 0.0005 * x)
+
+
+@needs_rs274
+def test_polar_holes_are_read_as_rs274_drills_them(tmp_path):
+    """Each hole where rs274 drills it, G91 repeats turning (^) or stretching (@) about the origin
+    from the hole before; a zero correction gives the program back."""
+    inp = _canon(tmp_path, POLAR, "in.ngc")
+    prog = nc.parse(POLAR)
+    assert not prog.unsupported
+    np.testing.assert_allclose(prog.blocks.end[:, :3], inp.ends[:, :3], atol=6e-5)  # rs274 prints 4 decimals
+    bottoms = prog.blocks.end[prog.blocks.motion == 1, :2]
+    a = np.radians(np.r_[0, 120, 240])
+    np.testing.assert_allclose(bottoms[:3], 25 * np.c_[np.cos(a), np.sin(a)], atol=1e-9)  # by hand
+    r = 10 + 10 * np.arange(1, 6)
+    np.testing.assert_allclose(bottoms[3:8], np.c_[r * math.cos(math.radians(33)), r * math.sin(math.radians(33))])
+    a = np.radians(21.17647 * np.arange(1, 18))
+    np.testing.assert_allclose(bottoms[8:], 40 * np.c_[np.cos(a), np.sin(a)], atol=1e-9)
+    assert prog.correct(fields.Shift((0, 0, 0))).data == POLAR.encode()
+
+
+@needs_rs274
+def test_polar_cycles_keep_their_words_when_the_holes_move_only_in_z(tmp_path):
+    inp = _canon(tmp_path, POLAR, "in.ngc")
+    prog = nc.parse(POLAR)
+    out = prog.correct(fields.Shift((0, 0, 0.03)))
+    text = out.text.splitlines()
+    # (in G91 R is from where the tool stands: at the first G91 cycle, the G98 level the
+    # uncorrected rapids left; at the second, the corrected R plane the first retracted to)
+    assert text[2:5] == ["G98 G81 R1.03 Z-3.97 F100", "^120", "^240"], out.text
+    assert text[6] == "G91 G81 @10 R1.03 Z-4 L5" and text[8] == "G91 G81 ^21.17647 R1 Z-4 L17", out.text
+    _feeds_displaced(_canon(tmp_path, out.data, "o.ngc"), inp, lambda x, y: (0, 0, 0.03), "polar shift")
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    ("field", "says", "line"),
+    [(lambda x, y: (0.01, 0.0, 0.0), "a hole in X or Y", 4), (_lifted, "by different amounts in Z", 7)],
+    ids=["sideways", "tilted"],
+)
+def test_polar_cycles_the_words_cannot_say_need_expand_cycles(tmp_path, field, says, line):
+    """Moved sideways, or (G91 repeats) by different amounts in Z: refused at the block, and
+    written as moves with --expand-cycles, which rs274 runs as the displaced holes."""
+    prog = nc.parse(POLAR)
+    with pytest.raises(InputError, match=f"polar words .*{says}.*--expand-cycles") as e:
+        prog.correct(_field_of(field))
+    assert e.value.line == line  # (line 3 has no polar words: its X Y are written)
+    out = prog.correct(_field_of(field), expand_cycles=True)
+    assert "G81" not in out.text and "L5" not in out.text  # (the rapid G0 @10 ^33 stays)
+    _feeds_displaced(_canon(tmp_path, out.data, "o.ngc"), _canon(tmp_path, POLAR, "in.ngc"), field, "polar expanded")

@@ -1146,11 +1146,14 @@ impl<'a> Emitter<'a> {
         let off = self.off;
         let level = (self.st.cyc_level - off[2]) / u;
         let mut holes: Vec<Hole> = Vec::with_capacity(cy.repeats as usize);
+        // where the program drills them, for a block whose polar words stay
+        let mut at: Vec<[f64; 2]> = Vec::with_capacity(cy.repeats as usize);
         for ri in first..=last {
             let r = &it.records[ri];
             if r.cycle != CYCLE_BOTTOM {
                 continue;
             }
+            at.push([(r.end[0] - off[0]) / u, (r.end[1] - off[1]) / u]);
             let (f, c) = samples.of(ri);
             let d = if c > 0 {
                 [disp[3 * f], disp[3 * f + 1], disp[3 * f + 2]]
@@ -1210,9 +1213,43 @@ impl<'a> Emitter<'a> {
             self.st.cyc_expanded = true;
             return self.expand_cycle(li, &cy, &holes, cur, level, inch, incremental);
         }
+        // polar words (@ ^) stay, and say where the holes are, when the correction leaves every
+        // hole where the program drills it in X and Y and moves them all alike in Z
+        let polar = self.lx.line_words(li).iter().any(is_polar);
+        if polar && copy {
+            return Err(err(format!(
+                "canned cycle {} with polar words (@ ^) under an unsupported construct kept as written: where its holes land from the corrected position is not followed",
+                name(cy.code)
+            )));
+        }
+        if polar {
+            let h0 = holes[0];
+            let sideways = holes
+                .iter()
+                .zip(&at)
+                .any(|(h, p)| (h.x - p[0]).abs() >= half || (h.y - p[1]).abs() >= half);
+            let apart = holes
+                .iter()
+                .any(|h| (h.r - h0.r).abs() >= half || (h.bottom - h0.bottom).abs() >= half);
+            if sideways || (incremental && apart) {
+                return Err(err(format!(
+                    "canned cycle {} with polar words (@ ^): the correction moves {}, which its polar words cannot say; use --expand-cycles",
+                    name(cy.code),
+                    if sideways { "a hole in X or Y" } else { "its holes by different amounts in Z" }
+                )));
+            }
+        }
         // the numbers the block must have
         let h0 = holes[0];
-        let (want, implied_xy) = if copy {
+        let (want, implied_xy) = if polar {
+            // X and Y are the polar words' (never written beside them)
+            let zr = if incremental {
+                [h0.bottom - h0.r, h0.r - level]
+            } else {
+                [h0.bottom, h0.r]
+            };
+            ([at[0][0], at[0][1], zr[0], zr[1]], [at[0][0], at[0][1]])
+        } else if copy {
             // the program's own numbers; in G91 X and Y are steps from wherever the tool is
             if incremental {
                 ([0.0, 0.0, cy.z_word, cy.r_word], [0.0, 0.0])
@@ -1253,6 +1290,10 @@ impl<'a> Emitter<'a> {
         let mut written = [0.0; 4];
         let words = self.lx.line_words(li);
         for (i, letter) in [b'X', b'Y', b'Z', b'R'].into_iter().enumerate() {
+            if polar && i < 2 {
+                written[i] = want[i]; // the polar words' (checked above)
+                continue;
+            }
             written[i] = if let Some(w) = words.iter().find(|w| w.letter == letter) {
                 if !copy && (want[i] - w.value).abs() >= half {
                     self.edit_number(w.num_start, w.end, want[i], inch)
@@ -1285,7 +1326,7 @@ impl<'a> Emitter<'a> {
         // where the output's block leaves the machine, from the numbers as written
         let mut out_holes = Vec::with_capacity(holes.len());
         let (mut aa, mut bb) = (cur[0], cur[1]);
-        for _ in 0..holes.len() {
+        for program_xy in at.iter().take(holes.len()) {
             let (r, cc) = if incremental {
                 let r = written[3] + level;
                 aa += written[0];
@@ -1296,6 +1337,10 @@ impl<'a> Emitter<'a> {
                 bb = written[1];
                 (written[3], written[2])
             };
+            if polar {
+                // the polar words drill where the program does
+                [aa, bb] = *program_xy;
+            }
             out_holes.push(Hole {
                 x: aa,
                 y: bb,
@@ -1359,7 +1404,10 @@ impl<'a> Emitter<'a> {
         let mut stops: Vec<u8> = Vec::new();
         for w in words {
             let cycle_g = w.letter == b'G' && is_motion_g(w);
-            if cycle_g || matches!(w.letter, b'X' | b'Y' | b'Z' | b'R' | b'Q' | b'P' | b'L') {
+            if cycle_g
+                || is_polar(w)
+                || matches!(w.letter, b'X' | b'Y' | b'Z' | b'R' | b'Q' | b'P' | b'L')
+            {
                 self.remove_word(li, w);
             } else if is_stop_m(w) {
                 stops.extend_from_slice(self.sep());

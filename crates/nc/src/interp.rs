@@ -1366,16 +1366,14 @@ impl Interpreter {
                 }
             }
             if polar_used {
-                let canned = matches!(st.mode, Mode::Canned(_));
                 let why = if st.dialect != Dialect::LinuxCnc {
                     Some("polar coordinates (@ ^), LinuxCNC's: not read in this dialect")
-                } else if canned
-                    || home.is_some()
+                } else if home.is_some()
                     || g53
                     || nonmodal_axis_user.is_some()
                     || frame_code.is_some()
                 {
-                    Some("polar coordinates (@ ^) in a canned cycle or with G28, G30, G53, G10, G52 or G92")
+                    Some("polar coordinates (@ ^) with G28, G30, G53, G10, G52 or G92")
                 } else {
                     None
                 };
@@ -1546,6 +1544,7 @@ impl Interpreter {
                         q: q_word,
                         p,
                         l: l_word,
+                        polar: polar_used.then_some(polar),
                         col: motion_word.map_or(axis_col, |(_, c)| c),
                     };
                     let blocked = blocker.or(e_construct);
@@ -2132,6 +2131,9 @@ struct CycleWords<'a> {
     q: Option<f64>,
     p: Option<f64>,
     l: Option<f64>,
+    /// LinuxCNC's polar words (@ distance, ^ angle) of the block, when it has any: in G91 each of
+    /// its L repeats turns and stretches the position about the origin by them.
+    polar: Option<[Option<f64>; 2]>,
     /// Where errors point: the cycle's G word, or the first axis word.
     col: usize,
 }
@@ -2353,8 +2355,14 @@ fn canned(
     };
     let mut holes = Vec::with_capacity(repeats.min(1024) as usize);
     for _ in 0..repeats {
-        aa += inc[0];
-        bb += inc[1];
+        match w.polar {
+            // as LinuxCNC: each repeat's polar step is taken from where the one before ended
+            Some(polar) if st.incremental => [aa, bb] = polar_xy([aa, bb], polar, true),
+            _ => {
+                aa += inc[0];
+                bb += inc[1];
+            }
+        }
         holes.push(Hole {
             x: aa,
             y: bb,
