@@ -156,6 +156,7 @@ def test_e_modes_follow_marlin(program, u):
         ("G1 X0 Y0 F100\nG29.2 S0\n", 2, "G29.2"),
         ("N1 G1 X0 Y0 F100*33\n", 1, "checksum"),
         ("G1 X0 Y0 U4 F100\n", 1, "U"),
+        ("G1 X0 Y0 F100\nG28 E\n", 2, "E without a number"),  # (was a crash)
     ],
 )
 def test_refused_at_its_line(text, line, says):
@@ -273,3 +274,11 @@ def test_refused_after_review(text, says):
     with pytest.raises(InputError, match=says) as e:
         ml.translate(text.encode())
     assert e.value.line == 2
+
+
+def test_correct_and_inspect_count_the_programs_lines(tmp_path):
+    """Each line of a print runs once: both say so (the straight program's preamble is not counted)."""
+    p = tmp_path / "p.gcode"
+    p.write_text(";FLAVOR:Marlin\nM82\nG1 X0 Y0 Z0.2 F600\nG1 X10 E1\nG1 Y10 E2\n")
+    c = nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0.0, 0.0, 0.0)), dialect="marlin")
+    assert c.expanded["blocks_run"] == nc.inspect_file(p, "marlin")["blocks_run"] == 5

@@ -707,6 +707,19 @@ def test_a_subprogram_in_a_folder_given_is_run(tmp_path, name):
     np.testing.assert_allclose(straight_ends(tr.data, tmp_path), straight_ends(beside.data, tmp_path), atol=1e-12)
 
 
+@needs_rs274
+def test_a_frame_set_in_a_subprogram_is_followed(tmp_path):
+    """TRANS in a called subprogram only (the main program has none): the frame, empty at the
+    start, is followed from there (by hand: X1 in the frame X5 is at X6)."""
+    (tmp_path / "SUB1.SPF").write_text("PROC SUB1\nTRANS X5\nG1 X1 Y0\nRET\n")
+    p = tmp_path / "MAIN.MPF"
+    p.write_text("G0 X0 Y0 Z0\nG1 X2 F100\nSUB1\nG1 X0\nM30\n")
+    tr = sn.translate(p.read_bytes(), str(p))
+    np.testing.assert_allclose(straight_ends(tr.data, tmp_path), [(2, 0, 0), (6, 0, 0), (5, 0, 0)], atol=1e-9)
+    info = nc.inspect_file(p, "sinumerik")
+    assert info["extents"]["feed"]["x"][1] == 6.0, info["extents"]  # (before the fix: no extents at all)
+
+
 def test_a_subprogram_twice_in_a_folder_is_refused(tmp_path):
     p, subs = _subprogram_folder(tmp_path)
     (subs / "_N_SQUARE_SPF").write_text(SUB_SQUARE.replace("X=SIDE", "X=2*SIDE"))

@@ -76,6 +76,11 @@ class Translation:
         """The 1-based line of each straight line: the preamble's is 1, then one to one."""
         return np.r_[1, np.arange(1, len(self.straight), dtype=np.int64)]
 
+    @property
+    def blocks_run(self) -> int:
+        """The blocks the program ran: each of its lines once (the preamble is not the program's)."""
+        return len(self.straight) - 1
+
 
 def _dec(text: str) -> Decimal:
     return Decimal(text if text not in ("", "+", "-", ".") else "0")
@@ -156,7 +161,7 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
                 raise InputError(f"{w}{v or ''} after {letter}{num}: Marlin reads one code a line", name, n, a + 1)
             if w in "UVWABC":
                 raise InputError(f"{w}: an axis a printer does not have (E is the extruder)", name, n, a + 1)
-            if v is None and g not in (28, 29):
+            if v is None and (g not in (28, 29) or w == "E"):
                 raise InputError(f"{w} without a number", name, n, a + 1)
             if w == "E" and len(v.split(".", 1)[1] if "." in v else "") > _MAX_DECIMALS:
                 raise InputError(

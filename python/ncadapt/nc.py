@@ -183,6 +183,8 @@ def correct_file(
     """
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
+    if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
+        raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
     if dialect in ("sinumerik", "marlin"):
         if read_ahead is not None:
             read_ahead.cancel()
@@ -190,8 +192,6 @@ def correct_file(
             return _correct_marlin(p, out, field, options)
         return _correct_sinumerik(p, out, field, expand, subprograms, options)
     if expand:
-        if dialect not in ("linuxcnc", "fanuc"):
-            raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
         if read_ahead is not None:
             read_ahead.cancel()
         return _correct_flat(p, out, field, dialect, options)
@@ -259,6 +259,24 @@ _MACHINE_MOVES = {
 }
 
 
+#: The dialects a translator turns into straight G-code first: the dialect the engine then reads
+#: it in, and how the straight program was made (for messages).
+_TRANSLATED = {
+    "sinumerik": ("linuxcnc", "run as straight G-code"),
+    "marlin": ("marlin", "read with its E as a U axis"),
+}
+
+
+def _program_note(message: str, of: str | None) -> str:
+    """A note of the straight program in the words of the program's dialect ``of``."""
+    return message.replace("G53 machine-coordinate move", _MACHINE_MOVES[of]) if of in _MACHINE_MOVES else message
+
+
+def _program_line(lines: np.ndarray, k):
+    """The program's line of line ``k`` (1-based) of its straight program."""
+    return int(lines[k - 1]) if isinstance(k, int) and 1 <= k <= len(lines) else k
+
+
 def _correct_straight(straight: bytes, flat, p: Path, field, dialect: str, how: str, options: dict, of=None):
     """Correct a straight program (``flat.lines``: the program's line of each of its lines) in
     memory: the correction (its warnings and notes on the program's lines) and the engine's
@@ -271,11 +289,7 @@ def _correct_straight(straight: bytes, flat, p: Path, field, dialect: str, how: 
     except (InputError, RefusedError) as e:
         raise _flat_error(e, flat, str(p), how) from None
     c = _original_lines(c, flat.lines)
-    if of in _MACHINE_MOVES:
-        c = dataclasses.replace(
-            c, notes=tuple((k, m.replace("G53 machine-coordinate move", _MACHINE_MOVES[of])) for k, m in c.notes)
-        )
-    return c, buf.getvalue()
+    return dataclasses.replace(c, notes=tuple((k, _program_note(m, of)) for k, m in c.notes)), buf.getvalue()
 
 
 def _written(c: Correction, out: Path, data: bytes, text: bytes, written: str, rewritten: int, blocks: int, run: int):
@@ -343,7 +357,7 @@ def _correct_sinumerik(p: Path, out: Path, field, expand: bool, subprograms, opt
 
     data = _read_program(p)
     tr = sinumerik.translate(data, str(p), subprograms)
-    c, corrected = _correct_straight(tr.data, tr, p, field, "linuxcnc", "run as straight G-code", options, "sinumerik")
+    c, corrected = _correct_straight(tr.data, tr, p, field, *_TRANSLATED["sinumerik"], options, "sinumerik")
     try:
         text, rewritten, written = sinumerik.assemble(tr, corrected, expand)
     except sinumerik.Unwritable as e:
@@ -372,24 +386,23 @@ def _correct_marlin(p: Path, out: Path, field, options: dict) -> Correction:
 
     data = _read_program(p)
     tr = marlin.translate(data, str(p))
-    c, corrected = _correct_straight(tr.data, tr, p, field, "marlin", "read with its E as a U axis", options, "marlin")
+    c, corrected = _correct_straight(tr.data, tr, p, field, *_TRANSLATED["marlin"], options, "marlin")
     text, rewritten = marlin.assemble(tr, corrected)
     written = "as it is" if rewritten == 0 else "in place"
-    return _written(c, out, data, text, written, rewritten, len(tr.straight), len(tr.straight))
+    return _written(c, out, data, text, written, rewritten, len(tr.straight), tr.blocks_run)
 
 
 def _original_lines(c: Correction, lines: np.ndarray) -> Correction:
     """``c`` with the lines its warnings and notes name, lines of a straight program (1-based),
     turned into the lines ``lines`` says they come from."""
 
-    def orig(k: int) -> int:
-        return int(lines[k - 1]) if 1 <= k <= len(lines) else k
-
     at_line = re.compile(r"(\bline )(\d+)")
     return dataclasses.replace(
         c,
-        warnings=tuple(at_line.sub(lambda m: f"{m.group(1)}{orig(int(m.group(2)))}", w) for w in c.warnings),
-        notes=tuple(dict.fromkeys((orig(k), m) for k, m in c.notes)),  # once per line of the program
+        warnings=tuple(
+            at_line.sub(lambda m: f"{m.group(1)}{_program_line(lines, int(m.group(2)))}", w) for w in c.warnings
+        ),
+        notes=tuple(dict.fromkeys((_program_line(lines, k), m) for k, m in c.notes)),  # once per line of the program
     )
 
 
@@ -403,7 +416,7 @@ def _flat_error(e, flat, name, how="flattened with --expand"):
     if isinstance(e, InputError):
         k = e.line
         if 1 <= k <= len(flat.lines):
-            return InputError(f"{e.message} (block {k} of the flattened program)", name, int(flat.lines[k - 1]))
+            return InputError(f"{e.message} (block {k} of the program {how})", name, _program_line(flat.lines, k))
         return e
     details = []
     for d in e.details:
@@ -438,21 +451,21 @@ def inspect_file(
         if dialect == "sinumerik"
         else marlin.translate(data, str(path))
     )
+    engine, how = _TRANSLATED[dialect]
     try:
-        info = _inspect(tr.data, str(path), "linuxcnc" if dialect == "sinumerik" else "marlin")
+        info = _inspect(tr.data, str(path), engine)
     except InputError as e:
-        raise _flat_error(e, tr, str(path)) from None
-
-    def orig(k):
-        return int(tr.lines[k - 1]) if isinstance(k, int) and 1 <= k <= len(tr.lines) else k
-
+        raise _flat_error(e, tr, str(path), how) from None
     info["lines"] = _count_lines(data)
-    info["blocks_run"] = getattr(tr, "blocks_run", len(tr.lines) - 1)
+    info["blocks_run"] = tr.blocks_run
     if dialect == "marlin":  # the straight program's preamble (G0 U0) is not the program's
         info["motions"]["rapid"] -= 1
-    info["end_line"] = orig(info["end_line"])
-    info["unsupported"] = [{**u, "line": orig(u["line"])} for u in info["unsupported"]]
-    info["notes"] = [{**n, "line": orig(n["line"])} for n in info["notes"]]
+    info["end_line"] = _program_line(tr.lines, info["end_line"])
+    info["unsupported"] = [{**u, "line": _program_line(tr.lines, u["line"])} for u in info["unsupported"]]
+    notes = dict.fromkeys(
+        (_program_line(tr.lines, n["line"]), _program_note(n["message"], dialect)) for n in info["notes"]
+    )
+    info["notes"] = [{"line": k, "message": m} for k, m in notes]  # once per line of the program
     if isinstance(tr, sinumerik.Translation):
         info["subprograms"] = tr.subprograms
     return info

@@ -63,11 +63,11 @@ from pathlib import Path
 import numpy as np
 
 from . import rewrite
+from .constants import MM_PER_INCH
 from .errors import InputError
 
 #: Most blocks a program may run: a loop that runs more is taken as one that does not end.
 MAX_BLOCKS = 2_000_000
-MM_PER_INCH = 25.4
 #: Deepest subprogram nesting followed.
 MAX_DEPTH = 12
 #: The largest INT (Siemens: 32-bit signed).
@@ -77,7 +77,6 @@ _AXES = ("X", "Y", "Z", "A", "B", "C")
 _LINEAR = ("X", "Y", "Z")
 #: Plane: (first axis, second axis, their centre letters).
 _PLANES = {17: ("X", "Y", "I", "J"), 18: ("Z", "X", "K", "I"), 19: ("Y", "Z", "J", "K")}
-_CENTRE = {"I": "X", "J": "Y", "K": "Z"}
 #: G codes copied without an effect on the path (exact stop, continuous path, SAR plane, corners).
 _COPY_G = {9, 60, 64, 641, 642, 643, 644, 645, 601, 602, 603, 340, 341, 450, 451}
 _COPY_WORDS = {"SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "DIAMOF"}
@@ -122,7 +121,6 @@ _REFUSED_G = {
 }
 _PASS_G = {17, 18, 19, 90, 91, 40, 93, 94, 95, 96, 97, 54, 55, 56, 57}
 _UNITS = {70: 20, 700: 20, 71: 21, 710: 21}
-_FLOW = ("IF", "ELSE", "ENDIF", "WHILE", "ENDWHILE", "FOR", "ENDFOR", "REPEAT", "UNTIL", "LOOP", "ENDLOOP")
 _OPENERS = {
     "IF": ("ELSE", "ENDIF"),
     "WHILE": ("ENDWHILE",),
@@ -631,11 +629,11 @@ class _Run:
         if kw == "PROC":
             raise _Error(
                 "a subprogram (PROC): its parameters come from the program that calls it; correct that one "
-                "(a subprogram in another file is not read)",
+                "(which reads it)",
                 1,
             )
         if kw == "EXTERN":
-            return i + 1  # a declaration: the call, if the program makes it, is refused
+            return i + 1  # a declaration: the call reads the subprogram
         raise _Error(f"{kw} is not read", 1)
 
     def end(self, t: _Tokens) -> None:
@@ -1383,10 +1381,6 @@ def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | 
             raise InputError(f"subprogram folder {d} is not a folder", str(d))
         folders.append(d)
     run = _Run(lines, name, folders)
-    if any(re.search(r"\bA?TRANS\b", ln.code) for ln in lines):
-        # the programmable frame is empty when a program starts (the control deletes it at reset
-        # and at the end of a program): the engine follows the translations from there
-        run.items.append(Item(0, "state", "G52 X0 Y0 Z0", ""))
     i, blocks = 0, 0
     while True:
         if i >= len(run.lines) and not run.calls:
@@ -1408,6 +1402,11 @@ def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | 
         if nxt is None:
             break
         i = nxt
+    if any(it.rs.startswith("G52 ") for it in run.items):
+        # the programmable frame is empty when a program starts (the control deletes it at reset
+        # and at the end of a program): the engine follows the translations (the program's or a
+        # subprogram's) from there
+        run.items.insert(0, Item(0, "state", "G52 X0 Y0 Z0", ""))
     return Translation(
         rewrite.mark([it.rs for it in run.items]),
         run.items,

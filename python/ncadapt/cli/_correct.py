@@ -168,7 +168,9 @@ def correct(
     from .._nc import read_ahead
 
     ahead = (
-        None if tools or expand or d.name == "sinumerik" else read_ahead(str(program), constants.PIECE_BYTES, d.name)
+        None
+        if tools or expand or d.name in ("sinumerik", "marlin")
+        else read_ahead(str(program), constants.PIECE_BYTES, d.name)
     )
     from .. import fields as _fields
     from .. import nc
