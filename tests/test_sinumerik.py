@@ -11,6 +11,7 @@ and adds G91 values to zero). LinuxCNC's rs274 runs the straight program the eng
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -115,6 +116,90 @@ def test_straight_program_moves_as_siemens_rules_say(name, want, scale, tmp_path
     np.testing.assert_allclose(got[: len(want)], want, atol=1e-9)
 
 
+#: rotation.mpf by hand (machine coordinates): base = TRANS + R(angle) · (frame coordinates), an
+#: ATRANS along the turned axes, AROT adding to the angle about the frame's origin, ROT alone
+#: taking the whole frame away. (nc-gcode-interpreter reads AROT Z-30 as a move to Z-30.)
+ROTATION_ENDS = [
+    (0, 0, 5),
+    (0, 0, -1),
+    (10, 15, -1),  # X10 Y0 turned 90: (0, 10), from (10, 5)
+    (0, 15, -1),
+    (0, 5, -1),  # G2 CR=10 to X0 Y10: (-10, 0)
+    (10, 5, -1),  # G3 back to the frame's origin
+    (10, 11, -1),  # ATRANS X5 along the turned X: origin (10, 10); X1 Y0 is (0, 1) from it
+    (9, 13, -1),  # G91 X2 Y1 turned: (-1, 2)
+    (10 + 4 * math.cos(math.radians(60)), 10 + 4 * math.sin(math.radians(60)), -1),  # AROT Z-30: 60 in all
+    (0, 0, -1),
+    (0, 0, 5),
+]
+
+
+@needs_rs274
+def test_a_rotated_frame_moves_as_siemens_rules_say(tmp_path):
+    tr = sn.translate((DATA / "rotation.mpf").read_bytes(), "rotation.mpf")
+    np.testing.assert_allclose(straight_ends(tr.data, tmp_path), np.array(ROTATION_ENDS, dtype=float), atol=1e-6)
+
+
+ROTATED_LOOP = """G17 G90 G0 X0 Y0 Z5
+TRANS X20
+AROT RPL=45
+G1 Z-1 F100
+R1 = 0
+WHILE R1 < 2
+  G1 X=10 + R1 * 5 Y0
+  G2 X=10 + R1 * 5 Y5 I0 J2.5
+  R1 = R1 + 1
+ENDWHILE
+ROT
+G0 Z5
+M30
+"""
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", ["rotation.mpf", "loop"])
+@pytest.mark.parametrize("field", ["shift", "linear"])
+def test_a_rotated_frame_is_written_back_in_its_own_coordinates(tmp_path, field, name):
+    """Corrected, the moves made in the turned frame are written in its coordinates (X Y both, I J
+    turned back), in place or (a loop) straight: read back, the program moves as the engine's
+    corrected straight program, and its frame lines are as written."""
+    data = (DATA / name).read_bytes() if name != "loop" else ROTATED_LOOP.encode()
+    f = fields.Shift((0.01, -0.02, 0.03)) if field == "shift" else linear
+    tr = sn.translate(data, name)
+    straight = nc.parse(tr.data).correct(f).data
+    if name == "loop":  # its lines run twice, corrected differently
+        with pytest.raises(sn.NeedsExpand):
+            sn.assemble(tr, straight)
+    text, _, how = sn.assemble(tr, straight, expand=True)
+    assert how == ("straight" if name == "loop" else "in place")
+    got = straight_ends(sn.translate(text).data, tmp_path)
+    np.testing.assert_allclose(got, straight_ends(straight, tmp_path), atol=1e-4)
+    lines = text.decode().splitlines()
+    frames = {"TRANS X10 Y5", "AROT RPL=90", "ATRANS X5", "AROT Z-30", "ROT"} if name != "loop" else {"AROT RPL=45"}
+    assert frames <= set(lines), lines
+    if name != "loop" and field == "shift":
+        # the G2 stays an arc, its radius as written; by hand, the shift (0.01, -0.02) in the frame
+        # turned 90 degrees is (-0.02, -0.01)
+        assert "G2 X-0.02 Y9.99 CR=10" in lines, lines
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("G0 X0 Y0 Z0\nROT X30\n", "only a rotation about Z"),
+        ("G0 X0 Y0 Z0\nAROT Y10\n", "only a rotation about Z"),
+        ("G0 X0 Y0 Z0\nG18\nROT RPL=30\n", "in G18"),
+        ("G0 X0 Y0 Z0\nTRANS RPL=30\n", "RPL= with TRANS"),
+        ("G0 X0 Y0 Z0\nROT Z30\nG18 G2 X1 Z1 CR=2\n", "its plane turns"),
+        ("G0 X0 Y0 Z0\nROT Z30\nG91 G1 X1\n", "SD42440"),
+        ("G0 Z0\nROT Z30\nG1 X1 F100\n", "position of X and Y"),
+    ],
+)
+def test_rotations_refused(text, says):
+    with pytest.raises(InputError, match=re.escape(says)):
+        sn.translate(text.encode())
+
+
 @needs_rs274
 def test_arcs_have_the_centres_siemens_rules_give(tmp_path):
     p = tmp_path / "arcs.ngc"
@@ -165,7 +250,9 @@ def test_int_variables_round_and_for_counts_to_its_end():
 @pytest.mark.parametrize(
     ("text", "line", "says"),
     [
-        ("G0 X0 Y0\nROT Z45\n", 2, "rotation"),
+        ("G0 X0 Y0\nROT X45\n", 2, "only a rotation about Z"),
+        ("G0 X0 Y0\nSCALE X2\n", 2, "scaling or mirroring"),
+        ("G0 X0 Y0\nAMIRROR X0\n", 2, "scaling or mirroring"),
         ("G1 X0 Y0 F100\nG41 X5\n", 2, "cutter radius compensation"),
         ("G1 X=R5 F100\n", 1, "R5 is read before the program sets it"),
         ("G1 X=$AA_IM[X] F100\n", 1, "system variable"),

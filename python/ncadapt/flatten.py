@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import rewrite
 from .errors import InputError
 from .rewrite import split_lines
 
@@ -54,7 +55,7 @@ _FUNCS = {
     "fix": math.floor,
     "fup": math.ceil,
     "ln": math.log,
-    "round": lambda x: float(math.floor(abs(x) + 0.5)) * (1.0 if x >= 0 else -1.0),
+    "round": rewrite.round_half_away,
     "sqrt": math.sqrt,
 }
 # binary operators by precedence, lowest first (LinuxCNC: ** > * / MOD > + - > comparisons > logic)
@@ -111,10 +112,7 @@ class Flat:
     fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
-class _Error(Exception):
-    def __init__(self, message: str, col: int = 0):
-        super().__init__(message)
-        self.message, self.col = message, col
+_Error = rewrite.LineError
 
 
 # ----------------------------------------------------------------------------------- reading lines
@@ -318,10 +316,7 @@ def _binary(op: str, a: float, b: float, at: int) -> float:
 
 
 def _fmt(v: float, letter: str) -> str:
-    if letter in "gm":
-        return f"{v:.4f}".rstrip("0").rstrip(".")
-    t = f"{v:.6f}".rstrip("0").rstrip(".")
-    return "0" if t in ("-0", "") else t
+    return rewrite.number(v, 4 if letter in "gm" else 6)
 
 
 # ----------------------------------------------------------------------------------- the program
@@ -528,7 +523,6 @@ class _FanucMachine:
     def __init__(self):
         self.levels: list[dict[int, float]] = [{}]
         self.common: dict[int, float] = {}
-        self.set_numbered = np.zeros(1, bool)  # (the machine's codes change no macro variable)
 
     def _store(self, ref, writing: bool) -> dict[int, float]:
         if not isinstance(ref, int):
@@ -861,8 +855,9 @@ class _Run:
         gs = [round(v * 10) for c, v in words if c == "g"]
         if any(g in (700, 710, 711, 720, 721) for g in gs):
             raise _Error("lathe cycles G70-G72 take their contour from the program's subroutines: not flattened")
-        if any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms):
+        if isinstance(mac, _Machine) and (any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms)):
             # probing, offsets, stored positions, tool data: the machine sets its parameters again
+            # (LinuxCNC's; the machine's codes change no Fanuc macro variable)
             mac.set_numbered[MACHINE_PARAMETERS:] = False
         if any(m in (98, 99) for m in ms):
             self.fixed.add(i)

@@ -228,13 +228,10 @@ def assemble(tr: Translation, corrected: bytes) -> tuple[bytes, int]:
     groups, changed = groups[1:], changed[1:]
     if not any(changed):
         return tr.source, 0
-    out = []
-    n = 0
-    for i, (body, eol) in enumerate(rewrite.lines_of(tr.source)):
+    repl = {}
+    for i, (body, _) in enumerate(rewrite.lines_of(tr.source)):
         if not changed[i]:
-            out.append(body + eol)
             continue
-        n += 1
         comment = body[body.index(";") :] if ";" in body else ""
         texts = _to_e(groups[i], tr.relative[i], tr.incremental[i], tr.base[i], tr.start[i])
         texts = _with_codes(texts, tr.code[i])
@@ -242,8 +239,8 @@ def assemble(tr: Translation, corrected: bytes) -> tuple[bytes, int]:
             texts[0] = f"{texts[0]} {tr.g92_e[i]}"
         if comment:
             texts[0] = f"{texts[0]} {comment}"
-        out += [t + (eol or "\n") for t in texts]
-    return "".join(out).encode("utf-8", "surrogateescape"), n
+        repl[i] = texts
+    return rewrite.splice(tr.source, repl), len(repl)
 
 
 def _with_codes(lines: list[str], code: str | None) -> list[str]:

@@ -299,7 +299,7 @@ def _written(c: Correction, out: Path, data: bytes, text: bytes, written: str, r
     n_in, n_out = _count_lines(data), _count_lines(text)
     c = dataclasses.replace(c, lines_in=n_in, lines_out=n_out, lines_added=max(0, n_out - n_in))
     expanded = {
-        "lines_in": _count_lines(data),
+        "lines_in": n_in,
         "blocks": blocks,
         "blocks_run": run,
         "kept": written == "as it is",
@@ -329,21 +329,17 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
     if not lines:
         text, written, n = data, "as it is", 0
     elif all(flat.runs[i] == 1 and not flat.fixed[i] for i in lines):
-        out_lines = []
-        for i, (body, eol) in enumerate(rewrite.lines_of(data)):
-            if i not in lines:
-                out_lines.append(body + eol)
-                continue
+        src = rewrite.lines_of(data)
+        repl = {}
+        for i, k in lines.items():
             # the line's indent, block delete and number stay; its words are the corrected block's
-            m = re.match(r"[ \t]*/?[ \t]*(?:[Nn][ \t]*\d+[ \t]*)?", body)
+            m = re.match(r"[ \t]*/?[ \t]*(?:[Nn][ \t]*\d+[ \t]*)?", src[i][0])
             head = m.group() if m else ""
-            g = groups[lines[i]]
-            first = g[0].strip()
+            first = groups[k][0].strip()
             if "/" in head and first.startswith("/"):
                 first = first[1:].lstrip()  # the line's own block delete is in its head
-            out_lines += [head + first + (eol or "\n")]
-            out_lines += [t.strip() + (eol or "\n") for t in g[1:]]
-        text, written, n = "".join(out_lines).encode("utf-8", "surrogateescape"), "in place", len(lines)
+            repl[i] = [head + first] + [t.strip() for t in groups[k][1:]]
+        text, written, n = rewrite.splice(data, repl), "in place", len(lines)
     else:
         text, written = "".join(t + "\n" for g in groups for t in g).encode("utf-8", "surrogateescape"), "straight"
         n = _count_lines(text)

@@ -7,11 +7,37 @@ corrects and leaves off the lines it adds after it; the engine's output so split
 of lines per straight line (:func:`groups`), and a straight line whose group is itself alone did
 not change. Where every changed line of the straight program comes from a line of the program
 that runs once, that line can be rewritten in place and every other line kept as written.
+
+It also holds what the programs' runners share: the error a line's reading raises
+(:class:`LineError`), the rounding of their controls (:func:`round_half_away`) and the way a
+straight line writes a number (:func:`number`).
 """
 
 from __future__ import annotations
 
+import math
 import re
+
+
+class LineError(Exception):
+    """Something wrong in the line being run, at column ``col`` of its code (1-based; 0 unknown):
+    the runner names the line."""
+
+    def __init__(self, message: str, col: int = 0):
+        super().__init__(message)
+        self.message, self.col = message, col
+
+
+def round_half_away(x: float) -> float:
+    """``x`` rounded to a whole number, halves away from zero (as the controls' ROUND)."""
+    return float(math.floor(abs(x) + 0.5)) * (1.0 if x >= 0 else -1.0)
+
+
+def number(v: float, decimals: int = 6) -> str:
+    """``v`` as a straight line writes it: ``decimals`` places, no trailing zeros, never ``-0``."""
+    t = f"{v:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if t in ("-0", "") else t
+
 
 _MARK = re.compile(rb"[ \t]*;@(\d+)[ \t]*$")
 
@@ -54,6 +80,15 @@ def split_lines(text: str) -> list[str]:
     if lines and lines[-1] == "":
         lines.pop()
     return [t[:-1] if t.endswith("\r") else t for t in lines]
+
+
+def splice(source: bytes, repl: dict[int, list[str]]) -> bytes:
+    """The program ``source`` with each line ``j`` of ``repl`` (0-based) replaced by the lines
+    ``repl[j]``, written with its line ending (LF where it has none); every other line as written."""
+    out = []
+    for j, (body, eol) in enumerate(lines_of(source)):
+        out += [t + (eol or "\n") for t in repl[j]] if j in repl else [body + eol]
+    return "".join(out).encode("utf-8", "surrogateescape")
 
 
 def lines_of(data: bytes) -> list[tuple[str, str]]:

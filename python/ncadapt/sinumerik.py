@@ -19,8 +19,10 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   by value, ``SAVE``; ended by ``RET``, ``M17`` or their end;
 - drilling cycles ``CYCLE81(RTP, RFP, SDIS, DP, DPR)`` and ``CYCLE82(…, DTB)`` at the position
   reached (G17 G90), run as G81/G82 from the retraction plane;
-- frames ``TRANS``/``ATRANS`` (translations; ``ROT``, ``SCALE``, ``MIRROR`` without axes reset
-  the frame; with axes they are refused);
+- frames ``TRANS``/``ATRANS`` (translations), ``ROT``/``AROT`` about Z (``Z…``, or ``RPL=`` in
+  G17: each move's X Y, and an arc's I J, turned in the straight program and turned back when it
+  is written); ``ROT``, ``SCALE``, ``MIRROR`` without axes reset the frame; scaling and mirroring
+  with axes are refused;
 - R parameters (``R1``, ``R[expr]``; one read before the program sets it is refused: its value is
   the machine's), ``DEF INT|REAL|BOOL`` variables, assignments, expressions (``+ - * / DIV MOD``,
   comparisons, ``AND OR XOR NOT``, ``SIN COS TAN ASIN ACOS ATAN2`` in degrees, ``SQRT ABS POT
@@ -39,7 +41,8 @@ cycles (``CYCLE83(…)``),
 splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), a ``CT`` whose direction is not known
 or along its chord, ``TURN=`` more
 than 0, polar coordinates (``AP= RP= G110 G111 G112``), ``AR=``, threads and tapping, cutter
-compensation ``G41``/``G42``, rotations, scaling and mirroring, ``DIAMON``, system variables
+compensation ``G41``/``G42``, rotations about X or Y (and arcs in G18/G19 under a rotation about
+Z), scaling and mirroring, ``DIAMON``, system variables
 (``$…``), other axes, a change of work system after a move, an arc without a centre or radius,
 a CIP moving the axis normal to its plane, an incremental value on an axis whose frame changed
 since its last absolute value (setting data SD42440 decides whether the change is travelled), a
@@ -143,7 +146,7 @@ _FUNCS = {
     "ABS": abs,
     "POT": lambda x: x * x,
     "TRUNC": lambda x: float(math.trunc(x)),
-    "ROUND": lambda x: float(math.floor(abs(x) + 0.5)) * (1.0 if x >= 0 else -1.0),
+    "ROUND": rewrite.round_half_away,
     "MINVAL": min,
     "MAXVAL": max,
     "LN": math.log,
@@ -157,10 +160,7 @@ _LEVELS = (("==", "<>", "<", ">", "<=", ">="), ("OR",), ("XOR",), ("AND",), ("+"
 RELATIVE_EQUAL = 1e-12
 
 
-class _Error(Exception):
-    def __init__(self, message: str, col: int = 0):
-        super().__init__(message)
-        self.message, self.col = message, col
+_Error = rewrite.LineError
 
 
 @dataclass
@@ -192,6 +192,9 @@ class Item:
     shifted: frozenset = frozenset()
     #: ``push``/``pop``: a subprogram's call and return (``pop_save``: one with SAVE)
     mark: str | None = None
+    #: the frame's rotation about Z (degrees) the move is made in: its straight words are turned
+    #: by it, and turned back when it is written
+    rot: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -294,7 +297,7 @@ class _Machine:
         if not math.isfinite(v):
             raise _Error(f"{target[1]}: the value is out of range", col)
         if var[0] == "INT":
-            v = float(math.floor(abs(v) + 0.5)) * (1.0 if v >= 0 else -1.0)
+            v = rewrite.round_half_away(v)
             if abs(v) > INT_MAX:
                 raise _Error(f"{target[1]} = {v:g}: beyond an INT's range (±{INT_MAX})", col)
         elif var[0] == "BOOL":
@@ -485,6 +488,16 @@ def _match(lines: list[_Line], src: str) -> dict[int, tuple[int, ...]]:
     return out
 
 
+def _targets(lines: list[_Line]) -> dict[str, list[int]]:
+    """Where a jump may land: the lines of each label and block number (``N90``), in order."""
+    out: dict[str, list[int]] = {}
+    for j, ln in enumerate(lines):
+        keys = {ln.label, None if ln.number is None else f"N{ln.number}"} - {None}
+        for key in keys:
+            out.setdefault(key, []).append(j)  # type: ignore[arg-type]
+    return out
+
+
 @dataclass
 class _State:
     """What the control holds between blocks, as far as the path goes."""
@@ -496,6 +509,7 @@ class _State:
     moved: bool = False
     wcs: int | None = None
     trans: dict = field(default_factory=lambda: dict.fromkeys(_AXES, 0.0))
+    rot: float = 0.0  # the programmable frame's rotation about Z, degrees, after its translation
     pos: dict = field(default_factory=lambda: dict.fromkeys(_AXES))  # program coordinates; None unknown
     #: a drilling cycle ran since the last move (the straight program's G80 left no motion mode)
     after_cycle: bool = False
@@ -506,9 +520,7 @@ class _State:
     shifted: set = field(default_factory=set)
 
 
-def _fmt(v: float) -> str:
-    t = f"{v:.6f}".rstrip("0").rstrip(".")
-    return "0" if t in ("-0", "") else t
+_fmt = rewrite.number
 
 
 @dataclass
@@ -526,6 +538,7 @@ class _Block:
     end: bool = False
     end_code: int = 0
     call: str | None = None  # an L123 subprogram call
+    rpl: float | None = None  # ROT/AROT RPL=: a rotation in the plane
 
     def put(self, name: str, v: float, how: str, col: int, span: tuple[int, int]) -> None:
         if not math.isfinite(v):
@@ -547,7 +560,7 @@ class _Run:
         #: where a called subprogram is looked for, in order; and the files read, by name
         self.folders = folders
         self.read: dict[str, str] = {}
-        #: the calls of subprograms in other files: (the caller's lines, name, flow, labels and FOR
+        #: the calls of subprograms in other files: (the caller's lines, name, flow, jump targets and FOR
         #: ends, the line to return to, its variables, what SAVE restores, the subprogram's name)
         self.calls: list[tuple] = []
         self.flow = _match(lines, src)
@@ -555,10 +568,7 @@ class _Run:
         self.s = _State()
         self.items: list[Item] = []
         self.runs = np.zeros(len(lines), dtype=np.int64)
-        self.labels: dict[str, int] = {}
-        for i, ln in enumerate(lines):
-            if ln.label is not None:
-                self.labels.setdefault(ln.label, i)
+        self.targets = _targets(lines)
         self.for_end: dict[int, float] = {}
 
     # --- flow
@@ -686,11 +696,7 @@ class _Run:
             t.i += 1
         if alone:
             self.end(t)
-        found = [
-            j
-            for j, ln in enumerate(self.lines)
-            if ln.label == dest or (dest.startswith("N") and dest[1:].isdigit() and ln.number == int(dest[1:]))
-        ]
+        found = self.targets.get(f"N{int(dest[1:])}" if dest[1:].isdigit() and dest[0] == "N" else dest, [])
         fwd = [j for j in found if j > i]
         back = [j for j in found if j <= i]
         if kw == "GOTOF":
@@ -943,15 +949,16 @@ class _Run:
             v = args[k] if k < len(args) else None
             if v is not None:
                 self.m.set(("V", pname), v, col)
-        snapshot = (self.s.mode, self.s.plane, self.s.absolute, self.s.inch, dict(self.s.trans)) if save else None
-        self.calls.append((self.lines, self.src, self.flow, self.labels, self.for_end, i + 1, caller, snapshot, name))
+        snapshot = (
+            (self.s.mode, self.s.plane, self.s.absolute, self.s.inch, (dict(self.s.trans), self.s.rot))
+            if save
+            else None
+        )
+        self.calls.append((self.lines, self.src, self.flow, self.targets, self.for_end, i + 1, caller, snapshot, name))
         self.items.append(Item(i, "state", "", "", sub=name, mark="push"))
         self.lines, self.src = lines, str(path)
         self.flow = _match(lines, str(path))
-        self.labels = {}
-        for k, ln in enumerate(lines):
-            if ln.label is not None:
-                self.labels.setdefault(ln.label, k)
+        self.targets = _targets(lines)
         self.for_end = {}
         return 0 if proc is None else proc + 1
 
@@ -1014,10 +1021,10 @@ class _Run:
     def leave(self) -> int:
         """Return from a subprogram (RET, M17, its end): the caller's line after the call; with
         SAVE, the caller's motion mode, plane and G90/G91 again."""
-        lines, src, flow, labels, for_end, back, caller, snapshot, name = self.calls.pop()
+        lines, src, flow, targets, for_end, back, caller, snapshot, name = self.calls.pop()
         if snapshot is not None:
             mode, plane, absolute, inch, trans = snapshot
-            if trans != self.s.trans or inch != self.s.inch:
+            if trans != (self.s.trans, self.s.rot) or inch != self.s.inch:
                 raise _Error(
                     f"{name} (SAVE) changes a frame or the units: what the control gives back is not followed", 1
                 )
@@ -1026,7 +1033,7 @@ class _Run:
             self.items.append(Item(0, "state", "G90" if absolute else "G91", "G90" if absolute else "G91"))
             self.s.after_cycle = mode is not None  # the next move names the mode given back
         self.items.append(Item(0, "state", "", "", mark="pop_save" if snapshot is not None else "pop"))
-        self.lines, self.src, self.flow, self.labels, self.for_end = lines, src, flow, labels, for_end
+        self.lines, self.src, self.flow, self.targets, self.for_end = lines, src, flow, targets, for_end
         self.m.vars = caller
         return back
 
@@ -1048,6 +1055,11 @@ class _Run:
             else:
                 v = _expr(t, self.m)
             b.put(name, v, how, col, (c0, t.toks[t.i - 1][3]))
+            return
+        if name == "RPL":
+            if b.rpl is not None:
+                raise _Error("RPL is written twice in the block", col)
+            b.rpl = _expr(t, self.m)
             return
         if name in ("F", "S"):
             v = _expr(t, self.m)
@@ -1209,6 +1221,8 @@ class _Run:
         else:
             code, tail = self.circle(mode, ends, b.arc, col0)
             words = [code]
+        if s.rot != 0.0 and ("X" in written or "Y" in written or tail):
+            written, tail = self.turned(mode, written, ends, tail, col0)
         words += [f"{a}{_fmt(v)}" for a, v in written.items()] + tail
         s.moved, s.after_cycle = True, False
         s.pos.update(ends)
@@ -1224,8 +1238,29 @@ class _Run:
                 explicit=b.motion is not None,
                 incremental=not s.absolute,
                 shifted=shifted_before,
+                rot=s.rot,
             )
         )
+
+    def turned(self, mode: str, written: dict, ends: dict, tail: list[str], col: int) -> tuple[dict, list[str]]:
+        """A move's straight words under a rotation about Z: X and Y (both) and an arc's I J
+        turned into the unrotated frame (G52's)."""
+        s = self.s
+        if mode not in ("G0", "G1") and s.plane != 17:
+            raise _Error(f"an arc in G{s.plane} under a rotation about Z: its plane turns out of G{s.plane}", col)
+        if s.absolute:
+            x, y = ends.get("X", s.pos["X"]), ends.get("Y", s.pos["Y"])
+            if x is None or y is None:
+                raise _Error("a move under a rotation needs the position of X and Y, which is not known here", col)
+        else:
+            x, y = written.get("X", 0.0), written.get("Y", 0.0)
+        x, y = _turn(x, y, s.rot)
+        out = {"X": x, "Y": y} | {a: v for a, v in written.items() if a not in ("X", "Y")}
+        centre = dict((w[0], float(w[1:])) for w in tail if w[0] in "IJ")
+        if centre:
+            i, j = _turn(centre.get("I", 0.0), centre.get("J", 0.0), s.rot)
+            tail = [f"I{_fmt(i)}", f"J{_fmt(j)}"] + [w for w in tail if w[0] not in "IJ"]
+        return out, tail
 
     def circle(self, mode: str, ends: dict, arc: dict, col: int) -> tuple[str, list[str]]:
         """The arc's direction (``G2``/``G3``) and its centre (incremental) or radius words."""
@@ -1341,31 +1376,74 @@ class _Run:
         self.items.append(Item(i, "state", f"G4 P{sn[1:]}" if sn.startswith("F") else "", f"G4 {sn}"))
 
     def set_frame(self, b: _Block, i: int) -> int:
+        """TRANS/ATRANS (translations) and ROT/AROT about Z (``ROT Z…``, ``ROT RPL=…`` in G17):
+        TRANS and ROT replace the programmable frame, ATRANS and AROT add to it in the frame in
+        force (an ATRANS after a rotation moves along the turned axes). The straight program
+        holds the translation as G52 and each move's X Y turned by the rotation."""
         col = self.lines[i].code_at + 1
-        kind, axes = b.frame or "TRANS", b.axes
+        kind, axes, s = b.frame or "TRANS", b.axes, self.s
         if b.motion is not None or b.pre or b.post or b.arc or b.machine:
             raise _Error(f"{kind} with other words: a frame is programmed in a block of its own", col)
-        if kind in ("ROT", "SCALE", "MIRROR") and not axes:
+        if b.rpl is not None and kind not in ("ROT", "AROT"):
+            raise _Error(f"RPL= with {kind}: a rotation in the plane is programmed with ROT or AROT", col)
+        if kind in ("ROT", "SCALE", "MIRROR") and not axes and b.rpl is None:
             kind = "TRANS"  # without axes they take the whole programmable frame away
-        if kind not in ("TRANS", "ATRANS"):
+        new, rot = dict.fromkeys(_AXES, 0.0) if kind in ("TRANS", "ROT") else dict(s.trans), s.rot
+        if kind in ("ROT", "AROT"):
+            if b.rpl is not None and axes:
+                raise _Error(f"{kind} with RPL= and axes", col)
+            if b.rpl is None and (set(axes) != {"Z"} or axes["Z"][1]):
+                other = ", ".join(a for a in axes if a != "Z") or f"Z={axes['Z'][1]}(…)"
+                raise _Error(f"{kind} {other}: only a rotation about Z is followed (the plane would tilt)", col)
+            if b.rpl is not None and s.plane != 17:
+                raise _Error(f"{kind} RPL= in G{s.plane}: only a rotation about Z (in G17) is followed", col)
+            angle = b.rpl if b.rpl is not None else axes["Z"][0]
+            rot = angle if kind == "ROT" else rot + angle
+        elif kind in ("TRANS", "ATRANS"):
+            if kind == "TRANS":
+                rot = 0.0
+            step = {}
+            for a, (v, how, _) in axes.items():
+                if how or a not in _LINEAR:
+                    raise _Error(
+                        f"{kind} {a}{'=' + how + '(…)' if how else ''} is not read: translations of X, Y, Z are", col
+                    )
+                step[a] = v
+            if kind == "ATRANS":  # along the axes of the frame in force
+                step["X"], step["Y"] = _turn(step.get("X", 0.0), step.get("Y", 0.0), s.rot)
+            for a, v in step.items():
+                new[a] += v
+        else:
             raise _Error(f"{kind} ({'a rotation' if 'ROT' in kind else 'scaling or mirroring'}) is not followed", col)
-        new = dict.fromkeys(_AXES, 0.0) if kind == "TRANS" else dict(self.s.trans)
-        for a, (v, how, _) in axes.items():
-            if how or a not in _LINEAR:
-                raise _Error(
-                    f"{kind} {a}{'=' + how + '(…)' if how else ''} is not read: translations of X, Y, Z are", col
-                )
-            new[a] = new[a] + v if kind == "ATRANS" else v
+        # the position in the new frame: the same place
+        base: dict[str, float | None] = {a: None if s.pos[a] is None else s.pos[a] + s.trans[a] for a in _AXES}
+        if s.pos["X"] is not None and s.pos["Y"] is not None:
+            dx, dy = _turn(s.pos["X"], s.pos["Y"], s.rot)
+            base["X"], base["Y"] = dx + s.trans["X"], dy + s.trans["Y"]
         for a in _AXES:
-            if new[a] != self.s.trans[a]:
-                self.s.shifted.add(a)
-            if self.s.pos[a] is not None:
-                self.s.pos[a] -= new[a] - self.s.trans[a]
-        self.s.trans = new
+            if new[a] != s.trans[a] or (rot != s.rot and a in ("X", "Y")):
+                s.shifted.add(a)
+            here = base[a]
+            if here is not None:
+                s.pos[a] = here - new[a]
+        if s.pos["X"] is not None and s.pos["Y"] is not None:
+            s.pos["X"], s.pos["Y"] = _turn(s.pos["X"], s.pos["Y"], -rot)
+        elif rot != 0.0 or s.rot != 0.0:
+            s.pos["X"] = s.pos["Y"] = None  # one of them not known: turned, neither is
+        s.trans, s.rot = new, rot
         words = " ".join(f"{a}{_fmt(new[a])}" for a in _LINEAR)
-        sn = (b.frame or kind) + "".join(f" {a}{_fmt(v)}" for a, (v, _, _) in axes.items())
+        given = "".join(f" {a}{_fmt(v)}" for a, (v, _, _) in axes.items())
+        sn = (b.frame or kind) + (given if b.rpl is None else f" RPL={_fmt(b.rpl)}")
         self.items.append(Item(i, "state", f"G52 {words}", sn))
         return i + 1
+
+
+def _turn(x: float, y: float, degrees: float) -> tuple[float, float]:
+    """(x, y) turned about the origin by ``degrees`` (counter-clockwise seen from +Z)."""
+    if degrees == 0.0:
+        return x, y
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return c * x - s * y, s * x + c * y
 
 
 def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | os.PathLike] = ()) -> Translation:
@@ -1456,6 +1534,8 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
     :class:`NeedsExpand` is raised without it."""
     groups = rewrite.groups(corrected, len(tr.items))
     changed = rewrite.changed(groups, [it.rs for it in tr.items])
+    if any(it.rot for it in tr.items):
+        groups = _unturned(tr, groups)
     for k in map(int, np.flatnonzero(changed)):
         it = tr.items[k]
         if it.kind == "state" and it.rs.startswith("G0 Z") and k + 1 < len(tr.items) and tr.items[k + 1].cycle:
@@ -1540,18 +1620,82 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
             if mode is not None and mode != it.mode:
                 need.setdefault(j, set()).add(it.mode)
             mode = it.mode
+    repl = dict(rewritten)
+    for j, modes in need.items():
+        if len(modes) > 1:
+            raise NeedsExpand(j + 1, int(tr.runs[j]))
+        body = src[j][0]
+        at = _code_start(body)
+        repl[j] = [body[:at] + next(iter(modes)) + " " + body[at:]]
+    return rewrite.splice(tr.source, repl), len(rewritten), "in place"
+
+
+_WORD = re.compile(r"(?<![A-Z0-9.])([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
+
+
+def _unturned(tr: Translation, groups: list[list[str]]) -> list[list[str]]:
+    """``groups`` with the lines of the moves made under a rotation about Z written in the
+    frame's own coordinates: X Y (an absolute line's missing one from where the straight
+    program is) and I J turned back. The straight program is followed line by line for that."""
+    pos: dict[str, float | None] = {"X": 0.0, "Y": 0.0}  # the straight program's, from G52's origin
+    off = {"X": 0.0, "Y": 0.0}
+    absolute = True
     out = []
-    for j, (body, eol) in enumerate(src):
-        if j in rewritten:
-            out += [t + (eol or "\n") for t in rewritten[j]]
-        elif j in need:
-            if len(need[j]) > 1:
-                raise NeedsExpand(j + 1, int(tr.runs[j]))
-            at = _code_start(body)
-            out.append(body[:at] + next(iter(need[j])) + " " + body[at:] + eol)
-        else:
-            out.append(body + eol)
-    return "".join(out).encode("utf-8", "surrogateescape"), len(rewritten), "in place"
+    for g, it in zip(groups, tr.items, strict=True):
+        new = []
+        for line in g:
+            code = line.split(";")[0]
+            words = _WORD.findall(code)
+            gs = {float(v) for a, v in words if a == "G"}
+            absolute = False if 91 in gs else True if 90 in gs else absolute
+            named = {a: float(v) for a, v in words if a in "XYIJ"}
+            if 52 in gs:
+                for a in off:
+                    v = named.get(a, 0.0)
+                    p = pos[a]
+                    pos[a] = None if p is None else p + off[a] - v
+                    off[a] = v
+                new.append(line)
+                continue
+            if 53 in gs or 28 in gs or 30 in gs:
+                for a in ("X", "Y"):
+                    if a in named or 53 not in gs:
+                        pos[a] = None
+                new.append(line)
+                continue
+            p0 = dict(pos)
+            for a in ("X", "Y"):
+                if a in named:
+                    pos[a] = named[a] if absolute else (None if p0[a] is None else p0[a] + named[a])  # type: ignore[operator]
+            if it.rot == 0.0 or it.kind != "motion" or not ({"X", "Y", "I", "J"} & set(named)):
+                new.append(line)
+                continue
+            if absolute:
+                if pos["X"] is None or pos["Y"] is None:
+                    raise Unwritable(it.line + 1, "a move under a rotation from a position the program does not tell")
+                x, y = _turn(pos["X"], pos["Y"], -it.rot)
+            else:
+                x, y = _turn(named.get("X", 0.0), named.get("Y", 0.0), -it.rot)
+            turned = {"X": x, "Y": y}
+            if "I" in named or "J" in named:
+                turned["I"], turned["J"] = _turn(named.get("I", 0.0), named.get("J", 0.0), -it.rot)
+            # the frame's words where the straight program's were: X Y at the first of them, I J likewise
+            text, done = [], set()
+            last = 0
+            for m in _WORD.finditer(code):
+                a = m.group(1)
+                if a not in turned:
+                    continue
+                text.append(code[last : m.start()])
+                pair = ("X", "Y") if a in "XY" else ("I", "J")
+                if pair[0] not in done:
+                    text.append(" ".join(f"{b}{_fmt(turned[b])}" for b in pair))
+                    done.add(pair[0])
+                last = m.end()
+            text.append(code[last:])
+            new.append(re.sub(r"[ \t]{2,}", " ", "".join(text)).strip() + line[len(code) :])
+        out.append(new)
+    return out
 
 
 def _code(line: str) -> str:

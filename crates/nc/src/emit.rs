@@ -66,6 +66,11 @@ impl Format {
         }
     }
 
+    /// [`Fmt::half`] in mm.
+    pub fn half_in_mm(&self, inch: bool) -> f64 {
+        self.half(inch) * if inch { MM_PER_INCH } else { 1.0 }
+    }
+
     /// Write `v` in the program's style and return the value the written text stands for.
     #[inline]
     pub fn number(&self, v: f64, inch: bool, out: &mut Vec<u8>) -> f64 {
@@ -634,7 +639,7 @@ impl<'a> Emitter<'a> {
         // polar words (LinuxCNC's @ ^) that take the current point (G91, or one of them left
         // out) go elsewhere from where the output is: written as X and Y to the program's end
         if rec.motion != Motion::Other && words.iter().any(is_polar) {
-            let half_mm = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
+            let half_mm = self.fmt.half_in_mm(rec.inch);
             let p = self.polar_end(li, rec);
             if (0..2).any(|a| (p[a] - rec.end[a]).abs() >= half_mm)
                 && (0..2).all(|a| rec.end[a].is_finite() && self.st.epos[a].is_finite())
@@ -753,7 +758,7 @@ impl<'a> Emitter<'a> {
         let uniform = disp
             .chunks_exact(3)
             .all(|d| (0..3).all(|k| (d[k] - d0[k]).abs() <= 1e-9));
-        let half_mm = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
+        let half_mm = self.fmt.half_in_mm(rec.inch);
         let target_at = |k: usize, t: f64| -> [f64; NAXES] {
             // XYZ corrected, the axes the block names interpolated, the others where they are
             let mut p = epos0;
@@ -1029,7 +1034,7 @@ impl<'a> Emitter<'a> {
         // length L turns by up to 2√2·half/L, which moves the offset end the controller starts
         // the next piece from by r times that: pieces shorter than `shortest` would move the
         // tool centre by more than the chord tolerance
-        let half = self.fmt.half(rec.inch) * if rec.inch { MM_PER_INCH } else { 1.0 };
+        let half = self.fmt.half_in_mm(rec.inch);
         let shortest = c.radius * 2.0 * std::f64::consts::SQRT_2 * half / self.st.arc_tol;
         if rec.motion.is_arc() {
             // the chords' lengths (in the plane), from the arc's start
