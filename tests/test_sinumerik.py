@@ -183,6 +183,50 @@ def test_a_rotated_frame_is_written_back_in_its_own_coordinates(tmp_path, field,
         assert "G2 X-0.02 Y9.99 CR=10" in lines, lines
 
 
+ROTATION_REVIEW = {
+    # a motion code alone, where the engine brings the tool to the corrected start
+    "motion code": ("G17 G90 G0 X0 Y0 Z5\nROT Z90\nG0 X10 Y0 Z-1\nG1 F100\nG1 X20 Y0\nG0 Z5\nM30\n", None),
+    # a unit change under a rotation: the straight program's numbers change unit
+    "inch": ("G71 G17 G90 G0 X0 Y0 Z5\nAROT Z90\nG1 X5 Y-10 F100\nG70\nG1 Z-0.04\nG0 Z0.2\nM30\n", None),
+    # G91 after a rotation, on the axis set absolute since: Y, which it does not name, stays unwritten
+    "g91": ("G17 G90 G0 X0 Y0 Z5\nROT Z30\nG1 Z-1 F100\nG1 X10\nG91 G1 X5\nG90 G0 Z5\nM30\n", None),
+}
+
+
+def _dx_by_z(q):
+    d = np.zeros_like(q)
+    d[:, 0], d[:, 2] = 0.01 * q[:, 2], 0.02
+    return d
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", sorted(ROTATION_REVIEW))
+def test_rotations_found_in_review_are_written_back_right(tmp_path, name):
+    """Read back, the written program moves as the engine's corrected straight program."""
+    text, _ = ROTATION_REVIEW[name]
+    p = tmp_path / "p.mpf"
+    p.write_text(text)
+    f = fields.Shift((0.1, 0.2, 0.05)) if name == "motion code" else _dx_by_z
+    c = correct(p, tmp_path / "o.mpf", f)
+    assert c.expanded["written"] == "in place"
+    straight = nc.parse(sn.translate(p.read_bytes()).data).correct(f).data
+    got = straight_ends(sn.translate((tmp_path / "o.mpf").read_bytes()).data, tmp_path)
+    # (rs274 prints 4 decimals of the program's unit: 2.54 µm in inches)
+    np.testing.assert_allclose(got, straight_ends(straight, tmp_path), atol=2e-4 if name != "inch" else 2.6e-3)
+    if name == "motion code":  # by hand: the shift (0.1, 0.2) turned back 90 degrees is (0.2, -0.1)
+        assert (tmp_path / "o.mpf").read_text().splitlines()[3] == "G1 X10.2 Y-0.1 Z-0.95 F100"
+    if name == "inch":  # Y (5 mm) in inches, turned to the frame's X
+        assert (tmp_path / "o.mpf").read_text().splitlines()[5] == "G1 Z-0.03921 X0.19685 Y-0.3933"
+
+
+@needs_rs274
+def test_a_tangent_is_turned_with_the_frame(tmp_path):
+    """CT after AROT Z90: the move before it heads +X (machine), the CT ends at machine (20, 10)
+    (frame X10 Y-20 turned 90): by Siemens' rule a G3 about machine (10, 10)."""
+    tr = sn.translate(b"G17 G90 G0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X10 Y0\nAROT Z90\nCT X10 Y-20\nM30\n")
+    assert [it.rs for it in tr.items if it.line == 4] == ["G3 X20 Y10 I0 J10"]
+
+
 @pytest.mark.parametrize(
     ("text", "says"),
     [
@@ -193,6 +237,15 @@ def test_a_rotated_frame_is_written_back_in_its_own_coordinates(tmp_path, field,
         ("G0 X0 Y0 Z0\nROT Z30\nG18 G2 X1 Z1 CR=2\n", "its plane turns"),
         ("G0 X0 Y0 Z0\nROT Z30\nG91 G1 X1\n", "SD42440"),
         ("G0 Z0\nROT Z30\nG1 X1 F100\n", "position of X and Y"),
+        # from review
+        ("G0 X0 Y0 Z5\nROT Z30 TRANS X5\n", "a block of its own"),
+        ("G0 X0 Y0 Z5\nROT Z90\nG0 X10 Y0\nSUPA G0 Y20\nG1 Y5 F100\n", "position of X and Y"),
+        ("G0 X0 Y0 Z5\nTRANS X100\nAROT Z90\nG1 X0 Y0 F100\nATRANS X5\nG91 G1 X3\n", "SD42440"),
+        ("G0 X0 Y0 Z5\nAROT\n", "without an angle"),
+        ("G0 X0 Y0 Z5\nROT RPL=1EX400\n", "out of range"),
+        ("G0 X0 Y0 Z5\nAROT Z=1EX308\nAROT Z=1EX308\n", "out of range"),
+        ("G0 X0 Y0 Z5\nATRANS X=1EX308\n", "out of range"),
+        ("G0 X0 Y0 Z5\nG1 X10 Y0 RPL=30 F100\n", "RPL= without ROT or AROT"),
     ],
 )
 def test_rotations_refused(text, says):

@@ -66,7 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from . import rewrite
-from .constants import MM_PER_INCH
+from .constants import COORD_MAX, MM_PER_INCH
 from .errors import InputError
 
 #: Most blocks a program may run: a loop that runs more is taken as one that does not end.
@@ -790,6 +790,10 @@ class _Run:
             elif text == "SUPA":
                 b.machine = text
             elif text in _FRAMES:
+                if b.frame is not None:
+                    raise _Error(
+                        f"{b.frame} and {text} in one block: each frame instruction is a block of its own", col
+                    )
                 b.frame = text
             elif text in _COPY_WORDS:
                 b.pre.append(("", text))
@@ -806,6 +810,8 @@ class _Run:
                 raise _Error(f"'{text}' is not read", col)
         if b.frame is not None:
             return self.set_frame(b, i)
+        if b.rpl is not None:
+            raise _Error("RPL= without ROT or AROT", at + 1)
         if b.dwell:
             self.dwell(b, i)
             return i + 1
@@ -821,7 +827,7 @@ class _Run:
                 raise _Error(f"{b.motion[0]} without an end point", at + b.motion[1][0] + 1)
             # a motion code alone: the engine may bring the tool to the corrected height there
             span = (at + b.motion[1][0], at + b.motion[1][1])
-            self.items.append(Item(i, "motion", b.motion[0], None, (span,), b.motion[0], explicit=True))
+            self.items.append(Item(i, "motion", b.motion[0], None, (span,), b.motion[0], explicit=True, rot=self.s.rot))
             self.s.after_cycle = False
         elif b.machine is not None:
             raise _Error(f"{b.machine} without a move", at + 1)
@@ -1201,6 +1207,8 @@ class _Run:
             self.items.append(Item(i, "motion", f"G53 {mode} {moves}", None, (), mode, b.machine))
             for a in b.axes:
                 s.pos[a] = None
+            if s.rot != 0.0 and {"X", "Y"} & set(b.axes):  # each frame coordinate is both machine axes'
+                s.pos["X"] = s.pos["Y"] = None
             s.tangent = None
             return
         shifted_before = frozenset(s.shifted)
@@ -1392,6 +1400,8 @@ class _Run:
         if kind in ("ROT", "AROT"):
             if b.rpl is not None and axes:
                 raise _Error(f"{kind} with RPL= and axes", col)
+            if b.rpl is None and not axes:
+                raise _Error(f"{kind} without an angle", col)
             if b.rpl is None and (set(axes) != {"Z"} or axes["Z"][1]):
                 other = ", ".join(a for a in axes if a != "Z") or f"Z={axes['Z'][1]}(…)"
                 raise _Error(f"{kind} {other}: only a rotation about Z is followed (the plane would tilt)", col)
@@ -1399,6 +1409,8 @@ class _Run:
                 raise _Error(f"{kind} RPL= in G{s.plane}: only a rotation about Z (in G17) is followed", col)
             angle = b.rpl if b.rpl is not None else axes["Z"][0]
             rot = angle if kind == "ROT" else rot + angle
+            if not (math.isfinite(rot) and abs(rot) <= 1e6):
+                raise _Error(f"{kind}: the angle {rot:g} is out of range", col)
         elif kind in ("TRANS", "ATRANS"):
             if kind == "TRANS":
                 rot = 0.0
@@ -1413,6 +1425,8 @@ class _Run:
                 step["X"], step["Y"] = _turn(step.get("X", 0.0), step.get("Y", 0.0), s.rot)
             for a, v in step.items():
                 new[a] += v
+                if not abs(new[a]) <= COORD_MAX:
+                    raise _Error(f"{kind}: the translation of {a} ({new[a]:g}) is out of range", col)
         else:
             raise _Error(f"{kind} ({'a rotation' if 'ROT' in kind else 'scaling or mirroring'}) is not followed", col)
         # the position in the new frame: the same place
@@ -1420,8 +1434,13 @@ class _Run:
         if s.pos["X"] is not None and s.pos["Y"] is not None:
             dx, dy = _turn(s.pos["X"], s.pos["Y"], s.rot)
             base["X"], base["Y"] = dx + s.trans["X"], dy + s.trans["Y"]
+        # the axes whose frame changed (SD42440): under a rotation a frame axis is both machine
+        # axes, so X and Y change together
+        turned = rot != s.rot or (
+            (rot != 0.0 or s.rot != 0.0) and any(abs(new[a] - s.trans[a]) > 1e-9 for a in ("X", "Y"))
+        )
         for a in _AXES:
-            if new[a] != s.trans[a] or (rot != s.rot and a in ("X", "Y")):
+            if abs(new[a] - s.trans[a]) > 1e-9 or (turned and a in ("X", "Y")):
                 s.shifted.add(a)
             here = base[a]
             if here is not None:
@@ -1430,6 +1449,9 @@ class _Run:
             s.pos["X"], s.pos["Y"] = _turn(s.pos["X"], s.pos["Y"], -rot)
         elif rot != 0.0 or s.rot != 0.0:
             s.pos["X"] = s.pos["Y"] = None  # one of them not known: turned, neither is
+        if s.tangent is not None and rot != s.rot:  # (kept in the frame's coordinates)
+            tx, ty = _turn(s.tangent[0], s.tangent[1], s.rot - rot)
+            s.tangent = (tx, ty, s.tangent[2])
         s.trans, s.rot = new, rot
         words = " ".join(f"{a}{_fmt(new[a])}" for a in _LINEAR)
         given = "".join(f" {a}{_fmt(v)}" for a, (v, _, _) in axes.items())
@@ -1639,7 +1661,7 @@ def _unturned(tr: Translation, groups: list[list[str]]) -> list[list[str]]:
     program is) and I J turned back. The straight program is followed line by line for that."""
     pos: dict[str, float | None] = {"X": 0.0, "Y": 0.0}  # the straight program's, from G52's origin
     off = {"X": 0.0, "Y": 0.0}
-    absolute = True
+    absolute, inch = True, False
     out = []
     for g, it in zip(groups, tr.items, strict=True):
         new = []
@@ -1648,6 +1670,11 @@ def _unturned(tr: Translation, groups: list[list[str]]) -> list[list[str]]:
             words = _WORD.findall(code)
             gs = {float(v) for a, v in words if a == "G"}
             absolute = False if 91 in gs else True if 90 in gs else absolute
+            k = 1.0 / MM_PER_INCH if 20 in gs and not inch else MM_PER_INCH if 21 in gs and inch else 1.0
+            if k != 1.0:  # a change of units: the straight program's numbers are the new unit's
+                pos = {a: None if v is None else v * k for a, v in pos.items()}
+                off = {a: v * k for a, v in off.items()}
+            inch = True if 20 in gs else False if 21 in gs else inch
             named = {a: float(v) for a, v in words if a in "XYIJ"}
             if 52 in gs:
                 for a in off:
@@ -1677,6 +1704,8 @@ def _unturned(tr: Translation, groups: list[list[str]]) -> list[list[str]]:
             else:
                 x, y = _turn(named.get("X", 0.0), named.get("Y", 0.0), -it.rot)
             turned = {"X": x, "Y": y}
+            if not absolute:  # an increment of nothing is not written (its axis may not take one)
+                turned = {a: v for a, v in turned.items() if abs(v) > 1e-9} or {"X": 0.0}
             if "I" in named or "J" in named:
                 turned["I"], turned["J"] = _turn(named.get("I", 0.0), named.get("J", 0.0), -it.rot)
             # the frame's words where the straight program's were: X Y at the first of them, I J likewise
@@ -1684,12 +1713,12 @@ def _unturned(tr: Translation, groups: list[list[str]]) -> list[list[str]]:
             last = 0
             for m in _WORD.finditer(code):
                 a = m.group(1)
-                if a not in turned:
+                if a not in "XYIJ":
                     continue
                 text.append(code[last : m.start()])
                 pair = ("X", "Y") if a in "XY" else ("I", "J")
                 if pair[0] not in done:
-                    text.append(" ".join(f"{b}{_fmt(turned[b])}" for b in pair))
+                    text.append(" ".join(f"{b}{_fmt(turned[b])}" for b in pair if b in turned))
                     done.add(pair[0])
                 last = m.end()
             text.append(code[last:])
