@@ -510,3 +510,36 @@ def test_block_delete_stays_on_flat_and_rewritten_lines(tmp_path):
     nc.correct_file(src, tmp_path / "o.ngc", _slope, expand=True)
     text = (tmp_path / "o.ngc").read_text()
     assert text.splitlines()[3].startswith("/G1 X") and "//" not in text  # rewritten in place, one /
+
+
+INSPECT_LOOP = """G21 G90 G0 X0 Y0 Z5
+#1 = 0
+o100 while [#1 LT 4]
+  G1 X[#1 * 10] Y[#1 * 5] F100
+  #1 = [#1 + 1]
+o100 endwhile
+G0 Z5
+M2
+"""
+
+
+@needs_rs274
+def test_inspect_expand_reports_the_flattened_program(tmp_path):
+    """`inspect --expand` counts the moves the program makes (rs274's) and names no construct;
+    without it, the flow is named as unsupported."""
+    p = tmp_path / "loop.ngc"
+    p.write_text(INSPECT_LOOP)
+    canon = rs274.canonical(p)
+    feeds = sum(k == "feed" for k in canon.kinds)
+    info = nc.inspect_file(p, "linuxcnc", expand=True)
+    assert info["motions"]["feed"] == feeds == 4 and not info["unsupported"]
+    assert info["lines"] == 8 and info["blocks_run"] > 8
+    assert info["extents"]["feed"]["x"] == [0.0, 30.0]
+    r = CliRunner().invoke(main, ["inspect", str(p), "--expand"])
+    assert r.exit_code == 0 and "flattened (--expand): 8 lines ran" in r.output, r.output
+    r = CliRunner().invoke(main, ["inspect", str(p)])
+    assert r.exit_code == 0 and "O-word" in r.output
+    g = tmp_path / "p.gcode"
+    g.write_text("$H\nG0 X0\n")
+    r = CliRunner().invoke(main, ["inspect", str(g), "--expand"])
+    assert r.exit_code == 2 and "--expand flattens" in r.output

@@ -427,27 +427,37 @@ def _flat_error(e, flat, name, how="flattened with --expand"):
 
 
 def inspect_file(
-    path: str | os.PathLike, dialect: str = "linuxcnc", subprograms: Sequence[str | os.PathLike] = ()
+    path: str | os.PathLike,
+    dialect: str = "linuxcnc",
+    subprograms: Sequence[str | os.PathLike] = (),
+    expand: bool = False,
 ) -> dict:
     """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
     piece: memory stays bounded whatever the program's length. A Sinumerik program is run into
     straight G-code first (:func:`ncadapt.sinumerik.translate`, its subprograms looked for beside
-    it and in ``subprograms``; ``subprograms`` in the result names the files read); the lines
-    named are its own."""
-    if dialect not in ("sinumerik", "marlin"):
+    it and in ``subprograms``; ``subprograms`` in the result names the files read); with
+    ``expand``, a LinuxCNC or Fanuc program's parameters, flow, subprograms and macros are first
+    flattened as ``correct_file(expand=True)`` does (:func:`ncadapt.flatten.flatten`). The lines
+    named are the program's own."""
+    if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
+        raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
+    if dialect not in ("sinumerik", "marlin") and not expand:
         try:
             return _inspect(str(path), str(path), _check_dialect(dialect))
         except InputError as e:
             raise _macro_hint(e, Path(path), dialect) from None
     from . import marlin, sinumerik
+    from .flatten import Flat, flatten
 
     data = _read_program(Path(path))
-    tr = (
-        sinumerik.translate(data, str(path), subprograms)
-        if dialect == "sinumerik"
-        else marlin.translate(data, str(path))
-    )
-    engine, how = _TRANSLATED[dialect]
+    tr: sinumerik.Translation | marlin.Translation | Flat
+    if dialect == "sinumerik":
+        tr = sinumerik.translate(data, str(path), subprograms)
+    elif dialect == "marlin":
+        tr = marlin.translate(data, str(path))
+    else:
+        tr = flatten(data, str(path), dialect)
+    engine, how = _TRANSLATED.get(dialect, (dialect, "flattened with --expand"))
     try:
         info = _inspect(tr.data, str(path), engine)
     except InputError as e:

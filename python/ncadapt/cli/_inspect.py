@@ -21,19 +21,31 @@ from ._common import (
 @click.command()
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @dialect_option
+@click.option(
+    "--expand",
+    is_flag=True,
+    help="Flatten the program's parameters, O-word flow, M98 subprograms and Fanuc Macro B first, as "
+    "`correct --expand` does, and report what the flattened program contains (lines named are the program's).",
+)
 @subprograms_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON.")
 @handle_errors
-def inspect(program, dialect, subprograms, json_path):
+def inspect(program, dialect, expand, subprograms, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
     d = dialects.resolve(program, dialect)
     no_subprograms(subprograms, d)
-    info = nc.inspect_file(program, d.name, subprograms)
+    if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
+        raise click.UsageError(
+            f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
+        )
+    info = nc.inspect_file(program, d.name, subprograms, expand)
     info["dialect"] = d.as_dict()
     m = info["motions"]
     summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
     summary(f"  dialect: {d.describe()}")
+    if expand and d.name != "sinumerik":
+        summary(f"  flattened (--expand): {info['lines']:,} lines ran {info['blocks_run']:,} blocks")
     summary(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
     p = info["planes"]
     summary(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")
