@@ -319,7 +319,7 @@ def test_int_variables_round_and_for_counts_to_its_end():
         ("G1 X0 F100\nIF Q > 1\nENDIF\n", 2, "'Q' is not defined"),
         ("G1 X0 F100\n/G1 X5\n", 2, "skipped block"),
         ("G1 X0 Y0 Z5 F100\nMCALL CYCLE81(10, 0, 2, -5)\n", 2, "MCALL"),
-        ("G1 X0 Y0 F100\nCYCLE83(10, 0, 2, -5)\n", 2, "CYCLE83 calls a cycle"),
+        ("G1 X0 Y0 F100\nCYCLE84(10, 0, 2, -5)\n", 2, "CYCLE84 calls a cycle"),
         ("G1 X0 Y0 F100\nL100\n", 2, "L100 calls a subprogram"),
         ("G1 X0 Y0 F100\nG2 X10 Y0\n", 2, "without a centre"),
         ("G1 X0 Y0 F100\nCIP X10 Y0 I1=5 J1=0\n", 2, "three points on a line"),
@@ -707,6 +707,45 @@ def test_a_field_moves_a_cycle_s_reference_plane_and_depth(tmp_path):
         np.testing.assert_allclose(got, want, atol=1e-4)
 
 
+DEEP = """G17 G90 G0 X10 Y20 Z50
+G1 F100
+N30 CYCLE83(50, 0, 2, -30, , -5, , 4, 1, 0.5, 1, 1) ; deep hole: first depth -5, degression 4
+G0 X40
+CYCLE83(50, 0, 2, , 25, , 6, 3, 0, 0, 1, 0, 3)
+M30
+"""
+
+
+@needs_rs274
+def test_a_deep_hole_cycle_is_drilled_on_its_line_and_moved_whole(tmp_path):
+    """CYCLE83's pecks run on the hole's axis between RTP and DP: the straight program drills
+    that line as one G81 (from RTP to RFP + SDIS, down to DP or RFP - DPR). Under a field the
+    absolute planes RFP, DP and the first depth FDEP move by the field's z at the hole; FDPR,
+    DAM and the rest, relative, stay (by hand: dz 0.02 at X10, 0.05 at X40)."""
+    p = tmp_path / "deep.mpf"
+    p.write_text(DEEP)
+    got = straight_ends(sn.translate(p.read_bytes()).data, tmp_path)
+    want = [(10, 20, 50), (10, 20, 2), (10, 20, -30), (10, 20, 50), (40, 20, 50), (40, 20, 2), (40, 20, -25)]
+    np.testing.assert_allclose(got[: len(want)], want, atol=1e-9)
+
+    def slope(q):
+        d = np.zeros_like(q)
+        d[:, 2] = 0.001 * q[:, 0] + 0.01
+        return d
+
+    correct(p, tmp_path / "out.mpf", slope)
+    out = (tmp_path / "out.mpf").read_text().splitlines()
+    assert (
+        out[2]
+        == "N30 CYCLE83(50, 0.02, 2, -29.98, , -4.98, , 4, 1, 0.5, 1, 1) ; deep hole: first depth -5, degression 4"
+    )
+    assert out[4] == "CYCLE83(50, 0.05, 2, , 25, , 6, 3, 0, 0, 1, 0, 3)"
+    tr = sn.translate(p.read_bytes())
+    want = straight_ends(nc.parse(tr.data).correct(slope).data, tmp_path)
+    np.testing.assert_allclose(straight_ends(sn.translate("\n".join(out).encode()).data, tmp_path), want, atol=1e-4)
+    assert correct(p, tmp_path / "zero.mpf", fields.Shift((0.0, 0.0, 0.0))).expanded["written"] == "as it is"
+
+
 def test_a_cycle_whose_hole_the_field_moves_sideways_is_refused(tmp_path):
     with pytest.raises(RefusedError) as e:
         correct(DATA / "drill.mpf", tmp_path / "out.mpf", fields.Shift((0.01, 0.0, 0.0)))
@@ -720,7 +759,11 @@ def test_a_cycle_whose_hole_the_field_moves_sideways_is_refused(tmp_path):
         ("G0 X0 Y0 Z50\nG1 F100\nCYCLE81(1, 0, 2, -5)\n", "below the safety plane"),
         ("G0 X0 Y0 Z50\nG1 F100\nCYCLE81(50, 0, 2, -5, 3)\n", "different depths"),
         ("G0 X0 Y0 Z50\nG1 F100\nCYCLE81(50, 0, 2)\n", "without a final depth"),
-        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE83(50, 0, 2, -5, , -2)\n", "CYCLE83 calls a cycle"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE85(50, 0, 2, -5)\n", "CYCLE85 calls a cycle"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE83(50, 0, 2, -5, , -2, 3)\n", "different first depths"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE83(50, 0, 2, -5, , -2, , 1, , , , , 1)\n", "only drilling along Z"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE83(50, 0, 2, -5, , -2, , 1, , , , 2)\n", "VARI=2"),
+        ("G0 X0 Y0 Z50\nG1 F100\nCYCLE83(50, 0, 2, -5, , -2, , 1, , , , 1, 3, 1, 1, 0, 1, 7)\n", "17 arguments"),
         ("G0 X0 Y0 Z50\nG1 F100\nMCALL CYCLE81(50, 0, 2, -5)\n", "MCALL"),
         ("G0 X0 Y0 Z50\nG18 G1 F100\nCYCLE81(50, 0, 2, -5)\n", "G17 G90"),
         ("G0 Z50\nG1 F100\nCYCLE81(50, 0, 2, -5)\n", "not known"),

@@ -17,8 +17,9 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   ``_N_NAME_SPF``), searched as the control searches: beside the program first, then in the
   subprogram folders given (``subprograms``, in order); ``PROC`` with INT, REAL, BOOL parameters
   by value, ``SAVE``; ended by ``RET``, ``M17`` or their end;
-- drilling cycles ``CYCLE81(RTP, RFP, SDIS, DP, DPR)`` and ``CYCLE82(…, DTB)`` at the position
-  reached (G17 G90), run as G81/G82 from the retraction plane;
+- drilling cycles ``CYCLE81(RTP, RFP, SDIS, DP, DPR)``, ``CYCLE82(…, DTB)`` and ``CYCLE83(…)``
+  (deep-hole drilling, along Z) at the position reached (G17 G90), run as G81/G82 from the
+  retraction plane;
 - frames ``TRANS``/``ATRANS`` (translations), ``ROT``/``AROT`` about Z (``Z…``, or ``RPL=`` in
   G17: each move's X Y, and an arc's I J, turned in the straight program and turned back when it
   is written); ``ROT``, ``SCALE``, ``MIRROR`` without axes reset the frame; scaling and mirroring
@@ -36,7 +37,7 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
 
 Refused at their line (:class:`~ncadapt.InputError`), because the path they make is not
 followed: calls of subprograms found in none of those folders (or twice in one) and of other
-cycles (``CYCLE83(…)``),
+cycles (``CYCLE84(…)``),
 ``MCALL``, a program that is itself a ``PROC``, ``VAR`` parameters,
 splines and polynomials (``ASPLINE BSPLINE CSPLINE POLY``), a ``CT`` whose direction is not known
 or along its chord, ``TURN=`` more
@@ -85,7 +86,7 @@ _COPY_G = {9, 60, 64, 641, 642, 643, 644, 645, 601, 602, 603, 340, 341, 450, 451
 _COPY_WORDS = {"SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "DIAMOF"}
 _COPY_ASSIGN = {"ADIS", "ADISPOS", "LIMS"}
 #: The drilling cycles read (Siemens standard cycles).
-_CYCLES = ("CYCLE81", "CYCLE82")
+_CYCLES = ("CYCLE81", "CYCLE82", "CYCLE83")
 _FRAMES = {"TRANS", "ATRANS", "ROT", "AROT", "SCALE", "ASCALE", "MIRROR", "AMIRROR"}
 _REFUSED_WORDS = {
     "MCALL": "a modal cycle call (MCALL)",
@@ -853,7 +854,12 @@ class _Run:
         position reached: a rapid to the reference plane plus the safety clearance, a feed to the
         final depth (DP, or DPR below the reference plane), a rapid to the retraction plane (Siemens,
         *Cycles*, "CYCLE81 drilling, centering"). Written for the engine as a canned cycle from the
-        retraction plane: ``G0 Z<RTP>``, ``G98 G81 R<RFP+SDIS> Z<DP>`` (G82 with P), ``G80``."""
+        retraction plane: ``G0 Z<RTP>``, ``G98 G81 R<RFP+SDIS> Z<DP>`` (G82 with P), ``G80``.
+        ``CYCLE83(RTP, RFP, SDIS, DP, DPR, FDEP, FDPR, DAM, DTB, DTS, FRF, VARI, _AXN, _MDEP, _VRT,
+        _DTD, _DIS1)``, deep-hole drilling, pecks down the same line (each infeed, retract and
+        re-approach on the hole's axis between RTP and DP): the engine is given it as the G81 of
+        that line, which the correction moves as a whole; its absolute first depth FDEP moves
+        with RFP and DP, its relative values (FDPR, DAM, the distances) stay."""
         ln, s = self.lines[i], self.s
         col = ln.code_at + t.peek()[2] + 1
         if t.i != 0:
@@ -874,7 +880,7 @@ class _Run:
                 break
             t.need(",")
         self.end(t)
-        n_args = {"CYCLE81": 5, "CYCLE82": 6}[name]
+        n_args = {"CYCLE81": 5, "CYCLE82": 6, "CYCLE83": 17}[name]
         if len(args) > n_args:
             raise _Error(f"{name} takes {n_args} arguments; {len(args)} given", col)
         args += [None] * (n_args - len(args))
@@ -898,7 +904,17 @@ class _Run:
             raise _Error(f"{name}: the final depth {depth:g} is not below the safety plane", col)
         code = "G81"
         extra = ""
-        if name == "CYCLE82":
+        if name == "CYCLE83":
+            fdep, fdpr, axn = args[5], args[6], args[12]
+            if axn not in (None, 0.0, 3.0):
+                raise _Error(f"{name} with _AXN={axn:g}: only drilling along Z (in G17) is read", col)
+            if fdep is not None and fdpr is not None and abs((rfp - abs(fdpr)) - fdep) > 1e-9:
+                raise _Error(f"{name}: FDEP {fdep:g} and FDPR {fdpr:g} give different first depths", col)
+            if args[11] not in (None, 0.0, 1.0):
+                raise _Error(
+                    f"{name}: VARI={args[11]:g} is not a machining type (0 chip breaking, 1 swarf removal)", col
+                )
+        elif name == "CYCLE82":
             dtb = args[5] or 0.0
             if dtb < 0:
                 raise _Error(f"{name}: a dwell in spindle turns (DTB < 0) is not read", col)
@@ -1781,6 +1797,8 @@ def _cycle_values(it: Item, group: list[str]) -> list[float | None]:
     values[1] = r - sdis
     if values[3] is not None:
         values[3] = z
+    if name == "CYCLE83" and values[5] is not None:  # the first depth, absolute: moved with the hole
+        values[5] = args[5] + (values[1] - args[1])
     return values
 
 
@@ -1814,7 +1832,7 @@ def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
     if it.cycle is not None:
         values, spans = _cycle_values(it, group), it.cycle[2]
         out, at = [], 0
-        for k in (1, 3):
+        for k in (1, 3, 5) if it.cycle[0] == "CYCLE83" else (1, 3):
             v = values[k]
             if spans[k] is not None and v is not None:
                 out += [body[at : spans[k][0]], _fmt(v)]
