@@ -298,6 +298,8 @@ REFUSED = {
     "g88_manual_retract": ("G88 X1 Y2 Z-3 R2 P1 F100\nG80\n", "canned cycle G88"),
     "rotary_word": ("G81 X1 Y2 Z-3 R2 A10 F100\nG80\n", "canned cycle G81 with A B C U V W words"),
     "unknown_position": ("G53 G0 Z0\nG81 X1 Y2 Z-3 R2 F100\nG80\n", "canned cycle G81 from an unknown position"),
+    # a polar word from an unknown X Y (from review)
+    "polar_unknown": ("G28\nG0 Z5\nG98 G81 ^30 R1 Z-4 F100\nG80\n", "canned cycle G81 from an unknown position"),
 }
 
 
@@ -617,3 +619,42 @@ def test_polar_cycles_the_words_cannot_say_need_expand_cycles(tmp_path, field, s
     out = prog.correct(_field_of(field), expand_cycles=True)
     assert "G81" not in out.text and "L5" not in out.text  # (the rapid G0 @10 ^33 stays)
     _feeds_displaced(_canon(tmp_path, out.data, "o.ngc"), _canon(tmp_path, POLAR, "in.ngc"), field, "polar expanded")
+
+
+def _bump_at_40(x, y):
+    """0.2 mm in X at (40, 0) only, 0.05 up everywhere."""
+    return (0.2 if math.hypot(x - 40, y) < 1 else 0.0, 0.0, 0.05)
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    "src",
+    [
+        "G21 G90 G17 G0 X0 Y0 Z5\nG98 G81 X40 Y0 R1 Z-4 F100\nG91 ^30 R-4 Z-5 L11\nG90 G80\nG0 Z5\nM2\n",
+        "G21 G90 G17 G0 X0 Y0 Z5\nG98 G81 X40 Y0 R1 Z-4 F100\n^120\n^240\nG80\nG0 Z5\nM2\n",
+    ],
+    ids=["g91", "g90"],
+)
+def test_polar_words_measured_from_a_moved_point_need_expand_cycles(tmp_path, src):
+    """From review: the field moves the hole before (the point the polar words measure from) but
+    none of the polar holes: kept, the polar words would drill every hole 0.2 mm off. Refused,
+    and right with --expand-cycles."""
+    prog = nc.parse(src)
+    with pytest.raises(InputError, match="polar words measure from") as e:
+        prog.correct(_field_of(_bump_at_40))
+    assert e.value.line == 3
+    out = prog.correct(_field_of(_bump_at_40), expand_cycles=True)
+    _feeds_displaced(_canon(tmp_path, out.data, "o.ngc"), _canon(tmp_path, src, "in.ngc"), _bump_at_40, "moved point")
+
+
+def test_a_cycle_continuation_kept_after_expanded_cycle_blocks_is_refused():
+    """From review: with --expand-cycles the output leaves the cycle; a later block of it copied
+    as written (its position unknown after G28, kept with --keep-unsupported) would be a rapid
+    there, not a hole. Refused at its line; without --expand-cycles the output stays in the cycle."""
+    src = "G21 G90 G17 G0 X0 Y0 Z5\nG98 G81 X25 Y0 R1 Z-4 F100\nG28\nX10 Y10\nG80 G0 Z5\nM2\n"
+    prog = nc.parse(src)
+    shift = fields.Shift((0, 0, 0.05))
+    with pytest.raises(InputError, match="no longer in the cycle") as e:
+        prog.correct(shift, keep_unsupported=True, expand_cycles=True)
+    assert e.value.line == 4
+    assert "X10 Y10" in prog.correct(shift, keep_unsupported=True).text.splitlines()

@@ -406,6 +406,20 @@ def test_polar_coordinates_as_rs274(tmp_path, inch, field):
     assert "@" in out.text  # the polar words that still reach their end stay
 
 
+@pytest.mark.parametrize(
+    "src",
+    ["G21 G90 G0 X10 Y0 Z5 F100\nG91 G81 @-10 R-4 Z-5 L3\nM2\n", "G21 G90 G0 X0 Y0 Z5\nG91 G1 ^30 F100\nM2\n"],
+    ids=["cycle", "move"],
+)
+@needs_rs274
+def test_an_incremental_polar_step_from_the_origin_is_refused_as_rs274(tmp_path, src):
+    (tmp_path / "p.ngc").write_text(src)
+    assert "indeterminate when at the origin" in (canonical(tmp_path / "p.ngc").error or "")
+    with pytest.raises(InputError, match="from the origin") as e:
+        nc.parse(src)
+    assert e.value.line == 2
+
+
 def test_polar_words_with_x_are_refused_as_rs274_and_followed_in_a_cycle(tmp_path):
     with pytest.raises(InputError, match="polar coordinates"):
         nc.parse("G21 G90 G0 X1 Y1 Z1\nG1 X2 @3 ^4 F100\nM2\n")

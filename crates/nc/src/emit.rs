@@ -424,6 +424,29 @@ impl<'a> Emitter<'a> {
             self.st.tail_ends.clear();
             self.st.stats.lines_in += 1;
             let words = self.lx.line_words(li);
+            // a motion code other than a cycle's, or G80, ends the cycle mode
+            let leaves_cycle = words.iter().any(|w| {
+                w.letter == b'G'
+                    && matches!(
+                        round(w.value * 10.0) as i32,
+                        0 | 10 | 20 | 30 | 800 | 330 | 331 | 382..=385 | 50 | 51 | 52
+                    )
+            });
+            if self.st.cyc_expanded && !leaves_cycle && ri != u32::MAX {
+                // a block that continues a cycle --expand-cycles wrote as moves, copied as written
+                // (not traced: under an unsupported construct kept), would not drill in the output
+                let rec = &self.it.records[ri as usize];
+                if rec.motion == Motion::Other && rec.cycle == 0 && rec.named & 0b111 != 0 {
+                    return Err(NcError::Interpret {
+                        line: li + 1,
+                        col: 1,
+                        message: "a block with axis words in a canned cycle that --expand-cycles wrote as moves, kept as written (an unsupported construct is in force): the output is no longer in the cycle, so it would not drill; correct it without --expand-cycles".into(),
+                    });
+                }
+            }
+            if leaves_cycle {
+                self.st.cyc_expanded = false; // (a cycle block sets it again when it is expanded)
+            }
             if ri != u32::MAX {
                 let ri = ri as usize;
                 if ri < samples.rec0 || ri >= samples.rec0 + nrec {
@@ -1229,10 +1252,23 @@ impl<'a> Emitter<'a> {
         }
         if polar {
             let h0 = holes[0];
-            let sideways = holes
-                .iter()
-                .zip(&at)
-                .any(|(h, p)| (h.x - p[0]).abs() >= half || (h.y - p[1]).abs() >= half);
+            // the polar words measure from where the output stands (G91, or a word left out):
+            // from there they must still reach the holes where the correction wants them
+            let mut words_polar = [None; 2];
+            for w in self.lx.line_words(li).iter().filter(|w| is_polar(w)) {
+                words_polar[usize::from(w.letter == b'^')] = Some(w.value);
+            }
+            let mut from = [cur[0], cur[1]];
+            let drifts = at.iter().any(|p| {
+                let start = if incremental { from } else { [cur[0], cur[1]] };
+                from = polar_xy(start, words_polar, incremental);
+                !((from[0] - p[0]).abs() < half && (from[1] - p[1]).abs() < half)
+            });
+            let sideways = drifts
+                || holes
+                    .iter()
+                    .zip(&at)
+                    .any(|(h, p)| (h.x - p[0]).abs() >= half || (h.y - p[1]).abs() >= half);
             let apart = holes
                 .iter()
                 .any(|h| (h.r - h0.r).abs() >= half || (h.bottom - h0.bottom).abs() >= half);
@@ -1240,7 +1276,7 @@ impl<'a> Emitter<'a> {
                 return Err(err(format!(
                     "canned cycle {} with polar words (@ ^): the correction moves {}, which its polar words cannot say; use --expand-cycles",
                     name(cy.code),
-                    if sideways { "a hole in X or Y" } else { "its holes by different amounts in Z" }
+                    if sideways { "a hole in X or Y (or the point its polar words measure from)" } else { "its holes by different amounts in Z" }
                 )));
             }
         }

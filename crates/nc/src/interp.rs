@@ -1384,11 +1384,15 @@ impl Interpreter {
                     push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                     continue;
                 }
-                // as LinuxCNC: in the XY plane whatever the plane
+                // as LinuxCNC: in the XY plane whatever the plane (rs274 -g of a G18 move with
+                // polar words), and an increment not from the origin
                 let (cx, cy) = (
                     (st.pos[0] - st.off[0]) / unit,
                     (st.pos[1] - st.off[1]) / unit,
                 );
+                if st.incremental && cx == 0.0 && cy == 0.0 {
+                    return Err(ierr(li, polar_col, POLAR_AT_ORIGIN));
+                }
                 let [x, y] = polar_xy([cx, cy], polar, st.incremental);
                 if st.incremental {
                     axis[0] = Some(x - cx);
@@ -1925,6 +1929,10 @@ pub fn axis_unit(k: usize, unit: f64) -> f64 {
     }
 }
 
+/// LinuxCNC's refusal of an incremental polar step from the origin (its angle is not defined).
+const POLAR_AT_ORIGIN: &str =
+    "incremental polar coordinates (@ ^) from the origin: the angle to step from is not defined (LinuxCNC refuses them)";
+
 /// Where LinuxCNC's polar words take X and Y (program units), from the current point `cur` in
 /// program units: about the program's origin, `polar` the distance `@` and the angle `^`
 /// (degrees); a word left out keeps the current point's, and in G91 each word adds to it.
@@ -2258,9 +2266,10 @@ fn canned(
         );
         return Ok(());
     }
+    // (a polar word from an unknown point gives no finite X, Y)
     let needs = [
-        st.incremental || w.axis[0].is_none(),
-        st.incremental || w.axis[1].is_none(),
+        st.incremental || !w.axis[0].is_some_and(f64::is_finite),
+        st.incremental || !w.axis[1].is_some_and(f64::is_finite),
         true,
     ];
     if (0..3).any(|k| needs[k] && !st.pos[k].is_finite())
@@ -2357,7 +2366,12 @@ fn canned(
     for _ in 0..repeats {
         match w.polar {
             // as LinuxCNC: each repeat's polar step is taken from where the one before ended
-            Some(polar) if st.incremental => [aa, bb] = polar_xy([aa, bb], polar, true),
+            Some(polar) if st.incremental => {
+                if aa == 0.0 && bb == 0.0 {
+                    return Err(ierr(li, w.col, POLAR_AT_ORIGIN));
+                }
+                [aa, bb] = polar_xy([aa, bb], polar, true)
+            }
             _ => {
                 aa += inc[0];
                 bb += inc[1];
