@@ -183,8 +183,7 @@ def correct_file(
     """
     p, out = Path(path), Path(output)
     _refuse_overwrite(out, p)
-    if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
-        raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
+    _check_expand(expand, dialect)
     if dialect in ("sinumerik", "marlin"):
         if read_ahead is not None:
             read_ahead.cancel()
@@ -265,6 +264,12 @@ _TRANSLATED = {
     "sinumerik": ("linuxcnc", "run as straight G-code"),
     "marlin": ("marlin", "read with its E as a U axis"),
 }
+
+
+def _check_expand(expand: bool, dialect: str) -> None:
+    """``expand`` flattens or runs LinuxCNC's, Fanuc's and Sinumerik's programs only."""
+    if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
+        raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
 
 
 def _program_note(message: str, of: str | None) -> str:
@@ -439,8 +444,7 @@ def inspect_file(
     ``expand``, a LinuxCNC or Fanuc program's parameters, flow, subprograms and macros are first
     flattened as ``correct_file(expand=True)`` does (:func:`ncadapt.flatten.flatten`). The lines
     named are the program's own."""
-    if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
-        raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
+    _check_expand(expand, dialect)
     if dialect not in ("sinumerik", "marlin") and not expand:
         try:
             return _inspect(str(path), str(path), _check_dialect(dialect))

@@ -561,6 +561,8 @@ class _Run:
         #: where a called subprogram is looked for, in order; and the files read, by name
         self.folders = folders
         self.read: dict[str, str] = {}
+        #: each subprogram file read: its lines, their flow and jump targets (read once a run)
+        self.files: dict[str, tuple[list[_Line], dict, dict]] = {}
         #: the calls of subprograms in other files: (the caller's lines, name, flow, jump targets and FOR
         #: ends, the line to return to, its variables, what SAVE restores, the subprogram's name)
         self.calls: list[tuple] = []
@@ -958,7 +960,10 @@ class _Run:
         if len(self.calls) >= MAX_DEPTH:
             raise _Error(f"subprograms nested deeper than {MAX_DEPTH}", col)
         self.read.setdefault(name, str(path))
-        lines = _read(path.read_bytes().decode("utf-8", "surrogateescape"), str(path))
+        if str(path) not in self.files:
+            lines = _read(path.read_bytes().decode("utf-8", "surrogateescape"), str(path))
+            self.files[str(path)] = (lines, _match(lines, str(path)), _targets(lines))
+        lines, flow, targets = self.files[str(path)]
         proc = next((k for k, ln in enumerate(lines) if ln.keyword == "PROC"), None)
         params, save = self.proc(lines[proc], name, str(path), proc) if proc is not None else ([], False)
         if len(args) > len(params):
@@ -978,9 +983,7 @@ class _Run:
         )
         self.calls.append((self.lines, self.src, self.flow, self.targets, self.for_end, i + 1, caller, snapshot, name))
         self.items.append(Item(i, "state", "", "", sub=name, mark="push"))
-        self.lines, self.src = lines, str(path)
-        self.flow = _match(lines, str(path))
-        self.targets = _targets(lines)
+        self.lines, self.src, self.flow, self.targets = lines, str(path), flow, targets
         self.for_end = {}
         return 0 if proc is None else proc + 1
 
@@ -988,6 +991,8 @@ class _Run:
         """The file of subprogram ``name``: ``NAME.SPF`` or ``_N_NAME_SPF`` (any case) in the first
         folder that holds one; two such files in that folder are refused (which the control takes is
         not known), and so is a name in none."""
+        if name in self.read:  # (found before in this run)
+            return Path(self.read[name])
         names = {f"{name}.SPF", f"_N_{name}_SPF"}
         for folder in self.folders:
             found = sorted(p for p in folder.iterdir() if p.name.upper() in names and p.is_file())
@@ -1539,6 +1544,8 @@ _RADIUS = re.compile(r"(?<![A-Z_=])R(?=[-+]?[.\d])")
 #: The words that stop the program or end it, after the block's motion.
 _STOPS = re.compile(r"(?<![A-Z0-9_.])M0*(?:0|1|2|17|30)(?![\d.])", re.I)
 _MOTION = re.compile(r"(?<![A-Z_0-9.])G0*([0-3])(?![\d.])|\b(CIP|CT)\b")
+#: A word of the straight program (the engine's output): its letter and its number.
+_WORD = re.compile(r"(?<![A-Z0-9.])([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
 
 
 class NeedsExpand(Exception):
@@ -1587,7 +1594,7 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
         if it.cycle is not None:
             _cycle_values(it, groups[k])  # refuses what a call cannot say
         if it.incremental and it.shifted:
-            named = {a for t in groups[k] for a in re.findall(r"(?<![A-Z])([XYZ])[-+.\d]", t.split(";")[0])}
+            named = {a for t in groups[k] for a, _ in _WORD.findall(t.split(";")[0]) if a in "XYZ"}
             if named & it.shifted:
                 raise Unwritable(
                     it.line + 1,
@@ -1666,9 +1673,6 @@ def assemble(tr: Translation, corrected: bytes, expand: bool = False) -> tuple[b
         at = _code_start(body)
         repl[j] = [body[:at] + next(iter(modes)) + " " + body[at:]]
     return rewrite.splice(tr.source, repl), len(rewritten), "in place"
-
-
-_WORD = re.compile(r"(?<![A-Z0-9.])([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
 
 
 def _unturned(tr: Translation, groups: list[list[str]]) -> list[list[str]]:
@@ -1779,7 +1783,7 @@ def _cycle_values(it: Item, group: list[str]) -> list[float | None]:
         raise Unwritable(
             it.line + 1, f"{name}: the correction wrote its hole as moves (--expand-cycles); a call cannot hold them"
         )
-    words = dict(re.findall(r"([A-Z])([-+]?[\d.]+)", group[0].split(";")[0]))
+    words = dict(_WORD.findall(group[0].split(";")[0]))
     if "X" in words or "Y" in words:
         raise Unwritable(
             it.line + 1,

@@ -252,6 +252,11 @@ fn is_motion_g(w: &Word) -> bool {
         }
 }
 
+/// A canned cycle's code (G73, G74, G76, G81-G89): a motion code that keeps the cycle mode.
+fn is_cycle_g(w: &Word) -> bool {
+    w.letter == b'G' && matches!(round(w.value * 10.0) as i32, 730 | 740 | 760 | 810..=890)
+}
+
 /// LinuxCNC's polar distance `@` or angle `^`.
 fn is_polar(w: &Word) -> bool {
     matches!(w.letter, b'@' | b'^')
@@ -425,13 +430,7 @@ impl<'a> Emitter<'a> {
             self.st.stats.lines_in += 1;
             let words = self.lx.line_words(li);
             // a motion code other than a cycle's, or G80, ends the cycle mode
-            let leaves_cycle = words.iter().any(|w| {
-                w.letter == b'G'
-                    && matches!(
-                        round(w.value * 10.0) as i32,
-                        0 | 10 | 20 | 30 | 800 | 330 | 331 | 382..=385 | 50 | 51 | 52
-                    )
-            });
+            let leaves_cycle = words.iter().any(|w| is_motion_g(w) && !is_cycle_g(w));
             if self.st.cyc_expanded && !leaves_cycle && ri != u32::MAX {
                 // a block that continues a cycle --expand-cycles wrote as moves, copied as written
                 // (not traced: under an unsupported construct kept), would not drill in the output
@@ -1254,10 +1253,7 @@ impl<'a> Emitter<'a> {
             let h0 = holes[0];
             // the polar words measure from where the output stands (G91, or a word left out):
             // from there they must still reach the holes where the correction wants them
-            let mut words_polar = [None; 2];
-            for w in self.lx.line_words(li).iter().filter(|w| is_polar(w)) {
-                words_polar[usize::from(w.letter == b'^')] = Some(w.value);
-            }
+            let words_polar = self.polar_words(li);
             let mut from = [cur[0], cur[1]];
             let drifts = at.iter().any(|p| {
                 let start = if incremental { from } else { [cur[0], cur[1]] };
@@ -1565,10 +1561,8 @@ impl<'a> Emitter<'a> {
         }
     }
 
-    /// Where the polar words of line `li` (block `rec`) take the output from where it is, as
-    /// LinuxCNC reads them (X and Y, mm).
-    fn polar_end(&self, li: usize, rec: &Record) -> [f64; 2] {
-        let u = if rec.inch { MM_PER_INCH } else { 1.0 };
+    /// The polar words of line `li`: the distance `@` and the angle `^`, where written.
+    fn polar_words(&self, li: usize) -> [Option<f64>; 2] {
         let mut polar = [None; 2];
         for w in self.lx.line_words(li) {
             match w.letter {
@@ -1577,6 +1571,14 @@ impl<'a> Emitter<'a> {
                 _ => {}
             }
         }
+        polar
+    }
+
+    /// Where the polar words of line `li` (block `rec`) take the output from where it is, as
+    /// LinuxCNC reads them (X and Y, mm).
+    fn polar_end(&self, li: usize, rec: &Record) -> [f64; 2] {
+        let u = if rec.inch { MM_PER_INCH } else { 1.0 };
+        let polar = self.polar_words(li);
         let cur = [
             (self.st.epos[0] - self.off[0]) / u,
             (self.st.epos[1] - self.off[1]) / u,

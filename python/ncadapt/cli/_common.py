@@ -370,7 +370,7 @@ def progress_bar(description: str, total: int):
         yield lambda done: say(description, done, total)
 
 
-#: ``--dialect`` of the commands that read an NC program.
+#: ``--subprograms`` of the commands that read an NC program.
 subprograms_option = click.option(
     "--subprograms",
     "subprograms",
@@ -388,6 +388,15 @@ def no_subprograms(subprograms, d) -> None:
         raise click.UsageError(f"--subprograms is for Sinumerik programs; this program is read as {d.describe()}")
 
 
+def expand_read(expand: bool, d) -> None:
+    """``--expand`` flattens or runs LinuxCNC's, Fanuc's and Sinumerik's programs only."""
+    if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
+        raise click.UsageError(
+            f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
+        )
+
+
+#: ``--dialect`` of the commands that read an NC program.
 dialect_option = click.option(
     "--dialect",
     type=click.Choice(dialects.CHOICES),

@@ -13,6 +13,7 @@ from ._common import (
     comma_floats,
     dialect_option,
     echo_err,
+    expand_read,
     handle_errors,
     no_subprograms,
     progress,
@@ -154,10 +155,7 @@ def correct(
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = dialects.resolve(program, dialect)
     no_subprograms(subprograms, d)
-    if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
-        raise click.UsageError(
-            f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
-        )
+    expand_read(expand, d)
     tools = None
     if tool_table is not None:
         from .. import tooltable

@@ -10,6 +10,7 @@ from .. import dialects, nc
 from ._common import (
     check_outputs,
     dialect_option,
+    expand_read,
     handle_errors,
     no_subprograms,
     subprograms_option,
@@ -35,10 +36,7 @@ def inspect(program, dialect, expand, subprograms, json_path):
     check_outputs({"program": program}, {"--json": json_path})
     d = dialects.resolve(program, dialect)
     no_subprograms(subprograms, d)
-    if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
-        raise click.UsageError(
-            f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
-        )
+    expand_read(expand, d)
     info = nc.inspect_file(program, d.name, subprograms, expand)
     info["dialect"] = d.as_dict()
     m = info["motions"]
