@@ -587,9 +587,7 @@ def test_a_change_of_units_keeps_positions_and_frames(text, x_mm, tmp_path):
     ],
 )
 def test_refused_after_review(text, line, says):
-    with pytest.raises(InputError) as e:
-        sn.translate(text.encode(), "p.mpf")
-    assert e.value.line == line and says in e.value.message, e.value
+    refused_at(sn.translate, text, "p.mpf", line, says)
 
 
 def test_an_absolute_move_after_a_frame_change_allows_incremental_ones_again(tmp_path):
