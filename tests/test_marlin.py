@@ -151,7 +151,8 @@ def test_e_modes_follow_marlin(program, u):
     ("text", "line", "says"),
     [
         ("G1 X0 Y0 F100\nG5 I1 J1 P1 Q1 X5 Y5\n", 2, "Bézier"),
-        ("G1 X0 Y0 F100\nM728\n", 2, "M728"),
+        # FABtotum's head set-up (FABlin's setup_addon): it may change the tool's offsets
+        ("G1 X0 Y0 F100\nM793 S4\n", 2, "M793"),
         ("G1 X0 Y0 F100\nM420 S1\n", 2, "M420"),  # bed levelling: the printer's own Z correction
         ("G1 X0 Y0 F100\nG29.2 S0\n", 2, "G29.2"),
         ("N1 G1 X0 Y0 F100*33\n", 1, "checksum"),
@@ -179,7 +180,15 @@ def test_zero_correction_and_comments(tmp_path):
     assert out[5].endswith("; a long extruding move") and out[6].startswith("G1 X")
 
 
-@pytest.mark.parametrize("name", ["cncjs__octocat.gcode", "cncjs__sample.gcode"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "cncjs__octocat.gcode",
+        "cncjs__sample.gcode",
+        "marlin__fab_cable_ties_nylon.gcode",
+        "marlin__fab_fabtotum_logo_keychain.gcode",
+    ],
+)
 def test_corpus_prints_keep_every_move_s_filament(name, tmp_path):
     src = CORPUS / name
     if not src.is_file():
@@ -201,6 +210,16 @@ def test_corpus_prints_keep_every_move_s_filament(name, tmp_path):
             assert sum(g or 0 for g in got) == e, (i + 1, line, per[i])
         else:
             assert [g for g in got if g is not None][-1] == e, (i + 1, line, per[i])
+
+
+def test_fabtotum_s_alive_code_is_copied(tmp_path):
+    # FABlin's M728 (light and beeper, no motion) stays on its line; the moves around it are corrected
+    p = tmp_path / "p.gcode"
+    p.write_text("M728 ;FAB bep bep\nG90\nM82\nG1 X0 Y0 Z0.3 F1200\nM728\nG1 X5 E1\n")
+    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
+    out = (tmp_path / "o.gcode").read_text().splitlines()
+    assert out[0] == "M728 ;FAB bep bep" and out[4] == "M728"
+    assert out[3] == "G1 X0 Y0 Z0.35 F1200"
 
 
 def test_cli(tmp_path):

@@ -40,10 +40,12 @@ import numpy as np
 from . import rewrite
 from .errors import InputError
 
-#: M codes copied as written: they move no axis.
+#: M codes copied as written: they move no axis. M728 is FABtotum's (FABlin firmware, a Marlin
+#: derivative: "Raspberry Pi alive", which sets the ambient light and beeps; stock Marlin ignores it).
 COPIED_M = frozenset(
     {0, 1, 3, 4, 5, 7, 8, 9, 17, 18, 73, 82, 83, 84, 104, 105, 106, 107, 109, 110, 114, 115, 117, 118}
-    | {140, 141, 149, 155, 190, 191, 201, 203, 204, 205, 207, 208, 209, 220, 221, 300, 302, 400, 900}
+    | {140, 141, 149, 155, 190, 191, 201, 203, 204, 205, 207, 208, 209, 220, 221, 300, 302, 400, 728}
+    | {900}
 )
 _WORD = re.compile(r"([A-Za-z])[ \t]*([-+]?(?:\d+\.?\d*|\.\d+))?")
 #: Most decimals an E word may have: the engine writes at most 8, and E must come back exact.
