@@ -326,7 +326,8 @@ def compare_motion(
     ``cycle[k]`` marks the moves of canned cycles: a hole moves as a whole, so its rapids may end
     displaced by the field too (or where the input's end: the initial level of G98), and before
     such a rapid the output may make one more rapid along Z no longer than twice the largest
-    displacement (LinuxCNC rapids down to a corrected R plane lower than the one it is at).
+    displacement (LinuxCNC rapids down to a corrected R plane lower than the one it is at, at
+    the hole, or up to one higher than the tool, where the tool is).
 
     ``lines`` (the source line of every input move) names the moves in the problems. Returns the
     problems found, each with how often it occurs and its first occurrence (empty: the motions agree).
@@ -381,13 +382,19 @@ def compare_motion(
                 e = oe6[jj, :3]
                 return np.abs(e - ie6[k, :3]).max() <= tol or (np.abs(e - cyc_target[:, k]).max(axis=1) <= tol).any()
 
+            def along_z(a, b):
+                return max(abs(oe[a][0] - oe[b][0]), abs(oe[a][1] - oe[b][1])) <= tol and abs(oe[a][2] - oe[b][2]) <= slack
+
+            # down at the hole (j then j + 1), or up where the tool stands (j - 1 then j: LinuxCNC
+            # rises to a corrected R plane higher than the tool first)
             if (
                 cycle[k]
                 and j + 1 < n_out
                 and okind[j] == okind[j + 1] == "traverse"
-                and max(abs(oe[j][0] - oe[j + 1][0]), abs(oe[j][1] - oe[j + 1][1])) <= tol
-                and abs(oe[j][2] - oe[j + 1][2]) <= slack
-                and not ends_here(j)
+                and (along_z(j, j + 1) or (j > 0 and along_z(j - 1, j)))
+                # (j may end near this rapid's end too, at a hole moved alike: when the input
+                # cuts next, the rapid is the one just before the cut)
+                and (not ends_here(j) or (k + 1 < n_in and cut[k + 1]))
                 and ends_here(j + 1)
             ):
                 j += 1

@@ -658,3 +658,50 @@ def test_a_cycle_continuation_kept_after_expanded_cycle_blocks_is_refused():
         prog.correct(shift, keep_unsupported=True, expand_cycles=True)
     assert e.value.line == 4
     assert "X10 Y10" in prog.correct(shift, keep_unsupported=True).text.splitlines()
+
+
+def _rise(x, y):
+    """Every hole higher by an amount that grows with x (mm): the first R plane ends above the
+    height the tool waits at, so LinuxCNC rises to it first, where the tool stands."""
+    return (0.0, 0.0, 0.01 + 0.002 * x)
+
+
+@needs_rs274
+@pytest.mark.parametrize("d", [_rise, _wavy], ids=["rise", "wavy"])
+def test_a_g90_cycle_entered_with_x_and_y_unknown_is_corrected(tmp_path, d):
+    """pcb2gcode's drill files set only Z before their first G81 (the tool is wherever the tool
+    change left it): a G90 cycle goes to its hole whatever X and Y were, so the block is
+    corrected, its X and Y written. rs274 (which starts at 0 0 0) drills the output's holes where
+    it drills the input's, displaced: the same as the displaced program's motion."""
+    src = (
+        "G94 G21 G90\nG00 Z10\nT1 M6\nG0 Z5\n"
+        "G81 R5 Z-2.5 F1000 X12.555 Y10.945\nX12.555 Y8.945\nX30 Y8.945\nG80\nG0 Z10\nM2\n"
+    )
+    displaced = "".join(
+        f"G81 R{5 + dz:.5f} Z{-2.5 + dz:.5f} F1000 X{x + dx:.5f} Y{y + dy:.5f}\n"
+        for x, y in ((12.555, 10.945), (12.555, 8.945), (30, 8.945))
+        for dx, dy, dz in [d(x, y)]
+    )
+    oracle_src = "G94 G21 G90\nG00 Z10\nT1 M6\nG0 Z5\n" + displaced + "G80\nG0 Z10\nM2\n"
+    out = nc.parse(src).correct(_field_of(d))
+    got = _canon(tmp_path, out.data, "out.ngc")
+    _same_motion(got, _canon(tmp_path, oracle_src, "displaced.ngc"), "unknown X Y")
+    _feeds_displaced(got, _canon(tmp_path, src, "in.ngc"), d, "unknown X Y")
+    assert out.correction.lines_added == 0
+
+
+@pytest.mark.parametrize(
+    "src",
+    [
+        # G91: the holes are steps from where the tool is
+        "G21 G0 Z5\nG91 G81 R0 Z-2 X10 Y10 F100\nG80 G90\nM2\n",
+        # the hole's Y is the tool's, which no move has set
+        "G21 G0 Z5\nG81 R5 Z-2 X10 F100\nG80\nM2\n",
+    ],
+)
+def test_a_cycle_whose_holes_depend_on_an_unknown_position_is_refused(src):
+    prog = nc.parse(src)
+    (u,) = prog.unsupported
+    assert u.line == 2 and "from an unknown position" in u.construct
+    with pytest.raises(RefusedError):
+        prog.correct(fields.Shift((0, 0, 0.05)))

@@ -1194,6 +1194,7 @@ impl<'a> Emitter<'a> {
                 bottom: (r.end[2] + d[2] - off[2]) / u,
             });
         }
+        let polar_block = self.lx.line_words(li).iter().any(is_polar);
         let cur = [
             (self.st.epos[0] - off[0]) / u,
             (self.st.epos[1] - off[1]) / u,
@@ -1214,7 +1215,17 @@ impl<'a> Emitter<'a> {
                 name(cy.code)
             )));
         }
-        if !(cur.iter().all(|v| v.is_finite()) && level.is_finite()) {
+        // a G90 cycle block (holes placed by X Y, not by polar words) goes to its first hole
+        // whatever X and Y the tool had before it: its X and Y are then written
+        let xy_needed = copy || incremental || polar_block || self.st.expand_cycles;
+        let holes_known = holes
+            .iter()
+            .all(|h| [h.x, h.y, h.r, h.bottom].iter().all(|v| v.is_finite()));
+        if !(cur[2].is_finite()
+            && (!xy_needed || cur[0].is_finite() && cur[1].is_finite())
+            && level.is_finite()
+            && holes_known)
+        {
             if copy {
                 // (the program's position is known here: a cycle from an unknown one is refused)
                 for (k, e) in self.st.epos.iter_mut().enumerate().take(3) {
@@ -1242,7 +1253,7 @@ impl<'a> Emitter<'a> {
         }
         // polar words (@ ^) stay, and say where the holes are, when the correction leaves every
         // hole where the program drills it in X and Y and moves them all alike in Z
-        let polar = self.lx.line_words(li).iter().any(is_polar);
+        let polar = polar_block;
         if polar && copy {
             return Err(err(format!(
                 "canned cycle {} with polar words (@ ^) under an unsupported construct kept as written: where its holes land from the corrected position is not followed",
