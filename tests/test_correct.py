@@ -49,6 +49,23 @@ def test_a_cutting_move_after_a_return_to_reference_is_reported_not_guessed():
     )
 
 
+@pytest.mark.parametrize("streamed", [False, True], ids=["in memory", "streamed"])
+def test_a_g1_that_names_no_axis_is_no_unknown_move(tmp_path, streamed):
+    # pcb2gcode sets its feed with `G01 F360` before any move: that G1 goes nowhere, so it is not
+    # a cutting move left uncorrected; a G1 that names an axis from an unknown position still is
+    src = "G20 G90\nG01 F360 ( Feedrate. )\nG0 Z1\nG0 X0 Y0\nG1 Z-0.1\nM2\n"
+    field = fields.Shift((0, 0, 0.01))
+    if streamed:
+        (tmp_path / "p.ngc").write_text(src)
+        warnings = nc.correct_file(tmp_path / "p.ngc", tmp_path / "o.ngc", field).warnings
+    else:
+        warnings = nc.parse(src).correct(field).correction.warnings
+    assert warnings == ()
+    src2 = "G20 G90\nG01 F360\nG1 X1\nG0 X0 Y0 Z1\nM2\n"
+    (w,) = nc.parse(src2).correct(field).correction.warnings
+    assert w.startswith("1 cutting move(s) not corrected because the position is unknown (first at line 3")
+
+
 def test_an_axis_unknown_at_its_start_is_named_as_such():
     # A is given on line 2 but never before: the move cannot be interpolated in A, it is kept
     prog = nc.parse("G21 G90 G0 X0 Y0 Z0\nG1 X10 A90 F100\nM30\n")

@@ -89,7 +89,9 @@ fn warnings(it: &Interp, clearance: Option<f64>, bounds: Option<[f64; 4]>, r: &m
         prev = rec.end;
         let m = rec.motion as u8;
         let cutting = (1..=3).contains(&m);
-        if cutting && !rec.supported {
+        // a G1 that names no axis (`G01 F360`) goes nowhere, wherever the tool is
+        let still = m == 1 && rec.named == 0 && rec.cycle == 0;
+        if cutting && !still && !rec.supported {
             let arc = m == 2 || m == 3;
             let mut end_unknown = [false; NAXES];
             let mut start_unknown = [false; NAXES];
