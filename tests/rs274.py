@@ -42,6 +42,9 @@ class Canon:
     #: per move: cutter radius compensation was on (or the move is the one after G40, which
     #: leaves the offset path)
     comp: list = field(default_factory=list)
+    #: per move: the feed rate rs274 set before it (SET_FEED_RATE, in the program's units per
+    #: minute; under G93 the move's length times its F)
+    rates: list = field(default_factory=list)
 
 
 def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = None) -> Canon:
@@ -71,8 +74,8 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     def lengths(v):
         return np.array([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
 
-    kinds, ends, arcs, comp = [], [], [], []
-    res = 0.0
+    kinds, ends, arcs, comp, rates = [], [], [], [], []
+    res, rate = 0.0, 0.0
     comp_on = leaving = False
     for line in text.splitlines():
         m = _CALL.match(line)
@@ -84,8 +87,11 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             continue
         if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "STRAIGHT_PROBE", "ARC_FEED"):
             comp.append(comp_on or leaving)
+            rates.append(rate)
             leaving = False
-        if name == "USE_LENGTH_UNITS":
+        if name == "SET_FEED_RATE":
+            rate = float(args)
+        elif name == "USE_LENGTH_UNITS":
             scale = 25.4 if "INCHES" in args else (10.0 if "CM" in args else 1.0)
         elif name == "SELECT_PLANE":
             plane = args.strip()
@@ -119,7 +125,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     ):
         tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
-    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp)
+    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp, rates)
 
 
 class Move:

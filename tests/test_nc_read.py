@@ -81,7 +81,11 @@ def test_errors_name_line_and_column(text, line, col, message):
         ("G0 X0 Y0 Z0\nG16\nG1 X10 Y30\n", 2, "polar coordinates G16"),
         ("G0 X0 Y0 Z0\nG28 @1 ^60\n", 2, "polar coordinates (@ ^) with G28, G30, G53, G10, G52 or G92"),
         ("G0 X0 Y0 Z0\nG28.1 X1\n", 2, "G28.1 with axis words"),
-        ("G0 X0 Y0 Z0\nG93 G1 X1 F2\n", 2, "inverse-time feed G93"),
+        (
+            "G0 X0 Y0 Z5\nG93 G81 X1 R1 Z0 F2\n",
+            2,
+            "canned cycle under inverse-time feed G93 (LinuxCNC refuses it)",
+        ),
         ("G0 X0 Y0 Z0\nG5.2 X1 Y1 P1 L3\n", 2, "spline G5.2"),
     ],
 )

@@ -12,7 +12,7 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   tangent to the path before it (``CT``);
 - ``G17 G18 G19``, ``G90 G91``, ``G70 G71 G700 G710`` (inch / metric), ``G54``–``G57`` (before the
   first move), ``G53``/``G153``/``SUPA`` (machine coordinates for the block: kept, not corrected),
-  ``G40``, ``G4 F``/``G4 S`` (dwell), ``G93 G94 G95 G96 G97``, ``F S T D M`` words;
+  ``G40``, ``G4 F``/``G4 S`` (dwell), ``G94 G95 G96 G97``, ``F S T D M`` words;
 - subprograms ``NAME(args)``, ``NAME``, ``L123`` in a file ``NAME.SPF`` (or the control's own name
   ``_N_NAME_SPF``), searched as the control searches: beside the program first, then in the
   subprogram folders given (``subprograms``, in order); ``PROC`` with INT, REAL, BOOL parameters
@@ -107,6 +107,8 @@ _REFUSED_G = {
     331: "tapping (G331)",
     332: "tapping (G332)",
     63: "tapping (G63)",
+    # (its F words are not carried into the straight program, where each piece needs its own)
+    93: "inverse-time feed (G93) in a Sinumerik program",
     41: "cutter radius compensation (G41) in a Sinumerik program",
     42: "cutter radius compensation (G42) in a Sinumerik program",
     110: "polar coordinates (G110)",
@@ -123,7 +125,7 @@ _REFUSED_G = {
     347: "a smooth approach (SAR)",
     348: "a smooth retract (SAR)",
 }
-_PASS_G = {17, 18, 19, 90, 91, 40, 93, 94, 95, 96, 97, 54, 55, 56, 57}
+_PASS_G = {17, 18, 19, 90, 91, 40, 94, 95, 96, 97, 54, 55, 56, 57}
 _UNITS = {70: 20, 700: 20, 71: 21, 710: 21}
 _OPENERS = {
     "IF": ("ELSE", "ENDIF"),

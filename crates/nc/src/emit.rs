@@ -229,6 +229,28 @@ struct Edit {
     t1: u32,
 }
 
+/// The F of a piece of a G93 (inverse-time) move whose F is `f`: the piece takes `share` of the
+/// move's time, 1 / (f · share) minutes. Written to 7 significant digits (the time is kept to
+/// 5e-7 of itself), without trailing zeros.
+fn inverse_feed(f: f64, share: f64, line: u32) -> Result<String, NcError> {
+    let v = f / share;
+    if !(share > 0.0 && v.is_finite()) {
+        return Err(NcError::Interpret {
+            line: line as usize + 1,
+            col: 1,
+            message: format!(
+                "inverse-time move (G93) cut into pieces: a piece with no share of the move's time (F{f} over {share}) cannot be written"
+            ),
+        });
+    }
+    let decimals = (6 - v.log10().floor() as i32).clamp(0, 12) as usize;
+    let mut t = format!("{v:.decimals$}");
+    if t.contains('.') {
+        t.truncate(t.trim_end_matches('0').trim_end_matches('.').len());
+    }
+    Ok(t)
+}
+
 fn motion_text(m: Motion, padded: bool) -> &'static str {
     match (m, padded) {
         (Motion::Rapid, false) => "G0",
@@ -956,8 +978,21 @@ impl<'a> Emitter<'a> {
             stops.extend_from_slice(&self.src[w.start as usize..w.end as usize]);
             self.remove_word(li, w);
         }
+        // G93: a piece's time is its share of the move's (its fraction along it), so its F is
+        // the move's F over that share; a piece left out (it moves no written digit) passes its
+        // share on to the next
+        let inverse_f = rec
+            .inverse_time
+            .then(|| words.iter().find(|w| w.letter == b'F'))
+            .flatten()
+            .map(|w| (w.num_start, w.end, w.value));
         let first = target_at(keep[0], ts[keep[0]]);
         self.set_axes(li, rec, &first, moved);
+        if let Some((ns, ne, f)) = inverse_f {
+            let text = inverse_feed(f, ts[keep[0]], rec.line)?;
+            self.edit_bytes(ns, ne, text.as_bytes());
+        }
+        let mut share_from = ts[keep[0]];
         let prefix: &[u8] = if self.lx.lines[li].block_delete {
             b"/"
         } else {
@@ -1011,6 +1046,16 @@ impl<'a> Emitter<'a> {
                     } else {
                         v * u + self.off[a]
                     };
+                }
+            }
+            if let Some((_, _, f)) = inverse_f {
+                if self.st.tail.len() > body {
+                    let text = inverse_feed(f, ts[k] - share_from, rec.line)?;
+                    let sep = self.sep();
+                    self.st.tail.extend_from_slice(sep);
+                    self.st.tail.push(b'F');
+                    self.st.tail.extend_from_slice(text.as_bytes());
+                    share_from = ts[k];
                 }
             }
             if k + 1 == n && !stops.is_empty() {

@@ -126,6 +126,9 @@ pub struct Record {
     /// Index into [`Interp::comps`] for a move under cutter radius compensation (or the move
     /// that ends it), [`NO_COMP`] otherwise.
     pub comp: u32,
+    /// G93 (inverse-time feed) in force: the block's F word is the inverse of the move's time in
+    /// minutes, so each piece the move is cut into needs its own F.
+    pub inverse_time: bool,
 }
 
 /// [`Record::comp`] of a move without cutter radius compensation.
@@ -401,7 +404,6 @@ struct Active {
     scaling: Option<(u32, usize)>,
     polar: Option<(u32, usize)>,
     diameter: Option<(u32, usize)>,
-    inverse_time: Option<(u32, usize)>,
     flow: Option<(u32, usize)>,
     /// A work coordinate system other than the one the program's moves began in.
     wcs: Option<(u32, usize)>,
@@ -417,7 +419,6 @@ impl Active {
             .or(self.diameter)
             .or(self.cutter_comp)
             .or(self.canned)
-            .or(self.inverse_time)
             .or(self.wcs)
             .map(|(_, idx)| idx)
     }
@@ -455,6 +456,8 @@ struct State {
     dialect: Dialect,
     /// The last of G0, G1, G2, G3 (Fanuc's group 01, which a canned cycle leaves as it is).
     g01: Option<Motion>,
+    /// G93: each feed move's F is the inverse of its time in minutes.
+    inverse_time: bool,
     /// The tool length offsets in force, per axis (mm): G43.1's words, 0 after G49, NaN after
     /// G43/G43.2 (the tool table's) and at the start.
     tlo: [f64; NAXES],
@@ -595,6 +598,7 @@ impl Interpreter {
                 frame: 0,
                 dialect,
                 g01: None,
+                inverse_time: false,
                 tlo: UNKNOWN_LENGTH,
                 comp: None,
                 comp_exit: None,
@@ -1067,13 +1071,8 @@ impl Interpreter {
                     }
                     530 => g53 = true,
                     610 | 611 | 640 => {} // path control
-                    940 | 950 => st.active.inverse_time = None,
-                    930 => {
-                        if st.active.inverse_time.is_none() {
-                            let idx = push_unsupported(out, li, gc, "inverse-time feed G93");
-                            st.active.inverse_time = Some((li as u32, idx));
-                        }
-                    }
+                    940 | 950 => st.inverse_time = false,
+                    930 => st.inverse_time = true,
                     960 | 970 => {} // spindle mode
                     980 => st.cyc.g98 = Some(true),
                     990 => st.cyc.g98 = Some(false),
@@ -1551,7 +1550,17 @@ impl Interpreter {
                         polar: polar_used.then_some(polar),
                         col: motion_word.map_or(axis_col, |(_, c)| c),
                     };
-                    let blocked = blocker.or(e_construct);
+                    let mut blocked = blocker.or(e_construct);
+                    if st.inverse_time && blocked.is_none() {
+                        // rs274 stops there: "Cannot feed with zero feed rate"
+                        let idx = push_unsupported(
+                            out,
+                            li,
+                            words.col,
+                            "canned cycle under inverse-time feed G93 (LinuxCNC refuses it)",
+                        );
+                        blocked = Some(idx);
+                    }
                     canned(out, st, li, c, &words, blocked, unit)?;
                 }
                 Mode::Motion(m) => {
@@ -1693,6 +1702,34 @@ impl Interpreter {
                             None
                         }
                     };
+                    if st.inverse_time && m != Motion::Rapid {
+                        let gcol = motion_word.map_or(axis_col, |(_, c)| c);
+                        let f = words.iter().find(|w| w.letter == b'F').map(|w| w.value);
+                        match f {
+                            None => {
+                                let g = match m {
+                                    Motion::ArcCw => "G2",
+                                    Motion::ArcCcw => "G3",
+                                    _ => "G1",
+                                };
+                                return Err(ierr(
+                                    li,
+                                    gcol,
+                                    format!(
+                                        "F word missing with inverse time {g} move (G93: every G1, G2, G3 gives its time)"
+                                    ),
+                                ));
+                            }
+                            Some(v) if !(v > 0.0 && v.is_finite()) => {
+                                return Err(ierr(
+                                    li,
+                                    wcol[(b'F' - b'A') as usize],
+                                    format!("inverse-time feed F{v}: it must be above 0"),
+                                ))
+                            }
+                            _ => {}
+                        }
+                    }
                     let leaves = st.comp_unfollowed_exit
                         && (m.is_arc() || (end[0] - st.pos[0]).hypot(end[1] - st.pos[1]) > 1e-9);
                     st.pos = end;
@@ -2720,6 +2757,7 @@ fn push_record(
         cycle: 0,
         frame: st.frame,
         comp: NO_COMP,
+        inverse_time: st.inverse_time,
     });
 }
 
