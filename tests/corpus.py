@@ -773,7 +773,9 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         details.append(f"reading: {why}")
     else:
         b = prog.blocks
-        r.uncorrected = int((~displaced & (b.motion >= 1) & (b.motion <= 3)).sum())
+        # (a G1 that names no axis goes nowhere: the correction does not warn of it)
+        still = (b.motion == 1) & (prog._records()["named"] == 0) & ~b.cycle
+        r.uncorrected = int((~displaced & ~still & (b.motion >= 1) & (b.motion <= 3)).sum())
         tools = tool_table(work)
         for name, out in outs.items():
             # the moves left as written are those the correction warns of
