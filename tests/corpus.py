@@ -383,7 +383,9 @@ def compare_motion(
                 return np.abs(e - ie6[k, :3]).max() <= tol or (np.abs(e - cyc_target[:, k]).max(axis=1) <= tol).any()
 
             def along_z(a, b):
-                return max(abs(oe[a][0] - oe[b][0]), abs(oe[a][1] - oe[b][1])) <= tol and abs(oe[a][2] - oe[b][2]) <= slack
+                return (
+                    max(abs(oe[a][0] - oe[b][0]), abs(oe[a][1] - oe[b][1])) <= tol and abs(oe[a][2] - oe[b][2]) <= slack
+                )
 
             # down at the hole (j then j + 1), or up where the tool stands (j - 1 then j: LinuxCNC
             # rises to a corrected R plane higher than the tool first)

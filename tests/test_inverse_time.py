@@ -102,3 +102,31 @@ def test_a_canned_cycle_under_g93_is_unsupported():
     prog = nc.parse("G21 G90 G0 X0 Y0 Z5\nG93 G81 X10 R1 Z-1 F2\nG80 G94\nM2\n")
     (u,) = prog.unsupported
     assert u.line == 2 and "inverse-time" in u.construct
+
+
+@needs_rs274
+@pytest.mark.parametrize("max_segment", [0.1, 1.0])
+def test_the_piece_that_joins_the_corrected_path_runs_at_the_move_s_speed(tmp_path, max_segment):
+    """From review: a shift the rapid before the move does not take (rapids are not corrected)
+    makes the first piece join the corrected path sideways; sharing the time by fraction along
+    the move ran that piece at 3 times the feed. Shared by length, every piece runs at the
+    corrected path's length over the move's time (rs274's rates)."""
+    src = "G21 G90\nG0 X0 Y0 Z0\nG93 G1 X10 F2\nG94\nM2\n"
+    out = nc.parse(src).correct(fields.Shift((0, 0.3, 0)), max_segment=max_segment)
+    got = _run(tmp_path, out.text, "out.ngc")
+    k = [i for i, kind in enumerate(got.kinds) if kind == "feed"]
+    starts = got.ends[[i - 1 for i in k], :3]
+    lens = np.linalg.norm(got.ends[k, :3] - starts, axis=1)
+    times = lens / np.array(got.rates)[k]
+    assert times.sum() == pytest.approx(0.5, rel=2e-3)  # the move's time, 1/F
+    speed = lens.sum() / times.sum()  # 20.4 mm/min: the path is 0.3 mm longer
+    long = lens > 0.05
+    assert np.allclose(lens[long] / times[long], speed, rtol=2e-2), (lens / times, speed)
+
+
+def test_g93_on_a_fanuc_family_control_is_unsupported():
+    """From review: a Fanuc reads an arc's F under G93 as feed / radius (Haas: 1/time), and an F
+    without a point by a parameter; the program does not say which, so G93 is not followed."""
+    prog = nc.parse("%\nO1000\nG21 G90 G0 X10. Y0. Z0.\nG93 G3 X10. Y0. I-10. J0. F2.\nG94\nM30\n%\n", dialect="fanuc")
+    (u,) = prog.unsupported
+    assert u.line == 4 and "G93 on a Fanuc-family control" in u.construct

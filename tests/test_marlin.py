@@ -212,12 +212,17 @@ def test_corpus_prints_keep_every_move_s_filament(name, tmp_path):
             assert [g for g in got if g is not None][-1] == e, (i + 1, line, per[i])
 
 
+def _raised(tmp_path, text: str) -> list[str]:
+    """The lines of ``text`` corrected by a 0.05 mm Z shift (through the file path, as the CLI)."""
+    p = tmp_path / "p.gcode"
+    p.write_text(text)
+    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
+    return (tmp_path / "o.gcode").read_text().splitlines()
+
+
 def test_fabtotum_s_alive_code_is_copied(tmp_path):
     # FABlin's M728 (light and beeper, no motion) stays on its line; the moves around it are corrected
-    p = tmp_path / "p.gcode"
-    p.write_text("M728 ;FAB bep bep\nG90\nM82\nG1 X0 Y0 Z0.3 F1200\nM728\nG1 X5 E1\n")
-    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
-    out = (tmp_path / "o.gcode").read_text().splitlines()
+    out = _raised(tmp_path, "M728 ;FAB bep bep\nG90\nM82\nG1 X0 Y0 Z0.3 F1200\nM728\nG1 X5 E1\n")
     assert out[0] == "M728 ;FAB bep bep" and out[4] == "M728"
     assert out[3] == "G1 X0 Y0 Z0.35 F1200"
 
@@ -252,10 +257,7 @@ def test_e_under_g91_is_shared_out_exactly(tmp_path):
 
 
 def test_the_first_move_after_homing_is_corrected(tmp_path):
-    p = tmp_path / "p.gcode"
-    p.write_text("M83\nG28\nG1 X10 Y3 Z0.3 E1 F1200\nG1 X20 Y3 E1\n")
-    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
-    out = (tmp_path / "o.gcode").read_text().splitlines()
+    out = _raised(tmp_path, "M83\nG28\nG1 X10 Y3 Z0.3 E1 F1200\nG1 X20 Y3 E1\n")
     assert out[2] == "G1 X10 Y3 Z0.35 E1 F1200" and out[3] == "G1 X20 Y3 E1"
 
 
@@ -269,10 +271,7 @@ def test_a_rewritten_g92_keeps_its_e(tmp_path):
 
 
 def test_an_extruding_g0_is_corrected_as_marlin_moves_it(tmp_path):
-    p = tmp_path / "p.gcode"
-    p.write_text("M83\nG1 X0 Y0 Z0.3 F1200\nG0 X10 Y3 Z0.3 E1\n")
-    nc.correct_file(p, tmp_path / "o.gcode", fields.Shift((0, 0, 0.05)), dialect="marlin")
-    assert (tmp_path / "o.gcode").read_text().splitlines()[2] == "G0 X10 Y3 Z0.35 E1"
+    assert _raised(tmp_path, "M83\nG1 X0 Y0 Z0.3 F1200\nG0 X10 Y3 Z0.3 E1\n")[2] == "G0 X10 Y3 Z0.35 E1"
 
 
 def test_a_form_feed_in_a_comment_does_not_end_the_line():

@@ -235,9 +235,7 @@ class _Warnings:
         start_unknown = needs_start & ~np.isfinite(r["start"])
         # a G1 that names no axis (`G01 F360`) goes nowhere, wherever the tool is
         still = (r["motion"] == 1) & (r["named"] == 0) & ((r["flags"] & 16) == 0)
-        left = np.flatnonzero(
-            cutting & ~still & ((r["flags"] & 8) == 0) & (end_unknown | start_unknown).any(axis=1)
-        )
+        left = np.flatnonzero(cutting & ~still & ((r["flags"] & 8) == 0) & (end_unknown | start_unknown).any(axis=1))
         if len(left) and self.first is None:
             i = left[0]
             said = []

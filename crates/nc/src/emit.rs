@@ -978,21 +978,57 @@ impl<'a> Emitter<'a> {
             stops.extend_from_slice(&self.src[w.start as usize..w.end as usize]);
             self.remove_word(li, w);
         }
-        // G93: a piece's time is its share of the move's (its fraction along it), so its F is
-        // the move's F over that share; a piece left out (it moves no written digit) passes its
-        // share on to the next
+        // G93: the pieces share the move's time as they share the length of the corrected path
+        // (the piece that joins it from where the output stands included), so every piece runs
+        // at one speed and they take the move's time; a piece's F is the move's over its share.
+        // A move along no X Y Z (rotary axes alone) shares it by fraction along the move. A
+        // piece left out (it moves no written digit) passes its share on to the next
         let inverse_f = rec
             .inverse_time
             .then(|| words.iter().find(|w| w.letter == b'F'))
             .flatten()
             .map(|w| (w.num_start, w.end, w.value));
+        let shares: Vec<f64> = if inverse_f.is_some() {
+            let mut prev = [epos0[0], epos0[1], epos0[2]];
+            let lens: Vec<f64> = keep
+                .iter()
+                .map(|&k| {
+                    let p = xyz_at(k);
+                    let d = ((p[0] - prev[0]).powi(2)
+                        + (p[1] - prev[1]).powi(2)
+                        + (p[2] - prev[2]).powi(2))
+                    .sqrt();
+                    prev = p;
+                    d
+                })
+                .collect();
+            let total: f64 = lens.iter().sum();
+            if total > 1e-9 {
+                lens.iter().map(|d| d / total).collect()
+            } else {
+                let mut t0 = 0.0;
+                keep.iter()
+                    .map(|&k| {
+                        let s = ts[k] - t0;
+                        t0 = ts[k];
+                        s
+                    })
+                    .collect()
+            }
+        } else {
+            Vec::new()
+        };
         let first = target_at(keep[0], ts[keep[0]]);
         self.set_axes(li, rec, &first, moved);
+        let mut pending = 0.0;
         if let Some((ns, ne, f)) = inverse_f {
-            let text = inverse_feed(f, ts[keep[0]], rec.line)?;
-            self.edit_bytes(ns, ne, text.as_bytes());
+            if shares[0] > 0.0 {
+                let text = inverse_feed(f, shares[0], rec.line)?;
+                self.edit_bytes(ns, ne, text.as_bytes());
+            } else {
+                pending = shares[0]; // (a first piece that goes nowhere keeps the move's F)
+            }
         }
-        let mut share_from = ts[keep[0]];
         let prefix: &[u8] = if self.lx.lines[li].block_delete {
             b"/"
         } else {
@@ -1001,7 +1037,7 @@ impl<'a> Emitter<'a> {
         // XYZ and the other axes the block names, in the order of AXES
         let axes = 0b111 | rec.named | moved;
         let half = self.fmt.half(rec.inch);
-        for &k in pieces {
+        for (i, &k) in pieces.iter().enumerate() {
             let t0 = self.st.tail.len();
             let body = t0 + prefix.len();
             self.st.tail.extend_from_slice(prefix);
@@ -1049,13 +1085,14 @@ impl<'a> Emitter<'a> {
                 }
             }
             if let Some((_, _, f)) = inverse_f {
+                pending += shares[i + 1];
                 if self.st.tail.len() > body {
-                    let text = inverse_feed(f, ts[k] - share_from, rec.line)?;
+                    let text = inverse_feed(f, pending, rec.line)?;
                     let sep = self.sep();
                     self.st.tail.extend_from_slice(sep);
                     self.st.tail.push(b'F');
                     self.st.tail.extend_from_slice(text.as_bytes());
-                    share_from = ts[k];
+                    pending = 0.0;
                 }
             }
             if k + 1 == n && !stops.is_empty() {

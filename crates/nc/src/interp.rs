@@ -404,6 +404,7 @@ struct Active {
     scaling: Option<(u32, usize)>,
     polar: Option<(u32, usize)>,
     diameter: Option<(u32, usize)>,
+    inverse_fanuc: Option<(u32, usize)>,
     flow: Option<(u32, usize)>,
     /// A work coordinate system other than the one the program's moves began in.
     wcs: Option<(u32, usize)>,
@@ -419,6 +420,7 @@ impl Active {
             .or(self.diameter)
             .or(self.cutter_comp)
             .or(self.canned)
+            .or(self.inverse_fanuc)
             .or(self.wcs)
             .map(|(_, idx)| idx)
     }
@@ -1071,8 +1073,25 @@ impl Interpreter {
                     }
                     530 => g53 = true,
                     610 | 611 | 640 => {} // path control
-                    940 | 950 => st.inverse_time = false,
-                    930 => st.inverse_time = true,
+                    940 | 950 => {
+                        st.inverse_time = false;
+                        st.active.inverse_fanuc = None;
+                    }
+                    930 => {
+                        st.inverse_time = true;
+                        // a Fanuc reads an arc's F under G93 as feed / radius, and an F without a
+                        // point by a parameter (Haas: 1/time for every move): which, the
+                        // program does not tell
+                        if st.dialect.point_matters() && st.active.inverse_fanuc.is_none() {
+                            let idx = push_unsupported(
+                                out,
+                                li,
+                                gc,
+                                "inverse-time feed G93 on a Fanuc-family control (an arc's F is feed / radius on a Fanuc, 1/time on a Haas)",
+                            );
+                            st.active.inverse_fanuc = Some((li as u32, idx));
+                        }
+                    }
                     960 | 970 => {} // spindle mode
                     980 => st.cyc.g98 = Some(true),
                     990 => st.cyc.g98 = Some(false),
