@@ -1020,15 +1020,12 @@ impl<'a> Emitter<'a> {
         };
         let first = target_at(keep[0], ts[keep[0]]);
         self.set_axes(li, rec, &first, moved);
-        let mut pending = 0.0;
-        if let Some((ns, ne, f)) = inverse_f {
-            if shares[0] > 0.0 {
-                let text = inverse_feed(f, shares[0], rec.line)?;
-                self.edit_bytes(ns, ne, text.as_bytes());
-            } else {
-                pending = shares[0]; // (a first piece that goes nowhere keeps the move's F)
-            }
+        // (a first piece that goes nowhere keeps the move's F)
+        if let Some((ns, ne, f)) = inverse_f.filter(|_| shares[0] > 0.0) {
+            let text = inverse_feed(f, shares[0], rec.line)?;
+            self.edit_bytes(ns, ne, text.as_bytes());
         }
+        let mut pending = 0.0;
         let prefix: &[u8] = if self.lx.lines[li].block_delete {
             b"/"
         } else {
@@ -1276,7 +1273,7 @@ impl<'a> Emitter<'a> {
                 bottom: (r.end[2] + d[2] - off[2]) / u,
             });
         }
-        let polar_block = self.lx.line_words(li).iter().any(is_polar);
+        let polar = self.lx.line_words(li).iter().any(is_polar);
         let cur = [
             (self.st.epos[0] - off[0]) / u,
             (self.st.epos[1] - off[1]) / u,
@@ -1299,7 +1296,7 @@ impl<'a> Emitter<'a> {
         }
         // a G90 cycle block (holes placed by X Y, not by polar words) goes to its first hole
         // whatever X and Y the tool had before it: its X and Y are then written
-        let xy_needed = copy || incremental || polar_block || self.st.expand_cycles;
+        let xy_needed = copy || incremental || polar || self.st.expand_cycles;
         let holes_known = holes
             .iter()
             .all(|h| [h.x, h.y, h.r, h.bottom].iter().all(|v| v.is_finite()));
@@ -1335,7 +1332,6 @@ impl<'a> Emitter<'a> {
         }
         // polar words (@ ^) stay, and say where the holes are, when the correction leaves every
         // hole where the program drills it in X and Y and moves them all alike in Z
-        let polar = polar_block;
         if polar && copy {
             return Err(err(format!(
                 "canned cycle {} with polar words (@ ^) under an unsupported construct kept as written: where its holes land from the corrected position is not followed",
