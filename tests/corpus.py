@@ -684,7 +684,7 @@ def run(entry: Entry, work: Path) -> Result:
 def _run(entry: Entry, work: Path, r: Result) -> None:
     work.mkdir(parents=True, exist_ok=True)
     try:
-        dialect = dialects.resolve(entry.path).name  # as `ncadapt correct` does first (--dialect auto)
+        dialect = dialects.resolve(entry.path).engine  # as `ncadapt correct` does first (--dialect auto)
     except InputError as e:
         d = dialects.detect(entry.path.read_bytes()[: dialects.HEAD_BYTES], entry.file)
         r.outcome = f"refused: line {e.line}: {dialects.NAMES[d.name]} program ({d.text}), syntax not read"

@@ -463,15 +463,15 @@ def test_a_cycle_under_an_unsupported_construct_is_copied(tmp_path, expand):
     _same_motion(cout, Canon(inp.kinds, want, [], 0, None), "kept")
 
 
-# G7 (lathe diameter mode) is a construct the engine does not follow either, and it leaves the
-# position as it is: a cycle block under it is kept within a cycle the engine corrects.
-_G7_MID_RUN = """G21 G90 G17
+# G10 L2 (a work offset set in the program) is a construct the engine does not follow either, and
+# with P1 R0 it leaves the position as it is: a cycle block under it is kept within a cycle the
+# engine corrects.
+_OFFSET_MID_RUN = """G21 G90 G17
 G0 X0 Y0 Z10
 G99 G81 X5 Y5 Z-2 R2 F100
-G7
+G10 L2 P1 R0
 X20
 Y8 Z-3
-G8
 G80
 G0 Z20
 M2
@@ -483,10 +483,10 @@ def test_a_kept_cycle_block_keeps_the_holes_of_the_program(tmp_path):
     corrected block wrote would drill its hole at the corrected depth, so the program's are written
     into it; rs274 drills the copied holes where the input does and the first one displaced. With
     --expand-cycles the copied block would no longer be in a cycle: refused at its line."""
-    prog = nc.parse(_G7_MID_RUN)
+    prog = nc.parse(_OFFSET_MID_RUN)
     shift = (0.0, 0.0, 0.05)
     out = prog.correct(fields.Shift(shift), keep_unsupported=True)
-    inp, cout = _canon(tmp_path, _G7_MID_RUN, "in.ngc"), _canon(tmp_path, out.data, "out.ngc")
+    inp, cout = _canon(tmp_path, _OFFSET_MID_RUN, "in.ngc"), _canon(tmp_path, out.data, "out.ngc")
     fin = [i for i, k in enumerate(inp.kinds) if k == "feed"]
     fout = [i for i, k in enumerate(cout.kinds) if k == "feed"]
     assert len(fin) == len(fout) == 3

@@ -74,7 +74,13 @@ def test_cli_reports_the_dialect_and_refuses_with_nothing_written(tmp_path):
     res = r.invoke(main, ["correct", str(prog), "--shift", "0,0,0.01", "-o", str(tmp_path / "o.nc"), "--json", "-"])
     assert res.exit_code == 0, res.output
     payload = json.loads(res.stdout)
-    assert payload["dialect"] == {"name": "fanuc", "detected": True, "line": 2, "evidence": "O1001"}
+    assert payload["dialect"] == {
+        "name": "fanuc",
+        "detected": True,
+        "line": 2,
+        "evidence": "O1001",
+        "machine": {"name": "mill", "detected": True, "line": None, "evidence": None},
+    }
     assert payload["options"]["dialect"] == "auto"
     assert payload["field_interpolation"] == "a constant shift"
     grid = tmp_path / "g.csv"

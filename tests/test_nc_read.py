@@ -77,7 +77,6 @@ def test_errors_name_line_and_column(text, line, col, message):
         ("o100 sub\nG0 X1\no100 endsub\n", 1, "O-word subroutine or control flow"),
         ("o<probe> call\n", 1, "O-word subroutine or control flow"),
         ("G0 X0 Y0 Z0\nM98 P1000\n", 2, "subprogram M98"),
-        ("G7\nG0 X10\n", 1, "lathe diameter mode G7"),
         ("G0 X0 Y0 Z0\nG16\nG1 X10 Y30\n", 2, "polar coordinates G16"),
         ("G0 X0 Y0 Z0\nG28 @1 ^60\n", 2, "polar coordinates (@ ^) with G28, G30, G53, G10, G52 or G92"),
         ("G0 X0 Y0 Z0\nG28.1 X1\n", 2, "G28.1 with axis words"),

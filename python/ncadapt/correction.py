@@ -309,6 +309,25 @@ def _native_field(field) -> tuple | None:
     return None
 
 
+def _lathe_y(disp: np.ndarray, lines, chord_tol: float, name) -> None:
+    """On a lathe the tool is at Y 0, where the field's y moves it along the turned surface, for
+    which the machine has no axis: refused above the chord tolerance, else not applied (set to 0
+    in ``disp``)."""
+    if not len(disp):
+        return
+    y = np.abs(disp[:, 1])
+    i = int(np.argmax(y))
+    if y[i] > chord_tol:
+        line = int(lines[i])
+        raise RefusedError(
+            f"{name}: line {line}: the field moves Y by {disp[i, 1]:.4f} mm there, and a lathe has no Y axis "
+            f"(at Y 0 the field's y is along the turned surface): give the field's x (radial) and z, or a y "
+            f"within --chord-tol ({chord_tol:g} mm); nothing written",
+            [{"line": line, "displacement": disp[i].round(4).tolist()}],
+        )
+    disp[:, 1] = 0.0
+
+
 def _grid_spec(field) -> tuple | None:
     """The native spec of a bilinear grid field (:func:`_native_field`), else None."""
     spec = _native_field(field)
@@ -343,7 +362,7 @@ def _correct_native(
     shift_norm = None
     if spec[0] == "shift":
         # the displacement's length as the Python evaluation computes it for every point
-        d = field(np.zeros((1, 3)))
+        d = np.array([spec[1]])
         shift_norm = float(np.sqrt(np.einsum("ij,ij->i", d, d))[0])
     out_file.flush()
     start = out_file.tell()
@@ -418,6 +437,15 @@ def _correct(
     grid = getattr(field, "grid_lines", None)
     gx, gy = ([], []) if grid is None else (list(map(float, grid[0])), list(map(float, grid[1])))
     spec = _native_field(field) if out_file is not None and not keep_points else None
+    lathe = dialect.endswith("-lathe")
+    if spec is not None and lathe and spec[0] == "shift":
+        dx, dy, dz = spec[1]
+        if abs(dy) > chord_tol:
+            raise RefusedError(
+                f"{name}: the shift moves Y by {dy:g} mm, and a lathe has no Y axis: give DX and DZ, "
+                f"or a DY within --chord-tol ({chord_tol:g} mm); nothing written"
+            )
+        spec = ("shift", (dx, 0.0, dz))
     if spec is None and read_ahead is not None:
         read_ahead.cancel()  # the Python evaluation reads the program itself
     if spec is not None:
@@ -503,6 +531,9 @@ def _correct(
             continue
         if disp.shape != pts.shape:
             raise ValueError(f"field returned shape {disp.shape}, expected {pts.shape}")
+        if lathe:
+            disp = np.array(disp)
+            _lathe_y(disp, lines, chord_tol, name)
         if not np.isfinite(disp).all():
             bad = int(np.flatnonzero(~np.isfinite(disp).all(axis=1))[0])
             raise RefusedError(f"{name}: the field is not finite at line {lines[bad]} {pts[bad].round(4).tolist()}")

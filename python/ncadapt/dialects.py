@@ -15,13 +15,21 @@ at once) and looks, in this order, for: a Heidenhain ``BEGIN PGM`` line; Sinumer
 printer's Marlin G-code (``;FLAVOR:Marlin``, ``M82``/``M83``, heater and fan codes, E words on
 moves); grbl system commands (``$H``, ``$J=…``); a Fanuc program number (``O1234`` not followed by
 a LinuxCNC O-word keyword), ``M98 P``, ``G65 P``, ``M99``. Anything else is LinuxCNC RS274NGC.
+
+The machine, a mill or a lathe, is detected in the same head for the LinuxCNC and Fanuc dialects
+(``--machine`` states it): a LinuxCNC program is a lathe's when it states G7 or G8 (diameter or
+radius mode, a lathe's codes); a Fanuc/Haas program when it has a four-digit T word (``T0101``,
+tool and offset), constant surface speed ``G96``, ``G50`` with a spindle limit or a coordinate
+(``G50 S2500``), or a roughing or finishing cycle ``G70``/``G71``/``G72`` with its ``P`` word.
+On a lathe the engine reads no Y (the tool is in the plane through the spindle's axis); a Fanuc
+lathe's X is a diameter, U and W its increments, and G90/G92/G94 its turning cycles.
 """
 
 from __future__ import annotations
 
 import re
 import string
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .errors import InputError
@@ -35,6 +43,20 @@ READ = ("linuxcnc", "fanuc", "sinumerik", "grbl", "marlin")
 
 #: How much of a program detection reads.
 HEAD_BYTES = 64 * 1024
+
+#: The machines ``--machine`` takes (``auto`` detects one of them).
+MACHINES = ("auto", "mill", "lathe")
+
+#: The dialects a program can be a lathe's in.
+LATHE_DIALECTS = ("linuxcnc", "fanuc")
+
+#: What shows a lathe's program, per dialect (read in the upper-cased text without comments).
+_LATHE = {
+    "linuxcnc": re.compile(r"\bG0*[78](?![.\d])"),
+    "fanuc": re.compile(
+        r"\bT\d{4}\b|\bG0*96(?![.\d])|\bG0*50(?![.\d])[^\n]*?(?<![A-Z])[SXZUW][-+.\d]|\bG0*7[012](?![.\d])[^\n]*?(?<![A-Z])P\d"
+    ),
+}
 
 NAMES = {
     "linuxcnc": "LinuxCNC RS274NGC",
@@ -109,11 +131,23 @@ class Dialect:
     detected: bool
     line: int | None = None
     text: str | None = None
+    #: The machine is a lathe (LinuxCNC and Fanuc/Haas programs only), whether that was
+    #: detected (or given), and the line and text that show it.
+    lathe: bool = False
+    machine_detected: bool = True
+    machine_line: int | None = None
+    machine_text: str | None = None
 
     @property
     def read(self) -> bool:
         """Whether the engine reads programs of this dialect."""
         return self.name in READ
+
+    @property
+    def engine(self) -> str:
+        """The dialect as the engine takes it (:data:`ncadapt.nc.DIALECTS`): a lathe's is
+        ``linuxcnc-lathe`` or ``fanuc-lathe``."""
+        return f"{self.name}-lathe" if self.lathe else self.name
 
     def describe(self) -> str:
         """One line for a summary."""
@@ -121,8 +155,32 @@ class Dialect:
         shown = f", line {self.line}: {self.text}" if self.line is not None else ""
         return f"{NAMES[self.name]} ({how}{shown})"
 
+    def describe_machine(self) -> str:
+        """One line for a summary: the machine, and how its program is read."""
+        how = "detected" if self.machine_detected else "given"
+        shown = f", line {self.machine_line}: {self.machine_text}" if self.machine_line is not None else ""
+        if not self.lathe:
+            return f"mill ({how}{shown})"
+        reading = (
+            "X a diameter, U and W its increments, no Y"
+            if self.name == "fanuc"
+            else "X a diameter after G7, a radius after G8; no Y"
+        )
+        return f"lathe ({how}{shown}): {reading}"
+
     def as_dict(self) -> dict:
-        return {"name": self.name, "detected": self.detected, "line": self.line, "evidence": self.text}
+        return {
+            "name": self.name,
+            "detected": self.detected,
+            "line": self.line,
+            "evidence": self.text,
+            "machine": {
+                "name": "lathe" if self.lathe else "mill",
+                "detected": self.machine_detected,
+                "line": self.machine_line,
+                "evidence": self.machine_text,
+            },
+        }
 
 
 #: A ``(…)`` comment, unless a name comes right before it (Sinumerik's ``MSG(…)``, ``IC(…)``,
@@ -162,26 +220,47 @@ def detect(head: bytes, name: str | None = None) -> Dialect:
             found = (m.start(), dialect)
     if found is not None:
         at, dialect = found
-        start = text.rfind("\n", 0, at) + 1
-        end = text.find("\n", at)
-        line = text[start : end if end >= 0 else len(text)]
-        return Dialect(dialect, True, text.count("\n", 0, at) + 1, line.strip()[:80])
+        return Dialect(dialect, True, *_line_of(text, at))
     if name is not None and Path(name).suffix.lower() in (".mpf", ".spf"):
         return Dialect("sinumerik", True, 1, f"the file name {Path(name).name}")
     return Dialect("linuxcnc", True)
 
 
-def resolve(path: str | Path, choice: str = "auto") -> Dialect:
-    """The dialect ``--dialect choice`` gives the program at ``path``: detected with ``auto``.
-    A dialect the engine does not read is an :class:`InputError` at the line that shows it."""
+def _line_of(text: str, at: int) -> tuple[int, str]:
+    """The 1-based line of offset ``at`` in ``text`` and that line's text (stripped, 80 characters)."""
+    start = text.rfind("\n", 0, at) + 1
+    end = text.find("\n", at)
+    return text.count("\n", 0, at) + 1, text[start : end if end >= 0 else len(text)].strip()[:80]
+
+
+def detect_lathe(head: bytes, dialect: str) -> tuple[int, str] | None:
+    """Where the program's first bytes ``head``, written in ``dialect``, show a lathe's program:
+    (line, its text), or None."""
+    rule = _LATHE.get(dialect)
+    if rule is None:
+        return None
+    text = head.decode("utf-8", "replace").replace("\r\n", "\n")
+    m = rule.search(_blank_comments(text).translate(_UPPER))
+    return None if m is None else _line_of(text, m.start())
+
+
+def resolve(path: str | Path, choice: str = "auto", machine: str = "auto") -> Dialect:
+    """The dialect ``--dialect choice`` gives the program at ``path``: detected with ``auto``,
+    and the machine ``--machine machine`` (a lathe's program is read as a lathe's: detected with
+    ``auto``). A dialect the engine does not read is an :class:`InputError` at the line that
+    shows it; a lathe in a dialect without lathes a :class:`ValueError`."""
     if choice not in CHOICES:
         raise ValueError(f"dialect must be one of {', '.join(CHOICES)}; got {choice!r}")
-    if choice == "auto":
+    if machine not in MACHINES:
+        raise ValueError(f"machine must be one of {', '.join(MACHINES)}; got {machine!r}")
+    head = b""
+    if choice == "auto" or machine == "auto":
         try:
             with open(path, "rb") as f:
                 head = f.read(HEAD_BYTES)
         except OSError as e:
             raise InputError(f"cannot read program: {e.strerror}", str(path)) from None
+    if choice == "auto":
         d = detect(head, str(path))
     else:
         d = Dialect(choice, False)
@@ -195,4 +274,16 @@ def resolve(path: str | Path, choice: str = "auto") -> Dialect:
             d.line or 0,
             1 if d.line else 0,
         )
-    return d
+    if machine == "lathe":
+        if d.name not in LATHE_DIALECTS:
+            raise ValueError(
+                f"--machine lathe: lathe programs are read in the {' and '.join(LATHE_DIALECTS)} dialects; "
+                f"this one is {NAMES[d.name]}"
+            )
+        return replace(d, lathe=True, machine_detected=False)
+    if machine == "mill":
+        return replace(d, machine_detected=False)
+    at = detect_lathe(head, d.name)
+    if at is None:
+        return d
+    return replace(d, lathe=True, machine_line=at[0], machine_text=at[1])

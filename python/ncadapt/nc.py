@@ -128,8 +128,11 @@ class Blocks:
 
 #: The dialects the engine reads (``dialect=`` of :func:`read`, :func:`parse`,
 #: :func:`correct_file`, :func:`inspect_file`): where they differ, blocks are read as that
-#: controller reads them (see :mod:`ncadapt.dialects`).
-DIALECTS = ("linuxcnc", "fanuc", "grbl", "marlin")
+#: controller reads them (see :mod:`ncadapt.dialects`). ``linuxcnc-lathe`` and ``fanuc-lathe`` are
+#: those controls on a lathe: no Y (0 throughout, the field evaluated there and its y not
+#: applied); X a diameter after LinuxCNC's G7, and always on a Fanuc lathe, whose U and W are
+#: increments of X and Z and whose G90/G92/G94 and G70-G76 are turning cycles (refused).
+DIALECTS = ("linuxcnc", "fanuc", "grbl", "marlin", "linuxcnc-lathe", "fanuc-lathe")
 
 
 def _check_dialect(dialect: str) -> str:
@@ -220,7 +223,7 @@ _MACRO_B = re.compile(r"^\s*(?:N\d+\s*)?(?:IF\s*\[|WHILE\s*\[|DO\s*\d|END\s*\d|G
 def _macro_hint(e: InputError, p: Path, dialect: str) -> InputError:
     """``e``, or where it falls on a Fanuc Custom Macro B statement, the refusal that names it and
     ``--expand``."""
-    if dialect != "fanuc" or not e.line:
+    if dialect not in ("fanuc", "fanuc-lathe") or not e.line:
         return e
     try:
         with open(p, "rb") as f:
@@ -269,7 +272,7 @@ _TRANSLATED = {
 def _check_expand(expand: bool, dialect: str) -> None:
     """``expand`` flattens or runs LinuxCNC's, Fanuc's and Sinumerik's programs only."""
     if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
-        raise ValueError(f"expand reads LinuxCNC's, Fanuc's and Sinumerik's programs; the dialect is {dialect}")
+        raise ValueError(f"expand reads the programs of LinuxCNC, Fanuc and Sinumerik mills; the dialect is {dialect}")
 
 
 def _program_note(message: str, of: str | None) -> str:

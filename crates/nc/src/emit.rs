@@ -619,8 +619,27 @@ impl<'a> Emitter<'a> {
         });
     }
 
+    /// Millimetres (degrees) per unit of the block's words on axis k: a diameter X's are halves.
     fn unit(rec: &Record, k: usize) -> f64 {
-        axis_unit(k, if rec.inch { MM_PER_INCH } else { 1.0 })
+        let u = axis_unit(k, if rec.inch { MM_PER_INCH } else { 1.0 });
+        if k == 0 && rec.diameter {
+            u / 2.0
+        } else {
+            u
+        }
+    }
+
+    /// The axis a word of block `rec` moves and whether its number is an increment: a Fanuc
+    /// lathe's U and W are increments of X and Z.
+    fn word_axis(&self, rec: &Record, letter: u8) -> Option<(usize, bool)> {
+        if self.it.dialect == Dialect::FanucLathe {
+            match letter {
+                b'U' => return Some((0, true)),
+                b'W' => return Some((2, true)),
+                _ => {}
+            }
+        }
+        axis_index(letter).map(|a| (a, rec.incremental))
     }
 
     /// Where new words go in the block: after its last axis word, or after its last word.
@@ -646,7 +665,7 @@ impl<'a> Emitter<'a> {
     /// A word that sets the modal motion the next blocks move in: a motion code, or on a Fanuc
     /// control only G0 G1 G2 G3 (its canned cycles and G80 are a group of their own).
     fn sets_motion(&self, w: &Word) -> bool {
-        if self.it.dialect == Dialect::Fanuc {
+        if self.it.dialect.is_fanuc() {
             is_g01(w)
         } else {
             is_motion_g(w)
@@ -699,11 +718,18 @@ impl<'a> Emitter<'a> {
                 return;
             }
         }
-        let rewrite = rec.supported && rec.incremental && rec.motion != Motion::Other;
+        // the axes the block's words move by increments (G91; a Fanuc lathe's U and W)
+        let mut increments: u16 = 0;
+        for w in words {
+            if let Some((k, true)) = self.word_axis(rec, w.letter) {
+                increments |= 1 << k;
+            }
+        }
+        let rewrite = rec.supported && increments != 0 && rec.motion != Motion::Other;
         let mut written = [None; NAXES];
         if rewrite {
             for w in words {
-                if let Some(k) = axis_index(w.letter) {
+                if let Some((k, true)) = self.word_axis(rec, w.letter) {
                     let u = Self::unit(rec, k);
                     let want = (rec.end[k] - self.st.epos[k]) / u;
                     if want.is_finite() && (want - w.value).abs() >= self.fmt.half(rec.inch) {
@@ -717,7 +743,7 @@ impl<'a> Emitter<'a> {
             let named = rec.named & (1 << k) != 0;
             self.st.epos[k] = match written[k] {
                 Some(d) => self.st.epos[k] + d,
-                None if named && !rec.incremental => rec.end[k],
+                None if named && increments & (1 << k) == 0 => rec.end[k],
                 None => self.st.epos[k] + (rec.end[k] - start[k]),
             };
         }
@@ -1621,7 +1647,7 @@ impl<'a> Emitter<'a> {
         self.st.steps = steps;
         // the moves written set the output's modal motion; on a Fanuc control the program's
         // stays the group 01 motion before the cycle, which the next block may rely on
-        self.st.out_motion = if self.it.dialect == Dialect::Fanuc {
+        self.st.out_motion = if self.it.dialect.is_fanuc() {
             self.st.steps.iter().rev().find_map(|s| match s {
                 CycleStep::Move(m, ..) => Some(*m),
                 _ => None,
@@ -1645,7 +1671,7 @@ impl<'a> Emitter<'a> {
     /// A cycle block written as a cycle block sets the output's modal motion as the program's,
     /// except on a Fanuc control, whose cycles (group 09) leave the G0/G1/G2/G3 in force.
     fn after_cycle_block(&mut self) {
-        if self.it.dialect != Dialect::Fanuc {
+        if !self.it.dialect.is_fanuc() {
             self.st.out_motion = None;
         }
     }
@@ -1700,23 +1726,23 @@ impl<'a> Emitter<'a> {
             self.st.epos[1] = p[1];
         }
         for w in words {
-            if let Some(a) = axis_index(w.letter) {
+            if let Some((a, incremental)) = self.word_axis(rec, w.letter) {
                 seen[a] = true;
                 let u = Self::unit(rec, a);
-                let want = if rec.incremental {
+                let want = if incremental {
                     (target[a] - self.st.epos[a]) / u
                 } else {
                     (target[a] - self.off[a]) / u
                 };
                 if (want - w.value).abs() < half {
-                    self.st.epos[a] = if rec.incremental {
+                    self.st.epos[a] = if incremental {
                         self.st.epos[a] + w.value * u
                     } else {
                         w.value * u + self.off[a]
                     };
                 } else {
                     let v = self.edit_number(w.num_start, w.end, want, rec.inch);
-                    self.st.epos[a] = if rec.incremental {
+                    self.st.epos[a] = if incremental {
                         self.st.epos[a] + v * u
                     } else {
                         v * u + self.off[a]

@@ -31,6 +31,12 @@ pub enum Dialect {
     Grbl,
     /// Marlin (3D printer G-code; no canned cycles).
     Marlin,
+    /// LinuxCNC on a lathe: no Y axis (Y is 0, the tool in the plane through the spindle's
+    /// axis); G7/G8 say whether X is a diameter or a radius.
+    LinuxCncLathe,
+    /// A Fanuc-family lathe (Haas lathes alike) in G-code system A: X is a diameter, U and W
+    /// are increments of X and Z, G90/G92/G94 and G70–G76 are turning cycles; no Y axis.
+    FanucLathe,
 }
 
 impl Dialect {
@@ -41,9 +47,11 @@ impl Dialect {
             "fanuc" => Dialect::Fanuc,
             "grbl" => Dialect::Grbl,
             "marlin" => Dialect::Marlin,
+            "linuxcnc-lathe" => Dialect::LinuxCncLathe,
+            "fanuc-lathe" => Dialect::FanucLathe,
             _ => {
                 return Err(NcError::Usage(format!(
-                    "the engine reads the dialects linuxcnc, fanuc, grbl and marlin; got {name:?}"
+                    "the engine reads the dialects linuxcnc, fanuc, grbl, marlin, linuxcnc-lathe and fanuc-lathe; got {name:?}"
                 )))
             }
         })
@@ -52,15 +60,31 @@ impl Dialect {
     /// Whether a number without a decimal point on a length or angle word is ambiguous (counted
     /// in least input increments, or in units, as a machine parameter says).
     pub fn point_matters(self) -> bool {
-        self == Dialect::Fanuc
+        self.is_fanuc()
+    }
+
+    /// A Fanuc-family control, mill or lathe.
+    pub fn is_fanuc(self) -> bool {
+        matches!(self, Dialect::Fanuc | Dialect::FanucLathe)
+    }
+
+    /// LinuxCNC, mill or lathe.
+    pub fn is_linuxcnc(self) -> bool {
+        matches!(self, Dialect::LinuxCnc | Dialect::LinuxCncLathe)
+    }
+
+    /// A lathe: no Y axis (Y is 0 throughout).
+    pub fn lathe(self) -> bool {
+        matches!(self, Dialect::LinuxCncLathe | Dialect::FanucLathe)
     }
 
     /// The canned-cycle retract mode (true: G98) a program that states neither G98 nor G99 runs
     /// in, when the dialect makes it certain: LinuxCNC's `rs274` reads G99.
     pub fn default_retract(self) -> Option<bool> {
-        match self {
-            Dialect::LinuxCnc => Some(false),
-            _ => None,
+        if self.is_linuxcnc() {
+            Some(false)
+        } else {
+            None
         }
     }
 }
@@ -129,6 +153,9 @@ pub struct Record {
     /// G93 (inverse-time feed) in force: the block's F word is the inverse of the move's time in
     /// minutes, so each piece the move is cut into needs its own F.
     pub inverse_time: bool,
+    /// Lathe diameter mode (LinuxCNC's G7, a Fanuc lathe's X): the X word is twice the X
+    /// coordinate (`end[0]` is the radius).
+    pub diameter: bool,
 }
 
 /// [`Record::comp`] of a move without cutter radius compensation.
@@ -405,6 +432,8 @@ struct Active {
     polar: Option<(u32, usize)>,
     diameter: Option<(u32, usize)>,
     inverse_fanuc: Option<(u32, usize)>,
+    /// G91 on a Fanuc lathe: another G-code system than A, or not one at all.
+    system: Option<(u32, usize)>,
     flow: Option<(u32, usize)>,
     /// A work coordinate system other than the one the program's moves began in.
     wcs: Option<(u32, usize)>,
@@ -421,6 +450,7 @@ impl Active {
             .or(self.cutter_comp)
             .or(self.canned)
             .or(self.inverse_fanuc)
+            .or(self.system)
             .or(self.wcs)
             .map(|(_, idx)| idx)
     }
@@ -460,6 +490,11 @@ struct State {
     g01: Option<Motion>,
     /// G93: each feed move's F is the inverse of its time in minutes.
     inverse_time: bool,
+    /// X words are diameters (LinuxCNC's G7; a Fanuc lathe's always).
+    diameter: bool,
+    /// Whether X is a diameter is known: on a LinuxCNC lathe once the program states G7 or G8
+    /// (before, it is the machine's start-up setting).
+    diameter_known: bool,
     /// The tool length offsets in force, per axis (mm): G43.1's words, 0 after G49, NaN after
     /// G43/G43.2 (the tool table's) and at the start.
     tlo: [f64; NAXES],
@@ -582,9 +617,13 @@ impl Interpreter {
 
     /// The state at the start of a program written for `dialect`.
     pub fn with_dialect(dialect: Dialect) -> Self {
+        let mut pos = [f64::NAN; NAXES];
+        if dialect.lathe() {
+            pos[1] = 0.0;
+        }
         Interpreter {
             st: State {
-                pos: [f64::NAN; NAXES],
+                pos,
                 mode: Mode::None,
                 plane: 0,
                 inch: false,
@@ -601,6 +640,8 @@ impl Interpreter {
                 dialect,
                 g01: None,
                 inverse_time: false,
+                diameter: dialect == Dialect::FanucLathe,
+                diameter_known: dialect != Dialect::LinuxCncLathe,
                 tlo: UNKNOWN_LENGTH,
                 comp: None,
                 comp_exit: None,
@@ -679,6 +720,9 @@ impl Interpreter {
         for lj in 0..nlines {
             let li = line_base + lj;
             let line = &lx.lines[lj];
+            if st.dialect.lathe() {
+                st.pos[1] = 0.0;
+            }
             let words = lx.line_words(lj);
             if line.percent {
                 if !*first_content_seen {
@@ -951,7 +995,7 @@ impl Interpreter {
             if let Some(ec) = e_word {
                 let e_reader = ms[..nm].iter().any(|&(m, _)| matches!(m, 66..=68))
                     || gs[..ng].iter().any(|&(c, _)| matches!(c, 700 | 760))
-                    || (st.dialect == Dialect::Fanuc && gs[..ng].iter().any(|&(c, _)| c == 1870));
+                    || (st.dialect.is_fanuc() && gs[..ng].iter().any(|&(c, _)| c == 1870));
                 if !e_reader && !g92_e_only {
                     e_construct = Some(grouped_unsupported(
                         out,
@@ -967,7 +1011,7 @@ impl Interpreter {
             for &(m, mc) in &ms[..nm] {
                 if m_group(m).is_none()
                     && !matches!(m, 98 | 99)
-                    && !(st.dialect == Dialect::Fanuc && HAAS_AUXILIARY_M.contains(&m))
+                    && !(st.dialect.is_fanuc() && HAAS_AUXILIARY_M.contains(&m))
                 {
                     unknown_m = Some(grouped_unsupported(
                         out,
@@ -998,12 +1042,58 @@ impl Interpreter {
             let mut untraced: Option<usize> = None;
             for &(c, gc) in &gs[..ng] {
                 match c {
+                    // a Fanuc lathe in G-code system A: G90, G92 and G94 are its turning,
+                    // threading and facing cycles (group 01, refused when a block runs one),
+                    // G70–G76 its multiple repetitive cycles, G98/G99 feed per minute and per
+                    // revolution, and there is no G91 (U and W are the increments)
+                    900 | 920 | 940 if st.dialect == Dialect::FanucLathe => {
+                        motion_word = Some((Mode::Canned(c), gc))
+                    }
+                    700 | 710 | 720 | 730 | 740 | 750 | 760
+                        if st.dialect == Dialect::FanucLathe =>
+                    {
+                        let idx =
+                            push_unsupported(out, li, gc, &format!("lathe cycle {}", g_name(c)));
+                        untraced = Some(idx);
+                    }
+                    980 | 990 if st.dialect == Dialect::FanucLathe => {}
+                    910 if st.dialect == Dialect::FanucLathe => {
+                        if st.active.system.is_none() {
+                            let idx = push_unsupported(
+                                out,
+                                li,
+                                gc,
+                                "G91 on a Fanuc lathe: G-code system A has none (U and W are the increments), and in systems B and C the turning cycles are other codes; which system the control runs, the program does not tell",
+                            );
+                            st.active.system = Some((li as u32, idx));
+                        }
+                    }
                     0 => motion_word = Some((Mode::Motion(Motion::Rapid), gc)),
                     10 => motion_word = Some((Mode::Motion(Motion::Feed), gc)),
                     20 => motion_word = Some((Mode::Motion(Motion::ArcCw), gc)),
                     30 => motion_word = Some((Mode::Motion(Motion::ArcCcw), gc)),
                     // (G80 is handled below; its group shares no conflict with the other motions)
-                    40 => {} // dwell
+                    // a dwell: on a Fanuc-family control its time is P, or X (U on a lathe),
+                    // which then moves nothing; LinuxCNC and grbl want P, and move other axis
+                    // words of the block in the modal motion after it
+                    40 if st.dialect.is_fanuc() => {
+                        let time: &[usize] = if st.dialect.lathe() { &[0, 6] } else { &[0] };
+                        for &k in time {
+                            axis[k] = None;
+                            named &= !(1 << k);
+                        }
+                        if named != 0 {
+                            return Err(ierr(
+                                li,
+                                gc,
+                                "axis words in a G04 block: its X (or U on a lathe) is the dwell time, and a Fanuc-family control moves no axis in it",
+                            ));
+                        }
+                    }
+                    40 if p.is_none() && !matches!(st.dialect, Dialect::Marlin) => {
+                        return Err(ierr(li, gc, "dwell time missing with G4 (its P word)"));
+                    }
+                    40 => {}
                     170 => st.plane = 0,
                     180 => st.plane = 1,
                     190 => st.plane = 2,
@@ -1027,7 +1117,7 @@ impl Interpreter {
                     410 | 411 | 420 | 421
                         if st.active.cutter_comp.is_none()
                             && st.comp.is_none()
-                            && matches!(st.dialect, Dialect::LinuxCnc | Dialect::Fanuc) =>
+                            && (st.dialect.is_linuxcnc() || st.dialect.is_fanuc()) =>
                     {
                         comp_code = Some((c, gc));
                     }
@@ -1054,7 +1144,7 @@ impl Interpreter {
                     // G43.1's words give it; G49 takes it off)
                     430 | 432 | 490 | 431 => tool_length = Some(c),
                     // Fanuc's extended work systems G54.1 P1…, Haas's G154 P1…: one code each
-                    541 | 1540 if st.dialect == Dialect::Fanuc => {
+                    541 | 1540 if st.dialect.is_fanuc() => {
                         let n = p.filter(|v| v.fract() == 0.0 && (1.0..=300.0).contains(v));
                         let Some(n) = n else {
                             return Err(ierr(
@@ -1105,6 +1195,10 @@ impl Interpreter {
                     | 842 => {
                         motion_word = Some((Mode::Canned(c), gc));
                     }
+                    70 | 80 if st.dialect.is_linuxcnc() => {
+                        st.diameter = c == 70;
+                        st.diameter_known = true;
+                    }
                     80 => st.active.diameter = None,
                     70 => {
                         if st.active.diameter.is_none() {
@@ -1117,7 +1211,7 @@ impl Interpreter {
                     // system the engine does not follow (its moves are refused): the systems in
                     // use stay as they are. G10 L2 P0 sets the external offset, which moves every
                     // system: not followed
-                    100 if st.dialect == Dialect::Fanuc
+                    100 if st.dialect.is_fanuc()
                         && l_word == Some(20.0)
                         && r.is_none()
                         && p.is_some_and(|v| v.fract() == 0.0 && v >= 1.0) =>
@@ -1126,10 +1220,7 @@ impl Interpreter {
                         let here = p.is_some_and(|v| st.wcs == EXTENDED_WCS + v as i32);
                         frame_code = Some((if here { 1002 } else { 1000 }, gc));
                     }
-                    100 if st.dialect == Dialect::Fanuc
-                        && l_word == Some(2.0)
-                        && p == Some(0.0) =>
-                    {
+                    100 if st.dialect.is_fanuc() && l_word == Some(2.0) && p == Some(0.0) => {
                         let idx = push_unsupported(
                             out,
                             li,
@@ -1220,9 +1311,9 @@ impl Interpreter {
                     // Fanuc/Haas modes of the look-ahead and smoothing (AI contour control G05.1
                     // Q, high-speed G05 P, Haas G187 P E): the programmed path is the same, so
                     // they are copied (LinuxCNC's G5/G5.1 are splines, with axis words)
-                    51 if st.dialect == Dialect::Fanuc && q_word.is_some() && named == 0 => {}
-                    50 if st.dialect == Dialect::Fanuc && p.is_some() && named == 0 => {}
-                    1870 if st.dialect == Dialect::Fanuc && named == 0 => {}
+                    51 if st.dialect.is_fanuc() && q_word.is_some() && named == 0 => {}
+                    50 if st.dialect.is_fanuc() && p.is_some() && named == 0 => {}
+                    1870 if st.dialect.is_fanuc() && named == 0 => {}
                     _ => {
                         let what = match c {
                             50..=53 => "spline",
@@ -1251,6 +1342,21 @@ impl Interpreter {
             if let Some(inch) = unit_change {
                 st.inch = inch;
             }
+            if untraced.is_none() {
+                untraced = lathe_words(out, st, li, &mut axis, &mut named, &wcol)?;
+            }
+            if st.diameter && untraced.is_none() {
+                let why = if polar_used {
+                    Some((polar_col, "polar coordinates (@ ^) in lathe diameter mode"))
+                } else if axis[0].is_some() && (frame_code.is_some() || tool_length == Some(431)) {
+                    Some((axis_col, "an offset on X (G92, G52, G10, G43.1) in lathe diameter mode: whether its X is a diameter is not followed"))
+                } else {
+                    None
+                };
+                if let Some((c, why)) = why {
+                    untraced = Some(push_unsupported(out, li, c, why));
+                }
+            }
             if st.inch {
                 out.summary.inch_lines += 1;
             } else {
@@ -1269,8 +1375,11 @@ impl Interpreter {
             }
             if let Some((m, mc)) = motion_word {
                 if let Mode::Canned(c) = m {
-                    // cycles the engine does not follow stay reported until G80
-                    if let Some(why) = cycle_refused(c) {
+                    // cycles the engine does not follow stay reported until G80 (a Fanuc
+                    // lathe's G90/G92/G94, which run only with axis words, where a block runs one)
+                    if lathe_modal_cycle(st.dialect, c) {
+                        st.active.canned = None;
+                    } else if let Some(why) = cycle_refused(st.dialect, c) {
                         let idx = push_unsupported(out, li, mc, &why);
                         st.active.canned = Some((li as u32, idx));
                     } else {
@@ -1289,9 +1398,11 @@ impl Interpreter {
                 st.mode = m;
                 match m {
                     Mode::Motion(mo) => st.g01 = Some(mo),
+                    // (of group 01 itself: no G0/G1/G2/G3 is in force after them)
+                    Mode::Canned(c) if lathe_modal_cycle(st.dialect, c) => st.g01 = None,
                     // on a Fanuc control G80 cancels the cycles' group 09 only: the motion of group
                     // 01 in force before them is again
-                    Mode::None if st.dialect == Dialect::Fanuc => {
+                    Mode::None if st.dialect.is_fanuc() => {
                         st.mode = st.g01.map_or(Mode::None, Mode::Motion);
                     }
                     _ => {}
@@ -1384,7 +1495,7 @@ impl Interpreter {
                 }
             }
             if polar_used {
-                let why = if st.dialect != Dialect::LinuxCnc {
+                let why = if !st.dialect.is_linuxcnc() {
                     Some("polar coordinates (@ ^), LinuxCNC's: not read in this dialect")
                 } else if home.is_some()
                     || g53
@@ -1702,6 +1813,17 @@ impl Interpreter {
                         && center[1].is_finite()
                         && (!m.is_arc() || finite(&st.pos, 0b111))
                         && finite(&st.pos, named & !0b111);
+                    // LinuxCNC's absolute arc centre (G90.1) in diameter mode: not followed
+                    let blocker = blocker.or_else(|| {
+                        (m.is_arc() && st.arc_absolute && st.diameter).then(|| {
+                            push_unsupported(
+                                out,
+                                li,
+                                motion_word.map_or(axis_col, |(_, c)| c),
+                                "an arc with an absolute centre (G90.1) in lathe diameter mode",
+                            )
+                        })
+                    });
                     let mut supported = blocker.is_none() && e_construct.is_none();
                     if let Some(idx) = blocker {
                         out.unsupported[idx].blocks += 1;
@@ -1953,6 +2075,77 @@ fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) ->
 }
 
 #[allow(clippy::too_many_arguments)]
+/// A lathe's axis words: U and W of a Fanuc lathe are increments of X and Z (read into `axis` as
+/// the absolute X and Z they reach); a diameter X (LinuxCNC's G7, a Fanuc lathe) is halved into
+/// the radius. A Y word on a lathe (the engine takes the tool in the plane through the spindle's
+/// axis), and on a Fanuc lathe V, A, B or C (a C axis, or a chamfer by parameter), are refused:
+/// the construct is returned.
+fn lathe_words(
+    out: &mut Interp,
+    st: &State,
+    li: usize,
+    axis: &mut [Option<f64>; NAXES],
+    named: &mut u16,
+    wcol: &[usize; 26],
+) -> Result<Option<usize>, NcError> {
+    let fanuc = st.dialect == Dialect::FanucLathe;
+    if st.dialect.lathe() {
+        let refused: &[u8] = if fanuc { b"YVABC" } else { b"Y" };
+        if let Some(&l) = refused
+            .iter()
+            .find(|&&l| axis[axis_index(l).unwrap()].is_some())
+        {
+            let why = if l == b'Y' || l == b'V' {
+                format!("{} word on a lathe: the engine takes the tool in the plane through the spindle's axis (Y 0)", l as char)
+            } else {
+                format!("{} word on a Fanuc lathe: a rotary axis, or a chamfer (parameter 3405#4 CCR), which the program does not tell", l as char)
+            };
+            return Ok(Some(push_unsupported(
+                out,
+                li,
+                wcol[(l - b'A') as usize],
+                &why,
+            )));
+        }
+    }
+    if !st.diameter_known && axis[0].is_some() {
+        return Ok(Some(push_unsupported(
+            out,
+            li,
+            wcol[(b'X' - b'A') as usize],
+            "X before G7 or G8 on a LinuxCNC lathe: whether X is a diameter is the machine's start-up setting (RS274NGC_STARTUP_CODE), which the program does not tell",
+        )));
+    }
+    let unit = if st.inch { MM_PER_INCH } else { 1.0 };
+    let dia = if st.diameter { 2.0 } else { 1.0 };
+    if fanuc {
+        for (inc, abs, scale) in [(6usize, 0usize, dia), (8, 2, 1.0)] {
+            let Some(v) = axis[inc] else { continue };
+            if axis[abs].is_some() {
+                return Err(ierr(
+                    li,
+                    wcol[(AXES[inc] - b'A') as usize],
+                    format!(
+                        "{} and {} in one block (an increment and an absolute value of one axis)",
+                        AXES[abs] as char, AXES[inc] as char
+                    ),
+                ));
+            }
+            // the word the axis stands at, in the program's numbers (NaN where unknown)
+            let here = (st.pos[abs] - st.off[abs]) / unit * scale;
+            axis[abs] = Some(here + v);
+            axis[inc] = None;
+            *named = (*named & !(1 << inc)) | (1 << abs);
+        }
+    }
+    if st.diameter {
+        if let Some(v) = axis[0] {
+            axis[0] = Some(v / 2.0);
+        }
+    }
+    Ok(None)
+}
+
 /// Where the axis words of a block take the axes from `pos`: lengths scaled by `unit` (mm per
 /// program unit), rotary words in degrees; added to `pos` when incremental.
 fn target(
@@ -2171,8 +2364,22 @@ fn cycle_code(c: i32) -> bool {
     matches!(c, 730 | 740 | 760 | 810..=890) && c % 10 == 0
 }
 
+/// A Fanuc lathe's G90, G92 or G94 (G-code system A): a turning, threading or facing cycle of
+/// the motion group, which runs in each block with axis words until another motion code.
+fn lathe_modal_cycle(d: Dialect, c: i32) -> bool {
+    d == Dialect::FanucLathe && matches!(c, 900 | 920 | 940)
+}
+
 /// Why the engine does not follow a canned cycle, or None when it does.
-fn cycle_refused(c: i32) -> Option<String> {
+fn cycle_refused(d: Dialect, c: i32) -> Option<String> {
+    if d == Dialect::FanucLathe {
+        return Some(match c {
+            900 => "turning cycle G90 (a Fanuc lathe's, G-code system A)".into(),
+            920 => "threading cycle G92 (a Fanuc lathe's, G-code system A)".into(),
+            940 => "facing cycle G94 (a Fanuc lathe's, G-code system A)".into(),
+            _ => format!("canned cycle {} on a lathe", g_name(c)),
+        });
+    }
     match c {
         760 => Some("threading cycle G76".into()),
         870 => Some(
@@ -2228,6 +2435,18 @@ fn canned(
         push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
     };
     if let Some((_, idx)) = st.active.canned {
+        unknown_after(out, st, idx);
+        return Ok(());
+    }
+    if lathe_modal_cycle(st.dialect, c) {
+        let why = cycle_refused(st.dialect, c).unwrap_or_default();
+        let idx = push_unsupported(out, li, w.col, &why);
+        unknown_after(out, st, idx);
+        return Ok(());
+    }
+    // in diameter mode a cycle is not traced (its block is copied as written)
+    if st.diameter {
+        let idx = push_unsupported(out, li, w.col, "canned cycle in lathe diameter mode");
         unknown_after(out, st, idx);
         return Ok(());
     }
@@ -2530,6 +2749,10 @@ fn comp_on(
         Err(format!(
             "cutter compensation {name} in the ZX or YZ plane (a lathe's nose radius): not treated"
         ))
+    } else if st.diameter {
+        Err(format!(
+            "cutter compensation {name} in lathe diameter mode: not treated"
+        ))
     } else if st.comp_exit.is_some() {
         Err(format!(
             "cutter compensation {name} again before a move ended the compensation before it"
@@ -2761,6 +2984,10 @@ fn push_record(
     turns: u32,
 ) {
     out.line_record[li - out.line_base] = out.records.len() as u32;
+    let mut end = st.pos;
+    if st.dialect.lathe() {
+        end[1] = 0.0;
+    }
     out.records.push(Record {
         line: li as u32,
         motion,
@@ -2770,13 +2997,14 @@ fn push_record(
         arc_absolute: st.arc_absolute,
         supported,
         named,
-        end: st.pos,
+        end,
         center,
         turns,
         cycle: 0,
         frame: st.frame,
         comp: NO_COMP,
         inverse_time: st.inverse_time,
+        diameter: st.diameter,
     });
 }
 

@@ -389,11 +389,35 @@ def no_subprograms(subprograms, d) -> None:
 
 
 def expand_read(expand: bool, d) -> None:
-    """``--expand`` flattens or runs LinuxCNC's, Fanuc's and Sinumerik's programs only."""
-    if expand and d.name not in ("linuxcnc", "fanuc", "sinumerik"):
+    """``--expand`` flattens or runs the programs of LinuxCNC, Fanuc and Sinumerik mills only."""
+    if expand and (d.name not in ("linuxcnc", "fanuc", "sinumerik") or d.lathe):
+        what = f"a lathe's ({d.describe_machine()})" if d.lathe else d.describe()
         raise click.UsageError(
-            f"--expand flattens LinuxCNC's, Fanuc's and Sinumerik's programs; this program is read as {d.describe()}"
+            f"--expand flattens the programs of LinuxCNC, Fanuc and Sinumerik mills; this program is read as {what}"
         )
+
+
+def resolve_dialect(program, dialect: str, machine: str):
+    """The program's dialect and machine (:func:`ncadapt.dialects.resolve`); a machine its
+    dialect has none of is a usage error."""
+    try:
+        return dialects.resolve(program, dialect, machine)
+    except InputError:
+        raise
+    except ValueError as e:
+        raise click.UsageError(str(e)) from None
+
+
+#: ``--machine`` of the commands that read an NC program.
+machine_option = click.option(
+    "--machine",
+    type=click.Choice(dialects.MACHINES),
+    default="auto",
+    show_default=True,
+    help="A mill's or a lathe's program; auto detects a lathe's (LinuxCNC: G7 or G8; Fanuc/Haas: a T word "
+    "such as T0101, G96, G50 S…, G70-G72 with P). On a lathe Y is 0 (the field's y there is not applied: "
+    "refused above --chord-tol); a Fanuc lathe's X is a diameter and U, W its increments.",
+)
 
 
 #: ``--dialect`` of the commands that read an NC program.

@@ -15,8 +15,10 @@ from ._common import (
     echo_err,
     expand_read,
     handle_errors,
+    machine_option,
     no_subprograms,
     progress,
+    resolve_dialect,
     subprograms_option,
     summary,
     write_json,
@@ -90,6 +92,7 @@ def _shift(ctx, param, value):
     "compared in mm).",
 )
 @dialect_option
+@machine_option
 @click.option(
     "--expand-cycles",
     is_flag=True,
@@ -136,6 +139,7 @@ def correct(
     keep_unsupported,
     clearance,
     dialect,
+    machine,
     expand_cycles,
     expand,
     tool_table,
@@ -153,7 +157,7 @@ def correct(
     check_outputs({"input program": program, "field file": field_path}, {"-o": output, "--json": json_path})
     if (tool_table is None) != (tool_units is None):
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
-    d = dialects.resolve(program, dialect)
+    d = resolve_dialect(program, dialect, machine)
     no_subprograms(subprograms, d)
     expand_read(expand, d)
     tools = None
@@ -168,7 +172,7 @@ def correct(
     ahead = (
         None
         if tools or expand or d.name in ("sinumerik", "marlin")
-        else read_ahead(str(program), constants.PIECE_BYTES, d.name)
+        else read_ahead(str(program), constants.PIECE_BYTES, d.engine)
     )
     from .. import fields as _fields
     from .. import nc
@@ -191,7 +195,7 @@ def correct(
             clearance=clearance,
             progress=say,
             expand_cycles=expand_cycles,
-            dialect=d.name,
+            dialect=d.engine,
             read_ahead=ahead,
             tools=tools,
             expand=expand,
@@ -199,6 +203,8 @@ def correct(
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
+    if d.name in dialects.LATHE_DIALECTS:
+        summary(f"  machine: {d.describe_machine()}")
     summary(f"  field: {field.describe()}")
     if c.expanded is not None:
         e = c.expanded
@@ -251,6 +257,7 @@ def correct(
             "keep_unsupported": keep_unsupported,
             "clearance": clearance,
             "dialect": dialect,
+            "machine": machine,
             "expand_cycles": expand_cycles,
             "expand": expand,
             "tool_table": None if tool_table is None else str(tool_table),

@@ -12,7 +12,9 @@ from ._common import (
     dialect_option,
     expand_read,
     handle_errors,
+    machine_option,
     no_subprograms,
+    resolve_dialect,
     subprograms_option,
     summary,
     write_json,
@@ -22,6 +24,7 @@ from ._common import (
 @click.command()
 @click.argument("program", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @dialect_option
+@machine_option
 @click.option(
     "--expand",
     is_flag=True,
@@ -31,17 +34,19 @@ from ._common import (
 @subprograms_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON.")
 @handle_errors
-def inspect(program, dialect, expand, subprograms, json_path):
+def inspect(program, dialect, machine, expand, subprograms, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
-    d = dialects.resolve(program, dialect)
+    d = resolve_dialect(program, dialect, machine)
     no_subprograms(subprograms, d)
     expand_read(expand, d)
-    info = nc.inspect_file(program, d.name, subprograms, expand)
+    info = nc.inspect_file(program, d.engine, subprograms, expand)
     info["dialect"] = d.as_dict()
     m = info["motions"]
     summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
     summary(f"  dialect: {d.describe()}")
+    if d.name in dialects.LATHE_DIALECTS:
+        summary(f"  machine: {d.describe_machine()}")
     if expand and d.name != "sinumerik":
         summary(f"  flattened (--expand): {info['lines']:,} lines ran {info['blocks_run']:,} blocks")
     summary(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
