@@ -168,11 +168,10 @@ def test_what_a_lathe_program_does_that_is_not_followed_is_refused_at_its_line()
         7,
         "axis words with no motion mode (G80 or none yet)",
     )
-    for code, what in [
-        ("G71 P10 Q20 U0.2 W0.1 D1. F0.2", "lathe cycle G71"),
-        ("G76 X10. Z-5. K1. D.2 F1.", "lathe cycle G76"),
-    ]:
-        assert _unsupported(head + code + "\nM30\n") == [(4, what)]
+    assert _unsupported(head + "G76 X10. Z-5. K1. D.2 F1.\nM30\n") == [(4, "lathe cycle G76")]
+    assert _unsupported(head + "G71 P10 Q20 U0.2 W0.1 D1. F0.2\nM30\n") == [
+        (5, "the contour of G71 P10 Q20 does not follow it from block N10")
+    ]
     assert "G91 on a Fanuc lathe" in _unsupported(head + "G91\nG1 X1. F0.2\nM30\n")[0][1]
     assert "Y word on a lathe" in _unsupported(head + "G1 Y1. F0.2\nM30\n")[0][1]
     assert "C word on a Fanuc lathe" in _unsupported(head + "G1 X10. C1. F0.2\nM30\n")[0][1]
@@ -241,3 +240,182 @@ def _lathe(p):
         return dialects.resolve(p).lathe
     except InputError:  # (a dialect the engine does not read)
         return False
+
+
+# ------------------------------------------------------------- nose radius compensation
+NOSE = """G21 G18 G7 G90
+T1 M6
+G0 X40 Z5
+G42 G1 X20 Z2 F100
+G1 Z-10
+G2 X30 Z-15 I5 K0
+G1 Z-30
+X40
+G40 G0 X50 Z5
+M2
+"""
+#: the nose radius (mm) of tool 1, and the table rs274 reads it from (in inches, its units)
+NOSE_R = 0.8
+NOSE_TABLE = f"T1 P1 D{2 * NOSE_R / 25.4:.7f} Q3 ;\n"
+
+
+def _gentle(p):
+    """A field whose change within the nose radius is far below the chord tolerance."""
+    p = np.asarray(p, dtype=float)
+    d = np.zeros((len(p), 3))
+    d[:, 0] = 0.01 * np.sin(p[:, 2] / 60)
+    d[:, 2] = 0.008 * np.cos(p[:, 0] / 40)
+    return d
+
+
+def _compensated(tmp_path, text, name):
+    (tmp_path / "tool.tbl").write_text(NOSE_TABLE)
+    path = tmp_path / name
+    path.write_text(text)
+    c = canonical(path, tools=tmp_path / "tool.tbl")
+    assert c.error is None, f"{name}: {c.error}"
+    return c, np.concatenate([m.dense(step=0.002, sagitta=1e-7) for m in moves(c)[1:] if m.kind != "traverse"])
+
+
+@needs_rs274
+def test_nose_compensation_offsets_the_corrected_contour(tmp_path):
+    """rs274 offsets the nose from the contour (its tool table's nose radius and orientation): a
+    shift moves the compensated path by the shift exactly; a field that changes little within
+    the nose radius moves it by the field within the chord tolerance."""
+    prog = nc.parse(NOSE, dialect="linuxcnc-lathe", tools={1: 2 * NOSE_R})
+    assert prog.unsupported == ()
+    inp, inp_path = _compensated(tmp_path, NOSE, "in.ngc")
+    shift = (0.05, 0.0, -0.02)
+    out, _ = _compensated(tmp_path, prog.correct(fields.Shift(shift), rapids=True).text, "out.ngc")
+    feeds = [k for k, kind in enumerate(inp.kinds) if kind != "traverse"]
+    assert len(feeds) == 6 and [k for k, kind in enumerate(out.kinds) if kind != "traverse"] == feeds
+    np.testing.assert_allclose(out.ends[feeds, :3], inp.ends[feeds, :3] + shift, atol=2e-4)
+    # (the nose is off the contour: rs274 compensates)
+    assert np.abs(inp.ends[feeds[1], 0] - 10.0) > NOSE_R
+    out_text = prog.correct(_gentle, rapids=True).text
+    _, out_path = _compensated(tmp_path, out_text, "out2.ngc")
+    want = inp_path + _gentle(inp_path)
+    far = max(cKDTree(want).query(out_path)[0].max(), cKDTree(out_path).query(want)[0].max())
+    assert far <= 0.002 + 0.0006, far
+
+
+def test_nose_compensation_needs_its_radius_and_a_field_calm_within_it():
+    # no tool table: refused at G42, naming what is missing
+    (u,) = nc.parse(NOSE, dialect="linuxcnc-lathe").unsupported
+    assert (u.line, "its nose radius is not known" in u.construct) == (4, True)
+    # a field that changes by microns within the nose radius: refused at the line
+    with pytest.raises(RefusedError, match="line [4-8]: nose radius compensation: the field changes"):
+        nc.parse(NOSE, dialect="linuxcnc-lathe", tools={1: 2 * NOSE_R}).correct(_field)
+    # a Fanuc lathe's nose radius is its offset's: T0101 is tool 1, offset 1
+    fanuc = "O1\nG21\nT0202\nG0 X40. Z5.\nG42 G1 X20. Z2. F0.1\nG1 Z-10.\nG40 G0 X50. Z5.\nM30\n"
+    assert nc.parse(fanuc, dialect="fanuc-lathe", tools={2: 1.6}).unsupported == ()
+    (u,) = nc.parse(fanuc, dialect="fanuc-lathe", tools={1: 1.6}).unsupported
+    assert "offset 2: its nose radius is not known" in u.construct
+
+
+def test_a_roughing_cycle_s_contour_is_not_read_as_moves():
+    """G71 P10 Q20 runs the blocks N10-N20 inside the cycle, then goes on after N20 from the
+    cycle's start: a contour the engine does not follow (type I: N10 names X alone), kept with
+    --keep-unsupported, is written as it is, and the move after it, an increment from a position
+    the engine does not follow, as written."""
+    text = "O1\nG18 G21\nG00 X32. Z2.\nG71 P10 Q20 U0.2 W0.1 F0.2\nN10 G00 X10.\nN20 G01 X30. Z-15.\nG01 U-4. W-2. F0.1\nX20. Z-20.\nM30\n"
+    prog = nc.parse(text, dialect="fanuc-lathe")
+    ((line, what, blocks),) = [(u.line, u.construct, u.blocks) for u in prog.unsupported]
+    assert (line, blocks, "names X and Z (absolute) here" in what) == (5, 2, True)
+    out = prog.correct(_field, keep_unsupported=True)
+    lines = out.text.splitlines()
+    assert lines[:7] == text.splitlines()[:7]
+    assert lines[7] != "X20. Z-20." and lines[7].startswith("X20.")  # (the first known move again)
+
+
+def test_a_lathe_s_arcs_are_in_the_zx_plane():
+    # a Fanuc lathe starts in G18: its arcs are in ZX (no Y written)
+    text = "O1\nG21\nT0101\nG00 X10. Z2.\nG01 Z0. F0.1\nG03 X20. Z-5. R5.\nG01 Z-10.\nM30\n"
+    out = nc.parse(text, dialect="fanuc-lathe").correct(_field)
+    assert out.correction.arcs_linearised == 1 and "Y" not in out.text
+    # on a LinuxCNC lathe the start-up plane is the machine's; another plane has no arcs on a lathe
+    assert (
+        "before the program states its plane"
+        in _unsupported("G21 G8\nG0 X10 Z2\nG3 X20 Z-5 R5\nM2\n", "linuxcnc-lathe")[0][1]
+    )
+    assert "outside the ZX plane" in _unsupported("G21 G8 G17\nG0 X10 Z2\nG3 X20 R5\nM2\n", "linuxcnc-lathe")[0][1]
+
+
+# ------------------------------------------------------------- roughing cycles' contours
+CONTOUR = """%
+O2
+G18 G21 G99
+T0101
+G00 X40. Z2.
+G71 P10 Q20 U0.4 W0.1 D1. F0.2
+N10 G00 X10. Z2.
+G01 Z0. F0.1
+G03 X20. Z-5. R5.
+G01 W-15.
+G02 U10. W-5. I5. K0.
+G01 Z-30.
+N20 G01 U1. W-0.5
+G70 P10 Q20 F0.05
+G00 X50. Z10.
+G01 X45. Z5. F0.2
+M30
+%
+"""
+
+
+def _contour_lines(text):
+    """The contour of CONTOUR's cycle (N10 through N20) as rs274 runs it from the cycle's start
+    (the move before the cycle), and the lines before and after it."""
+    lines = text.splitlines()
+    a = next(k for k, s in enumerate(lines) if s.startswith("N10"))
+    b = next(k for k, s in enumerate(lines) if s.startswith("N20"))
+    return "\n".join(["G18 G21"] + lines[a - 2 : a - 1] + lines[a : b + 1]) + "\nM2\n", lines[:a], lines[b + 1 :]
+
+
+@needs_rs274
+def test_a_roughing_cycle_s_contour_is_corrected_where_it_is(tmp_path):
+    """G71 P10 Q20 roughs along the blocks N10-N20 and G70 finishes along them: corrected in
+    place (the control follows the corrected contour), the cycles' blocks copied, N10 and N20
+    still the contour's first and last blocks; the contour, run by rs274, is the input's displaced."""
+    prog = nc.parse(CONTOUR, dialect="fanuc-lathe")
+    assert prog.unsupported == ()
+    out = prog.correct(_field, rapids=True)
+    c_in, before_in, after_in = _contour_lines(CONTOUR)
+    c_out, before_out, after_out = _contour_lines(out.text)
+    # the cycle's start corrected as a rapid (--rapids), the cycle's block copied
+    assert before_out[:4] + before_out[5:] == before_in[:4] + before_in[5:]
+    assert after_out[0] == after_in[0] == "G70 P10 Q20 F0.05"
+    assert c_out.count("\n") > c_in.count("\n") + 10  # cut in pieces, between N10 and N20
+    _check_displaced(tmp_path, _for_rs274(c_in), _for_rs274(c_out), 0.0035)
+    # after the cycles the control is back at the cycle's start, which is not followed: the move
+    # from there is corrected at its end only, and the next one from it as usual
+    assert after_out[1] == "G00 X50.0017 Z9.9987"  # (50, 10) moved by the field at radius 25
+    d = _field([[25.0, 0.0, 10.0]])[0]
+    assert (round(50 + 2 * d[0], 4), round(10 + d[2], 4)) == (50.0017, 9.9987)
+
+
+def test_what_a_roughing_cycle_s_contour_cannot_be():
+    def refused(text):
+        return [(u.line, u.construct) for u in nc.parse(text, dialect="fanuc-lathe").unsupported]
+
+    # its first block must follow the cycle, numbered P
+    assert "does not follow it from block N10" in refused(CONTOUR.replace("N10 G00", "N11 G00"))[0][1]
+    # and name X and Z (a type I contour names X alone: adding a Z would change its type)
+    assert "names X and Z (absolute) here" in refused(CONTOUR.replace("N10 G00 X10. Z2.", "N10 G00 X10."))[0][1]
+    # G70 along a contour no roughing cycle read
+    assert refused(CONTOUR.replace("G70 P10 Q20", "G70 P30 Q40")) == [(14, "lathe cycle G70")]
+    # the last block must stay one block: a feed the field bends is refused at its line
+    bent = CONTOUR.replace("N20 G01 U1. W-0.5", "N20 G01 X40. Z-40.")
+    with pytest.raises(InputError, match="last block of a roughing cycle's contour") as e:
+        nc.parse(bent, dialect="fanuc-lathe").correct(_field)
+    assert e.value.line == 13
+
+
+def test_a_haas_contour_with_nose_compensation_keeps_its_shape():
+    """As Haas posts write it: G42 on the contour's first block, G40 on its last."""
+    text = CONTOUR.replace("N10 G00 X10. Z2.", "N10 G00 G42 X10. Z2.").replace("N20 G01 U1.", "N20 G01 G40 U1.")
+    prog = nc.parse(text, dialect="fanuc-lathe", tools={1: 1.6})
+    assert prog.unsupported == ()
+    out = prog.correct(fields.Shift((0.05, 0, 0)), rapids=True).text
+    assert "N10 G00 G42 X10.1 Z2.\n" in out and "N20 G01 G40 U1. W-0.5\n" in out
+    assert "G71 P10 Q20 U0.4 W0.1 D1. F0.2\n" in out and "G70 P10 Q20 F0.05\n" in out

@@ -927,7 +927,18 @@ impl<'a> Emitter<'a> {
         let comp = (rec.comp != crate::interp::NO_COMP).then(|| &it.comps[rec.comp as usize]);
         let comp_whole = comp.is_some_and(|c| {
             !rec.motion.is_arc() && (c.start != c.end || c.kink > self.st.arc_tol)
-        });
+        }) || (rec.whole != 0 && !rec.motion.is_arc());
+        let whole_why = match rec.whole {
+            crate::interp::WHOLE_CONTOUR => "the last block of a roughing cycle's contour (numbered Q) must stay one move, as the pieces after its line would not belong to the contour",
+            _ => "the move that starts or ends nose radius compensation must stay one move",
+        };
+        if rec.whole != 0 && rec.motion.is_arc() && !keep_arc {
+            return Err(NcError::Interpret {
+                line: rec.line as usize + 1,
+                col: 1,
+                message: format!("{whole_why}, and this arc is not moved alike along it (it would be cut in chords)"),
+            });
+        }
         if comp_whole && !straight {
             let e = xyz_at(n - 1);
             let a = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
@@ -936,11 +947,21 @@ impl<'a> Emitter<'a> {
                 .fold(0.0f64, f64::max)
                 .sqrt();
             if !(worst <= self.st.arc_tol) || !only_xyz || moved != 0 {
+                let why = if rec.whole != 0 {
+                    whole_why
+                } else {
+                    "the move that starts or ends cutter compensation, or follows a turn under 0.05 rad (which the controller neither rounds nor trims), must stay one move"
+                };
+                let hint = if rec.whole != 0 {
+                    "correct the move before it (--rapids for a rapid), or raise --chord-tol"
+                } else {
+                    "plunge with G1 before turning compensation on, correct the rapid before it (--rapids), or raise --chord-tol"
+                };
                 return Err(NcError::Interpret {
                     line: rec.line as usize + 1,
                     col: 1,
                     message: format!(
-                        "the move that starts or ends cutter compensation, or follows a turn under 0.05 rad (which the controller neither rounds nor trims), must stay one move, but the corrected path along it is {:.1} µm off a straight line (more than the chord tolerance {} mm), or it moves another axis; plunge with G1 before turning compensation on, correct the rapid before it (--rapids), or raise --chord-tol",
+                        "{why}, but the corrected path along it is {:.1} µm off a straight line (more than the chord tolerance {} mm), or it moves another axis; {hint}",
                         worst * 1000.0,
                         self.st.arc_tol
                     ),
@@ -997,6 +1018,28 @@ impl<'a> Emitter<'a> {
             (0..n).collect()
         };
         let pieces = &keep[1..];
+        // a lathe's nose radius compensation: the control offsets each written piece along its
+        // own normal, which the rounding of its numbers turns by up to 2√2·half/length, moving
+        // the nose centre by the nose radius times that
+        if rec.nose > 0.0 {
+            let shortest = rec.nose * 2.0 * std::f64::consts::SQRT_2 * half_mm / self.st.arc_tol;
+            let mut prev = [epos0[0], epos0[1], epos0[2]];
+            for &k in &keep {
+                let p = xyz_at(k);
+                let len = (p[0] - prev[0]).hypot(p[2] - prev[2]);
+                if len < shortest {
+                    return Err(NcError::Interpret {
+                        line: rec.line as usize + 1,
+                        col: 1,
+                        message: format!(
+                            "a piece {len:.4} mm long under nose radius compensation: the rounding of its numbers turns it enough to move the nose centre ({:.4} mm radius) by more than the chord tolerance {} mm (pieces under it must be at least {shortest:.4} mm); raise --max-segment or --chord-tol",
+                            rec.nose, self.st.arc_tol
+                        ),
+                    });
+                }
+                prev = p;
+            }
+        }
         // program stops move to the last piece (they stay where they are when there is none)
         let mut stops: Vec<u8> = Vec::new();
         for w in words.iter().filter(|w| is_stop_m(w) && !pieces.is_empty()) {

@@ -156,6 +156,34 @@ pub struct Record {
     /// Lathe diameter mode (LinuxCNC's G7, a Fanuc lathe's X): the X word is twice the X
     /// coordinate (`end[0]` is the radius).
     pub diameter: bool,
+    /// A lathe's tool nose radius compensation (G41/G42 in G18) in force: the nose radius (mm),
+    /// 0 without. The move is corrected on the programmed contour, which the control offsets;
+    /// the field must not vary within the nose radius by more than the chord tolerance.
+    pub nose: f64,
+    /// Why the move must stay one move (0: it need not): [`WHOLE_NOSE`], [`WHOLE_CONTOUR`].
+    pub whole: u8,
+}
+
+/// [`Record::whole`] of the move that starts or ends a lathe's nose radius compensation (the
+/// first after G41/G42 or G40): the control goes between the programmed and the offset point
+/// along it.
+pub const WHOLE_NOSE: u8 = 1;
+/// [`Record::whole`] of the last block of a roughing cycle's contour (the block numbered Q): the
+/// pieces after its line would not belong to the contour.
+pub const WHOLE_CONTOUR: u8 = 2;
+
+/// A Fanuc lathe's roughing cycle (G71/G72 with P and Q) whose contour, the blocks numbered P
+/// through Q right after it, is being read: corrected where it is (the control roughs along it
+/// and G70 finishes along it), the cycle's blocks copied.
+#[derive(Clone, Copy, Debug)]
+struct Contour {
+    code: i32,
+    p: f64,
+    q: f64,
+    /// The next block is the contour's first (it must be numbered P).
+    first: bool,
+    /// The block numbered Q has been read: the control is back at the cycle's start.
+    done: bool,
 }
 
 /// [`Record::comp`] of a move without cutter radius compensation.
@@ -500,6 +528,23 @@ struct State {
     tlo: [f64; NAXES],
     /// Cutter radius compensation in force (G41/G42 with a known radius).
     comp: Option<CompOn>,
+    /// A lathe's nose radius compensation in force (G41/G42 in G18): the nose radius, mm.
+    nose: Option<f64>,
+    /// The next move starts or ends nose radius compensation ([`WHOLE_NOSE`]).
+    nose_edge: bool,
+    /// The block being read is the last of a roughing cycle's contour ([`WHOLE_CONTOUR`]).
+    contour_end: bool,
+    /// The roughing cycle whose contour is being read, and the (P, Q) of those read (a G70
+    /// finishes along one of them).
+    contour: Option<Contour>,
+    contours: Vec<(f64, f64)>,
+    /// Whether the plane is known: on a LinuxCNC lathe once the program states it (before, it
+    /// is the machine's start-up setting; a Fanuc lathe starts in G18, a mill in G17).
+    plane_known: bool,
+    /// A Fanuc lathe's G71/G72/G73 with P and Q: the blocks after it through the one numbered Q
+    /// are its contour, which the control runs inside the cycle (not followed): (Q, the
+    /// cycle's unsupported construct).
+    contour_until: Option<(f64, usize)>,
     /// After G40: the offset the tool centre stands at until the move that ends compensation.
     comp_exit: Option<[f64; 2]>,
     /// After G40 ending compensation the engine did not follow: the move that ends it is not
@@ -625,7 +670,7 @@ impl Interpreter {
             st: State {
                 pos,
                 mode: Mode::None,
-                plane: 0,
+                plane: if dialect == Dialect::FanucLathe { 1 } else { 0 },
                 inch: false,
                 incremental: false,
                 arc_absolute: false,
@@ -644,6 +689,13 @@ impl Interpreter {
                 diameter_known: dialect != Dialect::LinuxCncLathe,
                 tlo: UNKNOWN_LENGTH,
                 comp: None,
+                nose: None,
+                nose_edge: false,
+                contour_end: false,
+                contour: None,
+                contours: Vec::new(),
+                plane_known: dialect != Dialect::LinuxCncLathe,
+                contour_until: None,
                 comp_exit: None,
                 comp_unfollowed_exit: false,
                 tool_next: None,
@@ -742,6 +794,50 @@ impl Interpreter {
                 continue;
             }
             *first_content_seen = true;
+            // a Fanuc lathe's roughing cycle contour, read as moves from the cycle's start
+            if let Some(c) = st.contour.as_mut() {
+                let numbered = |v: f64| words.iter().any(|w| w.letter == b'N' && w.value == v);
+                if c.done {
+                    // back at the cycle's start, the output's, which is not followed here: the
+                    // position is unknown until moves name X and Z again
+                    st.contour = None;
+                    st.contour_end = false;
+                    st.pos = [f64::NAN; NAXES];
+                    push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                } else {
+                    let (code, p, q) = (c.code, c.p, c.q);
+                    let named = |l: &[u8]| words.iter().any(|w| l.contains(&w.letter));
+                    let why = if c.first && !numbered(p) {
+                        Some(format!(
+                            "the contour of {} P{p} Q{q} does not follow it from block N{p}",
+                            g_name(code)
+                        ))
+                    } else if c.first && !(named(b"X") && named(b"Z")) {
+                        Some(format!("the first block of the contour of {} names X and Z (absolute) here: adding the one it leaves out would change the cycle's type (I or II), and increments from the cycle's start would make G70's contour depend on where G70 starts", g_name(code)))
+                    } else {
+                        None
+                    };
+                    c.first = false;
+                    if let Some(why) = why {
+                        let idx = push_unsupported(out, li, 0, &why);
+                        st.contour = None;
+                        st.contour_until = Some((q, idx));
+                    } else if numbered(q) {
+                        c.done = true;
+                        st.contour_end = true;
+                    }
+                }
+            }
+            // a contour not followed: run inside the cycle, copied here
+            if let Some((q, idx)) = st.contour_until {
+                if words.iter().any(|w| w.letter == b'N' && w.value == q) {
+                    st.contour_until = None;
+                }
+                st.pos = [f64::NAN; NAXES];
+                push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                out.unsupported[idx].blocks += 1;
+                continue;
+            }
             if line.block_delete {
                 out.summary.block_delete_lines += 1;
             }
@@ -1009,10 +1105,7 @@ impl Interpreter {
             // M codes the engine does not know may do anything, also with the axis words of the block
             let mut unknown_m: Option<usize> = None;
             for &(m, mc) in &ms[..nm] {
-                if m_group(m).is_none()
-                    && !matches!(m, 98 | 99)
-                    && !(st.dialect.is_fanuc() && HAAS_AUXILIARY_M.contains(&m))
-                {
+                if m_group(m).is_none() && !matches!(m, 98 | 99) && !copied_m(st.dialect, m) {
                     unknown_m = Some(grouped_unsupported(
                         out,
                         grouped,
@@ -1040,6 +1133,9 @@ impl Interpreter {
             }
             let mut unit_change = None;
             let mut untraced: Option<usize> = None;
+            // a lathe's roughing or finishing cycle whose contour the engine corrects: its
+            // block moves nothing here (its U and W are allowances)
+            let mut cycle_line = false;
             for &(c, gc) in &gs[..ng] {
                 match c {
                     // a Fanuc lathe in G-code system A: G90, G92 and G94 are its turning,
@@ -1049,12 +1145,43 @@ impl Interpreter {
                     900 | 920 | 940 if st.dialect == Dialect::FanucLathe => {
                         motion_word = Some((Mode::Canned(c), gc))
                     }
+                    // a roughing cycle with its contour right after it, and G70 finishing along
+                    // one read: the cycles' blocks copied, the contour corrected where it is
+                    710 | 720
+                        if st.dialect == Dialect::FanucLathe
+                            && st.contour.is_none()
+                            && p.is_some()
+                            && q_word.is_some() =>
+                    {
+                        let (p, q) = (p.unwrap_or_default(), q_word.unwrap_or_default());
+                        st.contour = Some(Contour {
+                            code: c,
+                            p,
+                            q,
+                            first: true,
+                            done: false,
+                        });
+                        st.contours.push((p, q));
+                        cycle_line = true;
+                    }
+                    700 if st.dialect == Dialect::FanucLathe
+                        && st
+                            .contours
+                            .contains(&(p.unwrap_or(f64::NAN), q_word.unwrap_or(f64::NAN))) =>
+                    {
+                        cycle_line = true;
+                    }
                     700 | 710 | 720 | 730 | 740 | 750 | 760
                         if st.dialect == Dialect::FanucLathe =>
                     {
                         let idx =
                             push_unsupported(out, li, gc, &format!("lathe cycle {}", g_name(c)));
                         untraced = Some(idx);
+                        if matches!(c, 710 | 720 | 730) && p.is_some() {
+                            if let Some(q) = q_word {
+                                st.contour_until = Some((q, idx));
+                            }
+                        }
                     }
                     980 | 990 if st.dialect == Dialect::FanucLathe => {}
                     910 if st.dialect == Dialect::FanucLathe => {
@@ -1094,9 +1221,10 @@ impl Interpreter {
                         return Err(ierr(li, gc, "dwell time missing with G4 (its P word)"));
                     }
                     40 => {}
-                    170 => st.plane = 0,
-                    180 => st.plane = 1,
-                    190 => st.plane = 2,
+                    170 | 180 | 190 => {
+                        st.plane = ((c - 170) / 10) as u8;
+                        st.plane_known = true;
+                    }
                     200 => unit_change = Some(true),
                     210 => unit_change = Some(false),
                     900 => st.incremental = false,
@@ -1106,6 +1234,7 @@ impl Interpreter {
                     400 => {
                         // compensation the engine did not follow still puts the tool at the
                         // offset until the move that ends it, which stays as written too
+                        st.nose_edge |= st.nose.take().is_some();
                         st.comp_unfollowed_exit = st.active.cutter_comp.is_some();
                         if !st.comp_unfollowed_exit {
                             st.active.cutter_comp = None;
@@ -1117,6 +1246,7 @@ impl Interpreter {
                     410 | 411 | 420 | 421
                         if st.active.cutter_comp.is_none()
                             && st.comp.is_none()
+                            && st.nose.is_none()
                             && (st.dialect.is_linuxcnc() || st.dialect.is_fanuc()) =>
                     {
                         comp_code = Some((c, gc));
@@ -1341,6 +1471,9 @@ impl Interpreter {
             }
             if let Some(inch) = unit_change {
                 st.inch = inch;
+            }
+            if cycle_line && untraced.is_none() {
+                continue;
             }
             if untraced.is_none() {
                 untraced = lathe_words(out, st, li, &mut axis, &mut named, &wcol)?;
@@ -1815,13 +1948,19 @@ impl Interpreter {
                         && finite(&st.pos, named & !0b111);
                     // LinuxCNC's absolute arc centre (G90.1) in diameter mode: not followed
                     let blocker = blocker.or_else(|| {
-                        (m.is_arc() && st.arc_absolute && st.diameter).then(|| {
-                            push_unsupported(
-                                out,
-                                li,
-                                motion_word.map_or(axis_col, |(_, c)| c),
-                                "an arc with an absolute centre (G90.1) in lathe diameter mode",
-                            )
+                        let why = if !m.is_arc() {
+                            None
+                        } else if st.arc_absolute && st.diameter {
+                            Some("an arc with an absolute centre (G90.1) in lathe diameter mode")
+                        } else if !st.plane_known {
+                            Some("an arc before the program states its plane: on a LinuxCNC lathe the plane a program starts in is the machine's start-up setting (write G18)")
+                        } else if st.dialect.lathe() && st.plane != 1 {
+                            Some("an arc outside the ZX plane (G18) on a lathe, which has no Y axis")
+                        } else {
+                            None
+                        };
+                        why.map(|why| {
+                            push_unsupported(out, li, motion_word.map_or(axis_col, |(_, c)| c), why)
                         })
                     });
                     let mut supported = blocker.is_none() && e_construct.is_none();
@@ -1875,6 +2014,14 @@ impl Interpreter {
                         && (m.is_arc() || (end[0] - st.pos[0]).hypot(end[1] - st.pos[1]) > 1e-9);
                     st.pos = end;
                     push_record(out, st, li, m, supported && known, named, center, turns);
+                    let nose_edge = std::mem::take(&mut st.nose_edge);
+                    out.records.last_mut().unwrap().whole = if std::mem::take(&mut st.contour_end) {
+                        WHOLE_CONTOUR
+                    } else if nose_edge {
+                        WHOLE_NOSE
+                    } else {
+                        0
+                    };
                     if leaves {
                         st.comp_unfollowed_exit = false;
                         st.active.cutter_comp = None;
@@ -2031,6 +2178,16 @@ fn unused_word(
 /// (M31, M33), coolant spigot position (M34, M35), air gun on/off (M83, M84), through-spindle
 /// coolant on/off (M88, M89). Copied as written.
 const HAAS_AUXILIARY_M: [i32; 8] = [31, 33, 34, 35, 83, 84, 88, 89];
+
+/// M codes of a Haas lathe that set how its threading cycles (G76, G92) end and move no axis
+/// (the lathe operator's manual: M23 chamfer out of thread on, M24 off). Copied as written.
+const HAAS_LATHE_M: [i32; 2] = [23, 24];
+
+/// An M code outside RS274NGC's that the dialect's controls use for equipment moving no axis.
+fn copied_m(d: Dialect, m: i32) -> bool {
+    (d.is_fanuc() && HAAS_AUXILIARY_M.contains(&m))
+        || (d == Dialect::FanucLathe && HAAS_LATHE_M.contains(&m))
+}
 
 /// Modal group of an M code as LinuxCNC groups them; None for codes the engine does not know.
 fn m_group(m: i32) -> Option<u8> {
@@ -2745,6 +2902,51 @@ fn comp_on(
     unit: f64,
 ) -> Result<(), NcError> {
     let name = g_name(c);
+    if st.dialect.lathe() && st.plane == 1 {
+        // the nose radius: G41.1/G42.1's D (a diameter); else the tool table's diameter of the
+        // tool loaded (LinuxCNC: T… M6, or D the tool), or of a Fanuc lathe's offset (T0101:
+        // tool 01, offset 01, which holds the nose radius)
+        let diameter: Result<f64, String> = if matches!(c, 411 | 421) {
+            match d_word {
+                Some(d) => Ok(d * unit),
+                None => {
+                    return Err(ierr(
+                        li,
+                        gc,
+                        format!("{name} needs a D word (the diameter)"),
+                    ))
+                }
+            }
+        } else {
+            let tool = if st.dialect == Dialect::FanucLathe {
+                st.tool_next.filter(|&t| t >= 100).map(|t| t % 100)
+            } else {
+                d_word.map(|d| d.max(0.0) as u32).or(st.tool_loaded)
+            };
+            match tool {
+                Some(t) => match st.tools.iter().find(|&&(n, _)| n == t) {
+                    Some(&(_, d)) => Ok(d),
+                    None => Err(format!(
+                        "nose radius compensation {name} with offset {t}: its nose radius is not known; give it in the tool table (--tool-table: tool {t}, D the nose diameter)"
+                    )),
+                },
+                None => Err(format!(
+                    "nose radius compensation {name} with no tool offset selected (a lathe's T0101, or T… M6 on LinuxCNC): the nose radius is not known"
+                )),
+            }
+        };
+        match diameter {
+            Ok(d) => {
+                st.nose = Some(d.abs() / 2.0);
+                st.nose_edge = true;
+            }
+            Err(why) => {
+                let idx = push_unsupported(out, li, gc, &why);
+                st.active.cutter_comp = Some((li as u32, idx));
+            }
+        }
+        return Ok(());
+    }
     let diameter: Result<f64, String> = if st.plane != 0 {
         Err(format!(
             "cutter compensation {name} in the ZX or YZ plane (a lathe's nose radius): not treated"
@@ -3005,6 +3207,8 @@ fn push_record(
         comp: NO_COMP,
         inverse_time: st.inverse_time,
         diameter: st.diameter,
+        nose: st.nose.unwrap_or(0.0),
+        whole: 0,
     });
 }
 

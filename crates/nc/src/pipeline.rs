@@ -417,7 +417,7 @@ fn pass(
             }
             // cutter compensation: the field around the corners, and no X/Y displacement
             // (refused here; the caller's second reading says why)
-            if !piece.interp.comps.is_empty() {
+            if !piece.interp.comps.is_empty() || !samples.check_groups.is_empty() {
                 let mut cdisp = Vec::new();
                 if !field.eval(&samples.checks, &mut cdisp)
                     || crate::sample::comp_check(

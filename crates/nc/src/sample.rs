@@ -398,6 +398,19 @@ pub fn sample_range(
             }
         }
         s.range.push((first as u32, (s.t.len() - first) as u32));
+        // a lathe's nose radius compensation: the field within the nose radius of each sample
+        // (the contact point the control offsets the nose from), in the XZ plane
+        if rec.nose > 0.0 {
+            let r = rec.nose;
+            for k in first..s.t.len() {
+                let p = [s.xyz[3 * k], s.xyz[3 * k + 1], s.xyz[3 * k + 2]];
+                s.check_groups
+                    .push((i as u32, (s.checks.len() / 3) as u32, 5));
+                for (dx, dz) in [(0.0, 0.0), (r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
+                    s.checks.extend_from_slice(&[p[0] + dx, p[1], p[2] + dz]);
+                }
+            }
+        }
         if let Some(c) = comp {
             if !c.corner.is_empty() && start[0].is_finite() && start[1].is_finite() {
                 s.check_groups
@@ -523,7 +536,7 @@ pub fn comp_check(
     cdisp: &[f64],
     budget: f64,
 ) -> Option<(u32, String)> {
-    if it.comps.is_empty() {
+    if it.comps.is_empty() && s.check_groups.is_empty() {
         return None;
     }
     for (k, &ri) in s.rec.iter().enumerate() {
@@ -547,8 +560,25 @@ pub fn comp_check(
             let v = ((q[0] - d[0]).powi(2) + (q[1] - d[1]).powi(2) + (q[2] - d[2]).powi(2)).sqrt();
             worst = worst.max(v);
         }
+        let rec = &it.records[ri as usize];
+        if rec.nose > 0.0 {
+            // where the field is evaluated (the contact point, not the nose centre), and the
+            // normal the control offsets the moved contour along, turned by the field's change:
+            // each off by up to the change within the nose radius
+            if !(2.0 * worst <= budget) {
+                let um = 2.0 * worst * 1000.0;
+                return Some((
+                    rec.line + 1,
+                    format!(
+                        "nose radius compensation: the field changes by {:.1} µm within the nose radius ({:.4} mm), so the nose centre the control offsets from the corrected contour may be off by up to {um:.1} µm, more than the chord tolerance {budget} mm (raise --chord-tol to accept it)",
+                        worst * 1000.0,
+                        rec.nose
+                    ),
+                ));
+            }
+            continue;
+        }
         if !(worst <= budget) {
-            let rec = &it.records[ri as usize];
             let r = it.comps[rec.comp as usize].radius;
             let um = worst * 1000.0;
             return Some((
