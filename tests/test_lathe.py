@@ -309,6 +309,11 @@ def test_nose_compensation_needs_its_radius_and_a_field_calm_within_it():
     # a Fanuc lathe's nose radius is its offset's: T0101 is tool 1, offset 1
     fanuc = "O1\nG21\nT0202\nG0 X40. Z5.\nG42 G1 X20. Z2. F0.1\nG1 Z-10.\nG40 G0 X50. Z5.\nM30\n"
     assert nc.parse(fanuc, dialect="fanuc-lathe", tools={2: 1.6}).unsupported == ()
+    # another offset under compensation: another nose radius, not followed
+    changed = fanuc.replace("G1 Z-10.", "T0101\nG1 Z-10.")
+    assert [
+        (u.line, u.construct) for u in nc.parse(changed, dialect="fanuc-lathe", tools={1: 0.4, 2: 1.6}).unsupported
+    ] == [(6, "a tool offset changed under nose radius compensation: its nose radius is not followed")]
     (u,) = nc.parse(fanuc, dialect="fanuc-lathe", tools={1: 1.6}).unsupported
     assert "offset 2: its nose radius is not known" in u.construct
 
@@ -346,7 +351,7 @@ CONTOUR = """%
 O2
 G18 G21 G99
 T0101
-G00 X40. Z2.
+G00 X12. Z3.
 G71 P10 Q20 U0.4 W0.1 D1. F0.2
 N10 G00 X10. Z2.
 G01 Z0. F0.1
@@ -358,6 +363,10 @@ N20 G01 U1. W-0.5
 G70 P10 Q20 F0.05
 G00 X50. Z10.
 G01 X45. Z5. F0.2
+G71 P30 Q40 U0.4 W0.1 D1. F0.2
+N30 G00 X44. Z5.
+N40 G01 Z4.
+G01 X46. Z-31. F0.1
 M30
 %
 """
@@ -392,6 +401,9 @@ def test_a_roughing_cycle_s_contour_is_corrected_where_it_is(tmp_path):
     assert after_out[1] == "G00 X50.0017 Z9.9987"  # (50, 10) moved by the field at radius 25
     d = _field([[25.0, 0.0, 10.0]])[0]
     assert (round(50 + 2 * d[0], 4), round(10 + d[2], 4)) == (50.0017, 9.9987)
+    # (likewise after the second cycle's contour: its first move, whatever it is, at its end)
+    d = _field([[23.0, 0.0, -31.0]])[0]
+    assert after_out[-3] == f"G01 X{46 + 2 * d[0]:.4f} Z{-31 + d[2]:.4f} F0.1"
 
 
 def test_what_a_roughing_cycle_s_contour_cannot_be():
@@ -406,9 +418,18 @@ def test_what_a_roughing_cycle_s_contour_cannot_be():
     assert refused(CONTOUR.replace("G70 P10 Q20", "G70 P30 Q40")) == [(14, "lathe cycle G70")]
     # the last block must stay one block: a feed the field bends is refused at its line
     bent = CONTOUR.replace("N20 G01 U1. W-0.5", "N20 G01 X40. Z-40.")
-    with pytest.raises(InputError, match="last block of a roughing cycle's contour") as e:
+    with pytest.raises(InputError, match="the last block of a roughing cycle's contour") as e:
         nc.parse(bent, dialect="fanuc-lathe").correct(_field)
     assert e.value.line == 13
+    # and the first (its pieces would move the point the cycle roughs from)
+    bent = CONTOUR.replace("N10 G00 X10. Z2.", "N10 G00 X10. Z20.")
+    with pytest.raises(InputError, match="the first and the last block") as e:
+        nc.parse(bent, dialect="fanuc-lathe").correct(_field, rapids=True)
+    assert e.value.line == 7
+    # a contour with no block numbered Q before the program goes on: the control alarms
+    with pytest.raises(InputError, match="has no block numbered Q20 before this one") as e:
+        _ = nc.parse(CONTOUR.replace("N20 G01", "N21 G01"), dialect="fanuc-lathe").blocks
+    assert e.value.line == 14
 
 
 def test_a_haas_contour_with_nose_compensation_keeps_its_shape():

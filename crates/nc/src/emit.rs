@@ -929,7 +929,7 @@ impl<'a> Emitter<'a> {
             !rec.motion.is_arc() && (c.start != c.end || c.kink > self.st.arc_tol)
         }) || (rec.whole != 0 && !rec.motion.is_arc());
         let whole_why = match rec.whole {
-            crate::interp::WHOLE_CONTOUR => "the last block of a roughing cycle's contour (numbered Q) must stay one move, as the pieces after its line would not belong to the contour",
+            crate::interp::WHOLE_CONTOUR => "the first and the last block of a roughing cycle's contour (numbered P and Q) must stay one move: the pieces after the last would not belong to the contour, and the first's would move the point the cycle roughs from",
             _ => "the move that starts or ends nose radius compensation must stay one move",
         };
         if rec.whole != 0 && rec.motion.is_arc() && !keep_arc {

@@ -168,8 +168,9 @@ pub struct Record {
 /// first after G41/G42 or G40): the control goes between the programmed and the offset point
 /// along it.
 pub const WHOLE_NOSE: u8 = 1;
-/// [`Record::whole`] of the last block of a roughing cycle's contour (the block numbered Q): the
-/// pieces after its line would not belong to the contour.
+/// [`Record::whole`] of the first or last block of a roughing cycle's contour (numbered P or Q):
+/// the pieces after the last's line would not belong to the contour, and the first's would move
+/// the point the cycle roughs from.
 pub const WHOLE_CONTOUR: u8 = 2;
 
 /// A Fanuc lathe's roughing cycle (G71/G72 with P and Q) whose contour, the blocks numbered P
@@ -532,8 +533,9 @@ struct State {
     nose: Option<f64>,
     /// The next move starts or ends nose radius compensation ([`WHOLE_NOSE`]).
     nose_edge: bool,
-    /// The block being read is the last of a roughing cycle's contour ([`WHOLE_CONTOUR`]).
-    contour_end: bool,
+    /// The block being read is the first or the last of a roughing cycle's contour
+    /// ([`WHOLE_CONTOUR`]).
+    contour_edge: bool,
     /// The roughing cycle whose contour is being read, and the (P, Q) of those read (a G70
     /// finishes along one of them).
     contour: Option<Contour>,
@@ -691,7 +693,7 @@ impl Interpreter {
                 comp: None,
                 nose: None,
                 nose_edge: false,
-                contour_end: false,
+                contour_edge: false,
                 contour: None,
                 contours: Vec::new(),
                 plane_known: dialect != Dialect::LinuxCncLathe,
@@ -801,30 +803,46 @@ impl Interpreter {
                     // back at the cycle's start, the output's, which is not followed here: the
                     // position is unknown until moves name X and Z again
                     st.contour = None;
-                    st.contour_end = false;
+                    st.contour_edge = false;
                     st.pos = [f64::NAN; NAXES];
+                    st.pos[1] = 0.0; // (a lathe's Y)
                     push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
                 } else {
-                    let (code, p, q) = (c.code, c.p, c.q);
+                    let (cycle, p, q) = (c.code, c.p, c.q);
                     let named = |l: &[u8]| words.iter().any(|w| l.contains(&w.letter));
                     let why = if c.first && !numbered(p) {
                         Some(format!(
                             "the contour of {} P{p} Q{q} does not follow it from block N{p}",
-                            g_name(code)
+                            g_name(cycle)
                         ))
                     } else if c.first && !(named(b"X") && named(b"Z")) {
-                        Some(format!("the first block of the contour of {} names X and Z (absolute) here: adding the one it leaves out would change the cycle's type (I or II), and increments from the cycle's start would make G70's contour depend on where G70 starts", g_name(code)))
+                        Some(format!("the first block of the contour of {} names X and Z (absolute) here: adding the one it leaves out would change the cycle's type (I or II), and increments from the cycle's start would make G70's contour depend on where G70 starts", g_name(cycle)))
                     } else {
                         None
                     };
-                    c.first = false;
+                    // the program goes on, or ends, before the block numbered Q: the control
+                    // alarms at the cycle
+                    let ends = words.iter().any(|w| {
+                        (w.letter == b'M' && matches!(w.value as i32, 2 | 30 | 99))
+                            || (w.letter == b'G' && matches!(code(w), 700 | 710 | 720))
+                    });
+                    if ends && !numbered(q) && why.is_none() {
+                        return Err(ierr(
+                            li,
+                            0,
+                            format!("the contour of {} P{p} Q{q} has no block numbered Q{q} before this one", g_name(cycle)),
+                        ));
+                    }
+                    let first = std::mem::replace(&mut c.first, false);
                     if let Some(why) = why {
                         let idx = push_unsupported(out, li, 0, &why);
                         st.contour = None;
                         st.contour_until = Some((q, idx));
                     } else if numbered(q) {
                         c.done = true;
-                        st.contour_end = true;
+                        st.contour_edge = true;
+                    } else if first {
+                        st.contour_edge = true;
                     }
                 }
             }
@@ -1475,6 +1493,22 @@ impl Interpreter {
             if cycle_line && untraced.is_none() {
                 continue;
             }
+            // a new tool offset (a Fanuc lathe's T, LinuxCNC's M6) under nose radius compensation:
+            // its nose radius is another, which the check does not follow
+            let new_tool = if st.dialect == Dialect::FanucLathe {
+                seen & (1 << (b'T' - b'A')) != 0
+            } else {
+                ms[..nm].iter().any(|&(m, _)| m == 6)
+            };
+            if st.nose.is_some() && new_tool && st.active.cutter_comp.is_none() {
+                let idx = push_unsupported(
+                    out,
+                    li,
+                    0,
+                    "a tool offset changed under nose radius compensation: its nose radius is not followed",
+                );
+                st.active.cutter_comp = Some((li as u32, idx));
+            }
             if untraced.is_none() {
                 untraced = lathe_words(out, st, li, &mut axis, &mut named, &wcol)?;
             }
@@ -2015,7 +2049,8 @@ impl Interpreter {
                     st.pos = end;
                     push_record(out, st, li, m, supported && known, named, center, turns);
                     let nose_edge = std::mem::take(&mut st.nose_edge);
-                    out.records.last_mut().unwrap().whole = if std::mem::take(&mut st.contour_end) {
+                    out.records.last_mut().unwrap().whole = if std::mem::take(&mut st.contour_edge)
+                    {
                         WHOLE_CONTOUR
                     } else if nose_edge {
                         WHOLE_NOSE

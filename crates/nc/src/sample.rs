@@ -398,16 +398,19 @@ pub fn sample_range(
             }
         }
         s.range.push((first as u32, (s.t.len() - first) as u32));
-        // a lathe's nose radius compensation: the field within the nose radius of each sample
-        // (the contact point the control offsets the nose from), in the XZ plane
+        // a lathe's nose radius compensation: the field at the nose radius from each sample (the
+        // contact point the control offsets the nose from), in eight directions of the XZ plane
         if rec.nose > 0.0 {
             let r = rec.nose;
             for k in first..s.t.len() {
                 let p = [s.xyz[3 * k], s.xyz[3 * k + 1], s.xyz[3 * k + 2]];
                 s.check_groups
-                    .push((i as u32, (s.checks.len() / 3) as u32, 5));
-                for (dx, dz) in [(0.0, 0.0), (r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
-                    s.checks.extend_from_slice(&[p[0] + dx, p[1], p[2] + dz]);
+                    .push((i as u32, (s.checks.len() / 3) as u32, 9));
+                s.checks.extend_from_slice(&p);
+                for d in 0..8 {
+                    let a = d as f64 * std::f64::consts::FRAC_PI_4;
+                    s.checks
+                        .extend_from_slice(&[p[0] + r * a.cos(), p[1], p[2] + r * a.sin()]);
                 }
             }
         }
