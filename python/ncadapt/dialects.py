@@ -18,8 +18,8 @@ a LinuxCNC O-word keyword), ``M98 P``, ``G65 P``, ``M99``. Anything else is Linu
 
 The machine, a mill or a lathe, is detected in the same head for the LinuxCNC and Fanuc dialects
 (``--machine`` states it): a LinuxCNC program is a lathe's when it states G7 or G8 (diameter or
-radius mode, a lathe's codes); a Fanuc/Haas program when it has a four-digit T word (``T0101``,
-tool and offset), constant surface speed ``G96``, ``G50`` with a spindle limit or a coordinate
+radius mode, a lathe's codes); a Fanuc/Haas program when it has a T word of three or four digits
+(``T0101``, ``T101``: tool and offset), ``G28`` with U or W, constant surface speed ``G96``, ``G50`` with a spindle limit or a coordinate
 (``G50 S2500``), or a roughing or finishing cycle ``G70``/``G71``/``G72`` with its ``P`` word.
 On a lathe the engine reads no Y (the tool is in the plane through the spindle's axis); a Fanuc
 lathe's X is a diameter, U and W its increments, and G90/G92/G94 its turning cycles.
@@ -54,7 +54,7 @@ LATHE_DIALECTS = ("linuxcnc", "fanuc")
 _LATHE = {
     "linuxcnc": re.compile(r"\bG0*[78](?![.\d])"),
     "fanuc": re.compile(
-        r"\bT\d{4}\b|\bG0*96(?![.\d])|\bG0*50(?![.\d])[^\n]*?(?<![A-Z])[SXZUW][-+.\d]|\bG0*7[012](?![.\d])[^\n]*?(?<![A-Z])P\d"
+        r"\bT\d{3,4}\b|\bG0*28(?![.\d])[^\n]*?(?<![A-Z])[UW][-+.\d]|\bG0*96(?![.\d])|\bG0*50(?![.\d])[^\n]*?(?<![A-Z])[SXZUW][-+.\d]|\bG0*7[012](?![.\d])[^\n]*?(?<![A-Z])P\d"
     ),
 }
 

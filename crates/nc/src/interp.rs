@@ -2288,7 +2288,7 @@ fn lathe_words(
             .find(|&&l| axis[axis_index(l).unwrap()].is_some())
         {
             let why = if l == b'Y' || l == b'V' {
-                format!("{} word on a lathe: the engine takes the tool in the plane through the spindle's axis (Y 0)", l as char)
+                format!("{} word on a lathe: the engine takes the tool in the plane through the spindle's axis (Y 0); if the program is a mill's, say so (--machine mill)", l as char)
             } else {
                 format!("{} word on a Fanuc lathe: a rotary axis, or a chamfer (parameter 3405#4 CCR), which the program does not tell", l as char)
             };

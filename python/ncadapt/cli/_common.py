@@ -415,7 +415,7 @@ machine_option = click.option(
     default="auto",
     show_default=True,
     help="A mill's or a lathe's program; auto detects a lathe's (LinuxCNC: G7 or G8; Fanuc/Haas: a T word "
-    "such as T0101, G96, G50 S…, G70-G72 with P). On a lathe Y is 0 (the field's y there is not applied: "
+    "such as T0101 or T101, G28 U/W, G96, G50 S…, G70-G72 with P). On a lathe Y is 0 (the field's y there is not applied: "
     "refused above --chord-tol); a Fanuc lathe's X is a diameter and U, W its increments.",
 )
 
