@@ -511,3 +511,13 @@ def test_random_lathe_programs_are_corrected_at_the_radius(tmp_path, fanuc):
         _check_displaced(tmp_path, given, _for_rs274(out.text) if fanuc else out.text, 0.004)
         checked += 1
     assert checked >= 12, checked
+
+
+def test_the_two_block_roughing_cycle():
+    """Fanuc's two-block form: `G71 U(depth) R(retract)` sets the cycle's parameters (its U is no
+    move), the second block names the contour."""
+    text = CONTOUR.replace("G71 P10 Q20 U0.4 W0.1 D1. F0.2", "G71 U1. R0.5\nG71 P10 Q20 U0.4 W0.1 F0.2")
+    prog = nc.parse(text, dialect="fanuc-lathe")
+    assert prog.unsupported == ()
+    out = prog.correct(fields.Shift((0.05, 0, 0)), rapids=True).text
+    assert "G71 U1. R0.5\nG71 P10 Q20 U0.4 W0.1 F0.2\nN10 G00 X10.1 Z2.\n" in out

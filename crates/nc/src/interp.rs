@@ -1189,6 +1189,16 @@ impl Interpreter {
                     {
                         cycle_line = true;
                     }
+                    // the first block of the two-block form (Fanuc: G71 U depth R retract): it
+                    // sets the cycle's parameters and moves nothing
+                    710 | 720
+                        if st.dialect == Dialect::FanucLathe
+                            && p.is_none()
+                            && q_word.is_none()
+                            && named & !((1 << 6) | (1 << 8)) == 0 =>
+                    {
+                        cycle_line = true;
+                    }
                     700 | 710 | 720 | 730 | 740 | 750 | 760
                         if st.dialect == Dialect::FanucLathe =>
                     {
