@@ -417,6 +417,8 @@ def test_what_a_roughing_cycle_s_contour_cannot_be():
     assert "does not follow it from block N10" in refused(CONTOUR.replace("N10 G00", "N11 G00"))[0][1]
     # and name X and Z (a type I contour names X alone: adding a Z would change its type)
     assert "names X and Z (absolute) here" in refused(CONTOUR.replace("N10 G00 X10. Z2.", "N10 G00 X10."))[0][1]
+    # (and G70 along a contour not followed is not either)
+    assert refused(CONTOUR.replace("N10 G00 X10. Z2.", "N10 G00 X10."))[1] == (14, "lathe cycle G70")
     # G70 along a contour no roughing cycle read
     assert refused(CONTOUR.replace("G70 P10 Q20", "G70 P30 Q40")) == [(14, "lathe cycle G70")]
     # the last block must stay one block: a feed the field bends is refused at its line

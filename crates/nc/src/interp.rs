@@ -838,6 +838,8 @@ impl Interpreter {
                         let idx = push_unsupported(out, li, 0, &why);
                         st.contour = None;
                         st.contour_until = Some((q, idx));
+                        // (a G70 along it is not followed either)
+                        st.contours.retain(|&pq| pq != (p, q));
                     } else if numbered(q) {
                         c.done = true;
                         st.contour_edge = true;
