@@ -192,6 +192,9 @@ def test_a_dwell_moves_nothing():
     assert "G04 X1.5\n" in out.text and "G1 X1.01 F100.\n" in out.text
     with pytest.raises(InputError, match="axis words in a G04 block"):
         _ = nc.parse("O1\nG0 X0. Y0. Z0.\nG04 X1. Z1.\nM30\n", dialect="fanuc").blocks
+    # written without a point, its time is in least increments (or seconds, by a parameter)
+    with pytest.raises(InputError, match=r"X15 = 0\.015 s"):
+        _ = nc.parse("O1\nG0 X0. Y0. Z0.\nG04 X15\nM30\n", dialect="fanuc").blocks
     # LinuxCNC wants P (rs274: "Dwell time missing with g4")
     with pytest.raises(InputError, match="dwell time missing with G4"):
         _ = nc.parse("G21\nG0 X0 Y0 Z0\nG4 X1.5\nM2\n").blocks

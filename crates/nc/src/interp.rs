@@ -1025,6 +1025,19 @@ impl Interpreter {
                         }
                 }) {
                     let text = format!("{}{}", w.letter as char, w.value);
+                    let dwell =
+                        gs[..ng].iter().any(|&(c, _)| c == 40) && matches!(w.letter, b'X' | b'U');
+                    if dwell {
+                        return Err(ierr(
+                            li,
+                            col(w),
+                            format!(
+                                "{text} has no decimal point: a Fanuc/Haas control reads a dwell's time written so in least input increments ({text} = {:.3} s) unless parameter 3401#0 (DPI) is set, and the program does not say which; write the point ({text}.) if {text} means {} seconds",
+                                w.value * 0.001,
+                                w.value
+                            ),
+                        ));
+                    }
                     return Err(ierr(
                         li,
                         col(w),

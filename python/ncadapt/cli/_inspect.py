@@ -54,7 +54,8 @@ def inspect(program, dialect, machine, expand, subprograms, json_path):
     summary(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")
     e = info["extents"]["all"]
     if e:
-        summary("  extents (mm): " + ", ".join(f"{a.upper()} {lo:.4f}..{hi:.4f}" for a, (lo, hi) in e.items()))
+        radius = ", X a radius" if d.lathe else ""
+        summary(f"  extents (mm{radius}): " + ", ".join(f"{a.upper()} {lo:.4f}..{hi:.4f}" for a, (lo, hi) in e.items()))
     if info["work_offsets"]:
         summary("  work offsets: " + " ".join(info["work_offsets"]))
     if info["tools"]:
