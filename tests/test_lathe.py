@@ -160,11 +160,11 @@ def _unsupported(text, dialect="fanuc-lathe"):
 
 def test_what_a_lathe_program_does_that_is_not_followed_is_refused_at_its_line():
     head = "O1\nG18 G21\nG0 X20. Z1.\n"
-    # G-code system A's turning cycle, where a block runs it (G90 alone sets it up)
-    assert _unsupported(head + "G90 X18. Z-10. F0.2\nX16.\nG0 X30.\nM30\n")[0] == (
-        4,
-        "turning cycle G90 (a Fanuc lathe's, G-code system A)",
-    )
+    # G-code system A's taper turning cycle, where a block runs it (G90 alone sets it up)
+    assert _unsupported(head + "G90 X18. Z-10. R-1. F0.2\nX16.\nG0 X30.\nM30\n") == [
+        (4, "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)"),
+        (5, "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)"),  # (R is modal)
+    ]
     assert _unsupported(head + "G90 G54\nG01 X18. Z-10. F0.2\nM30\n") == []
     # and after G80 the cycle is still the motion (group 01): its axis words are not a G1 move
     assert _unsupported(head + "G01 X19. F0.2\nG90 X18. Z-10.\nG80\nX16.\nM30\n")[-1] == (
@@ -526,3 +526,88 @@ def test_the_two_block_roughing_cycle():
     assert prog.unsupported == ()
     out = prog.correct(fields.Shift((0.05, 0, 0)), rapids=True).text
     assert "G71 U1. R0.5\nG71 P10 Q20 U0.4 W0.1 F0.2\nN10 G00 X10.1 Z2.\n" in out
+
+
+# ------------------------------------------------------------- G90 / G94 box cycles
+BOXES = """O1
+G18 G21
+T0101
+G00 X42. Z2.
+G90 X38. Z-30. F0.2
+X36.
+X34.
+U-10. W-28.
+G00 X45. Z5.
+G94 X20. Z-1. F0.15
+Z-2.
+G00 X50. Z10.
+M30
+"""
+
+
+def _corners(text):
+    """Each G90/G94 block's start and corner (radius, Z), by the Fanuc manual's rules: the cycle
+    starts where the tool stands, X (a diameter) and Z are its corner, U and W increments from
+    the start, a word left out the block before's (modal), and the tool is back at the start after."""
+    out, pos, mode, modal = [], None, None, None
+    for line in text.splitlines():
+        words = dict((m[0], float(m[1:])) for m in re.findall(r"[A-Z]-?[\d.]+", line))
+        g = words.get("G")
+        if g is not None and g in (0, 1, 90, 94):
+            mode, modal = g, None if g != mode else modal
+        if not any(k in words for k in "XZUW"):
+            continue
+        x = words["X"] / 2 if "X" in words else None
+        z = words.get("Z")
+        if mode in (90, 94):
+            x = pos[0] + words["U"] / 2 if "U" in words else (x if x is not None else modal[0])
+            z = pos[1] + words["W"] if "W" in words else (z if z is not None else modal[1])
+            modal = (x, z)
+            out.append((pos, (x, z)))
+        else:
+            pos = (x if x is not None else pos[0], z if z is not None else pos[1])
+    return out
+
+
+def _box_field(p):
+    p = np.asarray(p, dtype=float)
+    d = np.zeros((len(p), 3))
+    d[:, 0] = 0.02 + 0.0001 * p[:, 0]
+    d[:, 2] = -0.01 + 0.0003 * p[:, 2] / 30
+    return d
+
+
+def test_box_cycles_move_their_corner_by_the_field():
+    prog = nc.parse(BOXES, dialect="fanuc-lathe")
+    assert prog.unsupported == ()
+    assert prog.correct(fields.Shift((0, 0, 0))).text == BOXES
+    out = prog.correct(_box_field).text
+    before, after = _corners(BOXES), _corners(out)
+    assert len(before) == len(after) == 6
+    for (a0, c0), (a1, c1) in zip(before, after):
+        assert a1 == a0  # (the start is a rapid's end, not corrected)
+        d = _box_field([[c0[0], 0, c0[1]]])[0]
+        assert c1 == pytest.approx((c0[0] + d[0], c0[1] + d[2]), abs=5e-4), (c0, c1)
+    # blocks that leave out X or Z keep doing so where the corrected modal value is the same
+    assert "\nX36.04" in out or "\nX36.03" in out
+
+
+def test_box_cycles_the_engine_does_not_follow_are_refused():
+    def refused(text):
+        return [u.construct for u in nc.parse(text, dialect="fanuc-lathe").unsupported]
+
+    head = "O1\nG18 G21\nG00 X42. Z2.\n"
+    assert refused(head + "G90 X38. Z-30. R-1. F0.2\nM30\n") == [
+        "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)"
+    ]
+    assert refused(head + "G92 X38. Z-30. F1.5\nM30\n") == ["threading cycle G92 (a Fanuc lathe's, G-code system A)"]
+    assert refused("O1\nG18 G21\nG90 X38. Z-30. F0.2\nM30\n") == [
+        "turning cycle G90 from a position the program does not tell"
+    ]
+    assert refused(head + "G90 X38. F0.2\nM30\n") == [
+        "turning cycle G90 without X or Z, which no block of it before gives"
+    ]
+    # a field that varies along the cuts more than the chord tolerance: one corner displacement
+    # cannot follow it
+    with pytest.raises(RefusedError, match=r"line 5: a turning or facing cycle \(G90, G94\): the field varies"):
+        nc.parse(BOXES, dialect="fanuc-lathe").correct(_field)

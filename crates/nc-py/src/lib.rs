@@ -87,7 +87,10 @@ fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict
                 | (r.arc_absolute as u8) << 2
                 | (r.supported as u8) << 3
                 | ((r.cycle != 0) as u8) << 4
-                | ((r.comp != nc::interp::NO_COMP || r.nose > 0.0) as u8) << 5
+                | ((r.comp != nc::interp::NO_COMP
+                    || r.nose > 0.0
+                    || r.cycle == nc::interp::CYCLE_LATHE) as u8)
+                    << 5
         })
         .collect();
     let named: Vec<u16> = it.records.iter().map(|r| r.named).collect();

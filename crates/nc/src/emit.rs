@@ -329,6 +329,8 @@ pub struct EmitState {
     /// has of the last move in the plane; a move after an inside corner needs it longer than the
     /// tool stops short there ([`crate::interp::Comp::trim`]).
     comp_piece: f64,
+    /// The output's modal X and Z (mm) of a lathe's G90/G94 box cycle, as last written.
+    out_box: [f64; 2],
 }
 
 impl EmitState {
@@ -350,6 +352,7 @@ impl EmitState {
             cyc_z: None,
             cyc_expanded: false,
             steps: Vec::new(),
+            out_box: [f64::NAN; 2],
         }
     }
 }
@@ -484,7 +487,9 @@ impl<'a> Emitter<'a> {
                 } else {
                     &uvw[3 * f..3 * (f + c)]
                 };
-                if self.it.records[ri].cycle != 0 {
+                if self.it.records[ri].cycle == crate::interp::CYCLE_LATHE {
+                    self.lathe_box(li, ri, samples, disp);
+                } else if self.it.records[ri].cycle != 0 {
                     if uvw.iter().any(|&v| v != 0.0) {
                         return Err(NcError::Interpret {
                             line: li + 1,
@@ -1743,6 +1748,70 @@ impl<'a> Emitter<'a> {
         ];
         let [x, y] = polar_xy(cur, polar, rec.incremental);
         [x * u + self.off[0], y * u + self.off[1]]
+    }
+
+    /// A Fanuc lathe's G90/G94 block ([`crate::interp::LatheBox`]; `ri` its last record, the
+    /// return to its start, after its corner): its X and Z (or U and W, from where the output
+    /// stands, the cycle's start) aimed at the corner moved by the field there (as the program
+    /// has it where the corner is not corrected); X or Z the block leaves out (modal) written
+    /// where the output's modal value is another. The output stays where it was: the cycle
+    /// returns to its start.
+    fn lathe_box(&mut self, li: usize, ri: usize, samples: &Samples, disp: &[f64]) {
+        let rec = &self.it.records[ri - 1];
+        let (f, c) = samples.of(ri - 1);
+        let mut target = rec.end;
+        if c > 0 {
+            for a in [0, 2] {
+                target[a] += disp[3 * f + a];
+            }
+        }
+        let half = self.fmt.half(rec.inch);
+        let mut seen = [false; 2];
+        for w in self.lx.line_words(li) {
+            let Some((a, incremental)) = self.word_axis(rec, w.letter) else {
+                continue;
+            };
+            if a != 0 && a != 2 {
+                continue;
+            }
+            seen[a / 2] = true;
+            let u = Self::unit(rec, a);
+            let from = if incremental {
+                self.st.epos[a]
+            } else {
+                self.off[a]
+            };
+            let want = (target[a] - from) / u;
+            let v = if (want - w.value).abs() < half {
+                w.value
+            } else {
+                self.edit_number(w.num_start, w.end, want, rec.inch)
+            };
+            self.st.out_box[a / 2] = from + v * u;
+        }
+        let at = self.insert_point(li);
+        let t0 = self.st.arena.len();
+        for a in [0, 2] {
+            let u = Self::unit(rec, a);
+            if seen[a / 2] || (target[a] - self.st.out_box[a / 2]).abs() / u < half {
+                continue;
+            }
+            let sep = self.sep();
+            self.st.arena.extend_from_slice(sep);
+            self.st.arena.push(AXES[a]);
+            let v = self
+                .fmt
+                .number((target[a] - self.off[a]) / u, rec.inch, &mut self.st.arena);
+            self.st.out_box[a / 2] = self.off[a] + v * u;
+        }
+        if self.st.arena.len() > t0 {
+            self.st.edits.push(Edit {
+                start: at,
+                end: at,
+                t0: t0 as u32,
+                t1: self.st.arena.len() as u32,
+            });
+        }
     }
 
     /// Remove the polar words of line `li`: the block's X and Y are then written as its other

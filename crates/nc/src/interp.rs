@@ -230,6 +230,25 @@ const UNKNOWN_LENGTH: [f64; NAXES] = {
 pub const CYCLE_MOVE: u8 = 1;
 /// [`Record::cycle`] of the feed that ends at the bottom of a hole.
 pub const CYCLE_BOTTOM: u8 = 2;
+/// [`Record::cycle`] of a Fanuc lathe's G90/G94 box cycle ([`LatheBox`]): its corner (a feed
+/// record, moved as a whole by the field there) and the return to its start (the last record of
+/// the block).
+pub const CYCLE_LATHE: u8 = 3;
+
+/// A Fanuc lathe's turning (G90) or facing (G94) cycle block of G-code system A: from its start
+/// A (where the tool stands) a rapid to the cut, a feed along Z (G90) or X (G94) to the corner,
+/// a feed back out along the other axis, and a rapid back to A. Its two cuts meet at the corner,
+/// which the field moves as a whole (the block's X and Z rewritten); the field must not vary
+/// along the cuts by more than the chord tolerance.
+#[derive(Clone, Copy, Debug)]
+pub struct LatheBox {
+    /// 0-based line.
+    pub line: u32,
+    /// 900 (G90) or 940 (G94).
+    pub code: i32,
+    /// The start A (mm): radius, Y 0, Z.
+    pub start: [f64; 3],
+}
 
 /// A canned-cycle block as the interpreter read it: what the emitter needs to rewrite it. Its
 /// holes are the ends of its [`CYCLE_BOTTOM`] records.
@@ -434,6 +453,8 @@ pub struct Interp {
     pub line_base: usize,
     /// The canned-cycle blocks whose motion is traced, in line order.
     pub cycles: Vec<Cycle>,
+    /// A Fanuc lathe's G90/G94 box cycles of the run, in line order.
+    pub boxes: Vec<LatheBox>,
     /// Offsets of the program's coordinates (mm; degrees for A, B, C) from the frame positions
     /// are kept in — the program's coordinates where its moves began, which a field is measured
     /// in: a number written `v` (absolute) is the position `v·unit + offset`. Set by G92, G52,
@@ -547,6 +568,10 @@ struct State {
     /// are its contour, which the control runs inside the cycle (not followed): (Q, the
     /// cycle's unsupported construct).
     contour_until: Option<(f64, usize)>,
+    /// The X (radius) and Z (mm) of the last G90/G94 box cycle block: modal while the cycle is,
+    /// and whether a block of it gave R (a taper, modal too).
+    box_xz: [f64; 2],
+    box_taper: bool,
     /// After G40: the offset the tool centre stands at until the move that ends compensation.
     comp_exit: Option<[f64; 2]>,
     /// After G40 ending compensation the engine did not follow: the move that ends it is not
@@ -698,6 +723,8 @@ impl Interpreter {
                 contours: Vec::new(),
                 plane_known: dialect != Dialect::LinuxCncLathe,
                 contour_until: None,
+                box_xz: [f64::NAN; 2],
+                box_taper: false,
                 comp_exit: None,
                 comp_unfollowed_exit: false,
                 tool_next: None,
@@ -745,6 +772,7 @@ impl Interpreter {
             origin: self.st.pos,
             line_base,
             cycles: Vec::new(),
+            boxes: Vec::new(),
             frames: vec![self.st.off],
             frame_lines: Vec::new(),
             dialect: self.st.dialect,
@@ -1567,6 +1595,10 @@ impl Interpreter {
             }
             if let Some((m, mc)) = motion_word {
                 if let Mode::Canned(c) = m {
+                    if st.mode != m {
+                        st.box_xz = [f64::NAN; 2];
+                        st.box_taper = false;
+                    }
                     // cycles the engine does not follow stay reported until G80 (a Fanuc
                     // lathe's G90/G92/G94, which run only with axis words, where a block runs one)
                     if lathe_modal_cycle(st.dialect, c) {
@@ -1579,6 +1611,8 @@ impl Interpreter {
                     }
                 } else {
                     st.active.canned = None;
+                    st.box_xz = [f64::NAN; 2];
+                    st.box_taper = false;
                     // any other motion ends the cycles' initial level and sticky words
                     st.cyc.level = None;
                     st.cyc.last = 0;
@@ -2587,13 +2621,82 @@ fn lathe_modal_cycle(d: Dialect, c: i32) -> bool {
     d == Dialect::FanucLathe && matches!(c, 900 | 920 | 940)
 }
 
+/// A Fanuc lathe's straight G90 or G94 block ([`LatheBox`]): its corner and the return to its
+/// start; X and Z not written are the last box block's (modal). From an unknown start, refused.
+fn lathe_box(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    c: i32,
+    w: &CycleWords,
+    blocked: Option<usize>,
+    unit: f64,
+) -> Result<(), NcError> {
+    let a = st.pos;
+    let name = if c == 900 {
+        "turning cycle G90"
+    } else {
+        "facing cycle G94"
+    };
+    let named = (0..NAXES).fold(0u16, |m, k| m | ((w.axis[k].is_some() as u16) << k));
+    let mut corner = a;
+    for (k, i) in [(0usize, 0usize), (2, 1)] {
+        corner[k] = match w.axis[k] {
+            Some(v) => v * unit + st.off[k],
+            None => st.box_xz[i],
+        };
+    }
+    let why = if !(a[0].is_finite() && a[2].is_finite()) {
+        Some(format!("{name} from a position the program does not tell"))
+    } else if !(corner[0].is_finite() && corner[2].is_finite()) {
+        Some(format!(
+            "{name} without X or Z, which no block of it before gives"
+        ))
+    } else {
+        None
+    };
+    if let Some(why) = why {
+        let idx = push_unsupported(out, li, w.col, &why);
+        out.unsupported[idx].blocks += 1;
+        st.pos = [f64::NAN; NAXES];
+        push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+        return Ok(());
+    }
+    st.box_xz = [corner[0], corner[2]];
+    if let Some(idx) = blocked {
+        out.unsupported[idx].blocks += 1;
+    }
+    st.pos = corner;
+    push_record(
+        out,
+        st,
+        li,
+        Motion::Feed,
+        blocked.is_none(),
+        named,
+        [0.0; 2],
+        1,
+    );
+    out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
+    st.pos = a;
+    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+    out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
+    out.boxes.push(LatheBox {
+        line: li as u32,
+        code: c,
+        start: [a[0], a[1], a[2]],
+    });
+    out.summary.counts[Motion::Feed as usize] += 2;
+    Ok(())
+}
+
 /// Why the engine does not follow a canned cycle, or None when it does.
 fn cycle_refused(d: Dialect, c: i32) -> Option<String> {
     if d == Dialect::FanucLathe {
         return Some(match c {
-            900 => "turning cycle G90 (a Fanuc lathe's, G-code system A)".into(),
+            900 => "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)".into(),
             920 => "threading cycle G92 (a Fanuc lathe's, G-code system A)".into(),
-            940 => "facing cycle G94 (a Fanuc lathe's, G-code system A)".into(),
+            940 => "taper facing cycle G94 R (a Fanuc lathe's, G-code system A)".into(),
             _ => format!("canned cycle {} on a lathe", g_name(c)),
         });
     }
@@ -2654,6 +2757,13 @@ fn canned(
     if let Some((_, idx)) = st.active.canned {
         unknown_after(out, st, idx);
         return Ok(());
+    }
+    if lathe_modal_cycle(st.dialect, c) {
+        // (R, the taper, is modal like X and Z)
+        st.box_taper |= w.r.is_some();
+        if c != 920 && !st.box_taper {
+            return lathe_box(out, st, li, c, w, blocked, unit);
+        }
     }
     if lathe_modal_cycle(st.dialect, c) {
         let why = cycle_refused(st.dialect, c).unwrap_or_default();

@@ -304,8 +304,9 @@ pub fn sample_range(
             *prev_o = o;
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
-        let end_only =
-            !prev.iter().all(|v| v.is_finite()) || rec.cycle == crate::interp::CYCLE_BOTTOM;
+        let end_only = !prev.iter().all(|v| v.is_finite())
+            || rec.cycle == crate::interp::CYCLE_BOTTOM
+            || rec.cycle == crate::interp::CYCLE_LATHE;
         // an arc over whose circle the field varies by no more than the chord tolerance, the block
         // before it corrected (so the output starts the arc where the field puts its start): it
         // stays an arc, moved along a helix to its end's displacement (the emitter keeps it)
@@ -398,6 +399,31 @@ pub fn sample_range(
             }
         }
         s.range.push((first as u32, (s.t.len() - first) as u32));
+        // a lathe's box cycle: the field along its two cuts, which meet at its corner (the
+        // sample), from (corner X, start Z) and to (start X, corner Z)
+        if rec.cycle == crate::interp::CYCLE_LATHE && s.t.len() > first {
+            let k = it.boxes.partition_point(|b| b.line < rec.line);
+            if let Some(b) = it.boxes.get(k).filter(|b| b.line == rec.line) {
+                let c = [rec.end[0], 0.0, rec.end[2]];
+                s.check_groups
+                    .push((i as u32, (s.checks.len() / 3) as u32, 0));
+                let g = s.check_groups.len() - 1;
+                s.checks.extend_from_slice(&c);
+                for far in [[c[0], 0.0, b.start[2]], [b.start[0], 0.0, c[2]]] {
+                    let len = ((far[0] - c[0]).powi(2) + (far[2] - c[2]).powi(2)).sqrt();
+                    let n = (len / opts.max_segment).ceil().max(1.0) as usize;
+                    for j in 1..=n {
+                        let t = j as f64 / n as f64;
+                        s.checks.extend_from_slice(&[
+                            c[0] + t * (far[0] - c[0]),
+                            0.0,
+                            c[2] + t * (far[2] - c[2]),
+                        ]);
+                    }
+                }
+                s.check_groups[g].2 = (s.checks.len() / 3) as u32 - s.check_groups[g].1;
+            }
+        }
         // a lathe's nose radius compensation: the field at the nose radius from each sample (the
         // contact point the control offsets the nose from), in eight directions of the XZ plane
         if rec.nose > 0.0 {
@@ -564,6 +590,18 @@ pub fn comp_check(
             worst = worst.max(v);
         }
         let rec = &it.records[ri as usize];
+        if rec.cycle == crate::interp::CYCLE_LATHE {
+            if !(worst <= budget) {
+                let um = worst * 1000.0;
+                return Some((
+                    rec.line + 1,
+                    format!(
+                        "a turning or facing cycle (G90, G94): the field varies by {um:.1} µm along its cuts, more than the chord tolerance {budget} mm, and the cycle block moves its corner by one displacement; write the cuts as moves (G0, G1) to have them corrected along their length, or raise --chord-tol"
+                    ),
+                ));
+            }
+            continue;
+        }
         if rec.nose > 0.0 {
             // where the field is evaluated (the contact point, not the nose centre), and the
             // normal the control offsets the moved contour along, turned by the field's change:
