@@ -162,8 +162,8 @@ def test_what_a_lathe_program_does_that_is_not_followed_is_refused_at_its_line()
     head = "O1\nG18 G21\nG0 X20. Z1.\n"
     # G-code system A's taper turning cycle, where a block runs it (G90 alone sets it up)
     assert _unsupported(head + "G90 X18. Z-10. R-1. F0.2\nX16.\nG0 X30.\nM30\n") == [
-        (4, "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)"),
-        (5, "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)"),  # (R is modal)
+        (4, "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)"),
+        (5, "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)"),  # (R is modal)
     ]
     assert _unsupported(head + "G90 G54\nG01 X18. Z-10. F0.2\nM30\n") == []
     # and after G80 the cycle is still the motion (group 01): its axis words are not a G1 move
@@ -598,7 +598,7 @@ def test_box_cycles_the_engine_does_not_follow_are_refused():
 
     head = "O1\nG18 G21\nG00 X42. Z2.\n"
     assert refused(head + "G90 X38. Z-30. R-1. F0.2\nM30\n") == [
-        "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)"
+        "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)"
     ]
     assert refused(head + "G92 X38. Z-30. F1.5\nM30\n") == ["threading cycle G92 (a Fanuc lathe's, G-code system A)"]
     assert refused("O1\nG18 G21\nG90 X38. Z-30. F0.2\nM30\n") == [
@@ -611,3 +611,17 @@ def test_box_cycles_the_engine_does_not_follow_are_refused():
     # cannot follow it
     with pytest.raises(RefusedError, match=r"line 5: a turning or facing cycle \(G90, G94\): the field varies"):
         nc.parse(BOXES, dialect="fanuc-lathe").correct(_field)
+
+
+def test_what_box_cycles_the_engine_does_not_follow_leave_out_is_not_taken_from_a_corrected_one():
+    # a taper block (refused, kept with --keep-unsupported) leaving out X would take the output's
+    # rewritten X: refused even then
+    text = "O1\nG18 G21\nG00 X42. Z2.\nG90 X38. Z-30. F0.2\nZ-25. R-1.\nG00 X50.\nM30\n"
+    with pytest.raises(InputError, match="leaves out X or Z, which a block before gives") as e:
+        nc.parse(text, dialect="fanuc-lathe").correct(fields.Shift((0.05, 0, 0)), keep_unsupported=True)
+    assert e.value.line == 5
+    # Haas writes a G90 taper with I and a G94 taper with K: refused as the taper it is
+    haas = "O1\nG18 G21\nG00 X42. Z2.\nG90 X38. Z-30. I-1. F0.2\nG00 X50.\nM30\n"
+    assert [(u.line, u.construct) for u in nc.parse(haas, dialect="fanuc-lathe").unsupported] == [
+        (4, "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)")
+    ]

@@ -278,12 +278,18 @@ def _comp_check(run, field, r, disp, checks, name):
     first = int(r["line"][np.flatnonzero(r["flags"] & 32)[0]])
     if getattr(field, "uses_axes", False):
         # the rotary and U V W axes of a compensated move are not interpolated at the tool centre
-        return first, "cutter compensation with a field that depends on the rotary or U, V, W axes: not treated"
+        return first, (
+            "cutter or nose radius compensation, or a lathe's G90/G94 cycle, with a field that depends on the rotary "
+            "or U, V, W axes: not treated"
+        )
     cpts = np.frombuffer(checks, dtype="<f8").reshape(-1, 3)
     try:
         cdisp = np.ascontiguousarray(field(cpts), dtype=np.float64) if len(cpts) else np.zeros((0, 3))
     except _OutsideError:
-        return first, "the tool centre around a compensated corner is outside the field's domain"
+        return first, (
+            "a point the check needs (the tool centre around a compensated corner, the field within a lathe tool's "
+            "nose radius, or along a lathe cycle's cuts) is outside the field's domain"
+        )
     if cdisp.shape != cpts.shape or not np.isfinite(cdisp).all():
         raise RefusedError(f"{name}: the field is not finite at the tool around a compensated corner")
     return _engine(lambda: run.comp_check(disp, cdisp), name)

@@ -1637,6 +1637,18 @@ impl Interpreter {
             // words no code of the block uses are an error, as in LinuxCNC (its check_other_codes):
             // on a Fanuc control R, I, K on a G1 round or chamfer the corner, which a split move
             // would put in the wrong place
+            // a Haas lathe's taper on a G90 (I) or G94 (K): a taper like Fanuc's R
+            if st.dialect == Dialect::FanucLathe
+                && matches!(
+                    motion_word.map_or(st.mode, |(m, _)| m),
+                    Mode::Canned(900 | 940)
+                )
+                && (ijk[0].is_some() || ijk[2].is_some())
+                && (named != 0 || motion_word.is_some())
+            {
+                st.box_taper = true;
+                seen &= !((1 << (b'I' - b'A')) | (1 << (b'K' - b'A')));
+            }
             if untraced.is_none() && unknown_m.is_none() && seen & CHECKED_WORDS != 0 {
                 let to_be = match motion_word {
                     Some((m, _)) => Some(m),
@@ -2694,9 +2706,9 @@ fn lathe_box(
 fn cycle_refused(d: Dialect, c: i32) -> Option<String> {
     if d == Dialect::FanucLathe {
         return Some(match c {
-            900 => "taper turning cycle G90 R (a Fanuc lathe's, G-code system A)".into(),
+            900 => "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)".into(),
             920 => "threading cycle G92 (a Fanuc lathe's, G-code system A)".into(),
-            940 => "taper facing cycle G94 R (a Fanuc lathe's, G-code system A)".into(),
+            940 => "taper facing cycle G94 (R, or K on a Haas: a Fanuc lathe's, G-code system A)".into(),
             _ => format!("canned cycle {} on a lathe", g_name(c)),
         });
     }
@@ -2763,6 +2775,18 @@ fn canned(
         st.box_taper |= w.r.is_some();
         if c != 920 && !st.box_taper {
             return lathe_box(out, st, li, c, w, blocked, unit);
+        }
+        // a block the engine does not follow that leaves out X or Z takes them from a box
+        // block before, which the correction may have rewritten: not even copied
+        if (w.axis[0].is_none() || w.axis[2].is_none()) && st.box_xz.iter().all(|v| v.is_finite()) {
+            return Err(ierr(
+                li,
+                w.col,
+                format!(
+                    "this {} block leaves out X or Z, which a block before gives, and the correction may rewrite that one: write X and Z in it",
+                    g_name(c)
+                ),
+            ));
         }
     }
     if lathe_modal_cycle(st.dialect, c) {
