@@ -2706,9 +2706,11 @@ fn lathe_box(
 fn cycle_refused(d: Dialect, c: i32) -> Option<String> {
     if d == Dialect::FanucLathe {
         return Some(match c {
-            900 => "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)".into(),
+            900 => "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)"
+                .into(),
             920 => "threading cycle G92 (a Fanuc lathe's, G-code system A)".into(),
-            940 => "taper facing cycle G94 (R, or K on a Haas: a Fanuc lathe's, G-code system A)".into(),
+            940 => "taper facing cycle G94 (R, or K on a Haas: a Fanuc lathe's, G-code system A)"
+                .into(),
             _ => format!("canned cycle {} on a lathe", g_name(c)),
         });
     }
