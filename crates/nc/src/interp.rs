@@ -3083,6 +3083,17 @@ fn untraced_move(
     push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
 }
 
+/// The diameter (mm) of tool `t` in the tool table the caller gave.
+fn table_diameter(st: &State, t: u32) -> Option<f64> {
+    st.tools.iter().find(|&&(n, _)| n == t).map(|&(_, d)| d)
+}
+
+/// Compensation the engine does not follow: its moves are unsupported until G40.
+fn comp_not_followed(out: &mut Interp, st: &mut State, li: usize, gc: usize, why: &str) {
+    let idx = push_unsupported(out, li, gc, why);
+    st.active.cutter_comp = Some((li as u32, idx));
+}
+
 /// G41/G42 (tool D's diameter from the tool table, or the loaded tool's) or G41.1/G42.1 (D the
 /// diameter): compensation followed when the radius is known and the plane is XY; otherwise an
 /// unsupported construct that blocks the moves until G40.
@@ -3120,8 +3131,8 @@ fn comp_on(
                 d_word.map(|d| d.max(0.0) as u32).or(st.tool_loaded)
             };
             match tool {
-                Some(t) => match st.tools.iter().find(|&&(n, _)| n == t) {
-                    Some(&(_, d)) => Ok(d),
+                Some(t) => match table_diameter(st, t) {
+                    Some(d) => Ok(d),
                     None => Err(format!(
                         "nose radius compensation {name} with offset {t}: its nose radius is not known; give it in the tool table (--tool-table: tool {t}, D the nose diameter)"
                     )),
@@ -3136,10 +3147,7 @@ fn comp_on(
                 st.nose = Some(d.abs() / 2.0);
                 st.nose_edge = true;
             }
-            Err(why) => {
-                let idx = push_unsupported(out, li, gc, &why);
-                st.active.cutter_comp = Some((li as u32, idx));
-            }
+            Err(why) => comp_not_followed(out, st, li, gc, &why),
         }
         return Ok(());
     }
@@ -3177,8 +3185,8 @@ fn comp_on(
         };
         match tool {
             Some(0) => Ok(0.0),
-            Some(t) => match st.tools.iter().find(|&&(n, _)| n == t) {
-                Some(&(_, d)) => Ok(d),
+            Some(t) => match table_diameter(st, t) {
+                Some(d) => Ok(d),
                 None if st.tools.is_empty() => Err(format!(
                     "cutter compensation {name} with tool {t}: its diameter is not known; give the tool table (--tool-table)"
                 )),
@@ -3200,10 +3208,7 @@ fn comp_on(
                 last: None,
             });
         }
-        Err(why) => {
-            let idx = push_unsupported(out, li, gc, &why);
-            st.active.cutter_comp = Some((li as u32, idx));
-        }
+        Err(why) => comp_not_followed(out, st, li, gc, &why),
     }
     Ok(())
 }
