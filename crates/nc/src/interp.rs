@@ -1563,7 +1563,7 @@ impl Interpreter {
                 st.active.cutter_comp = Some((li as u32, idx));
             }
             if untraced.is_none() {
-                untraced = lathe_words(out, st, li, &mut axis, &mut named, &wcol)?;
+                untraced = lathe_words(out, grouped, st, li, &mut axis, &mut named, &wcol)?;
             }
             if st.diameter && untraced.is_none() {
                 let why = if polar_used {
@@ -2345,6 +2345,7 @@ fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) ->
 /// the construct is returned.
 fn lathe_words(
     out: &mut Interp,
+    grouped: &mut Vec<(String, usize)>,
     st: &State,
     li: usize,
     axis: &mut [Option<f64>; NAXES],
@@ -2363,8 +2364,9 @@ fn lathe_words(
             } else {
                 format!("{} word on a Fanuc lathe: a rotary axis, or a chamfer (parameter 3405#4 CCR), which the program does not tell", l as char)
             };
-            return Ok(Some(push_unsupported(
+            return Ok(Some(grouped_unsupported(
                 out,
+                grouped,
                 li,
                 wcol[(l - b'A') as usize],
                 &why,
@@ -2372,8 +2374,9 @@ fn lathe_words(
         }
     }
     if !st.diameter_known && axis[0].is_some() {
-        return Ok(Some(push_unsupported(
+        return Ok(Some(grouped_unsupported(
             out,
+            grouped,
             li,
             wcol[(b'X' - b'A') as usize],
             "X before G7 or G8 on a LinuxCNC lathe: whether X is a diameter is the machine's start-up setting (RS274NGC_STARTUP_CODE), which the program does not tell",
