@@ -19,8 +19,9 @@ a LinuxCNC O-word keyword), ``M98 P``, ``G65 P``, ``M99``. Anything else is Linu
 The machine, a mill or a lathe, is detected in the same head for the LinuxCNC and Fanuc dialects
 (``--machine`` states it): a LinuxCNC program is a lathe's when it states G7 or G8 (diameter or
 radius mode, a lathe's codes); a Fanuc/Haas program when it has a T word of three or four digits
-(``T0101``, ``T101``: tool and offset), ``G28`` with U or W, constant surface speed ``G96``, ``G50`` with a spindle limit or a coordinate
-(``G50 S2500``), or a roughing or finishing cycle ``G70``/``G71``/``G72`` with its ``P`` word.
+(``T0101``, ``T101``: tool and offset), ``G28`` with U or W, constant surface speed ``G96``,
+``G50`` with a spindle limit or a coordinate (``G50 S2500``), or a roughing or finishing cycle
+``G70``/``G71``/``G72`` with its ``P`` word.
 On a lathe the engine reads no Y (the tool is in the plane through the spindle's axis); a Fanuc
 lathe's X is a diameter, U and W its increments, and G90/G92/G94 its turning cycles.
 """
@@ -201,15 +202,32 @@ def _blank_comments(text: str) -> str:
     return "\n".join(out)
 
 
-def detect(head: bytes, name: str | None = None) -> Dialect:
-    """The dialect of a program from its first bytes ``head`` (and its file ``name``, whose
-    ``.mpf``/``.spf`` suffix is Sinumerik's)."""
+@dataclass(frozen=True)
+class _Head:
+    """A program's first bytes as detection reads them: the text (its last line left out when it
+    may be cut), upper-cased, and upper-cased with its comments blanked to the same length (so
+    that a match's offset gives its line in the text; ASCII only: offsets stay)."""
+
+    text: str
+    up: str
+    up_code: str
+
+
+def _read_head(head: bytes) -> _Head:
     text = head.decode("utf-8", "replace").replace("\r\n", "\n")
     if len(head) >= HEAD_BYTES:
         text = text[: text.rfind("\n") + 1]  # the last line may be cut
-    # comments blanked to the same length, so that a match's offset gives its line in the text
-    code = _blank_comments(text)
-    up, up_code = text.translate(_UPPER), code.translate(_UPPER)  # ASCII only: offsets stay
+    return _Head(text, text.translate(_UPPER), _blank_comments(text).translate(_UPPER))
+
+
+def detect(head: bytes, name: str | None = None) -> Dialect:
+    """The dialect of a program from its first bytes ``head`` (and its file ``name``, whose
+    ``.mpf``/``.spf`` suffix is Sinumerik's)."""
+    return _detect(_read_head(head), name)
+
+
+def _detect(h: _Head, name: str | None) -> Dialect:
+    text, up, up_code = h.text, h.up, h.up_code
     found: tuple[int, str] | None = None  # the first rule's dialect that matches, at its match
     for dialect, with_comments, gate, rule in _RULES:
         if found is not None and found[1] != dialect:
@@ -233,15 +251,12 @@ def _line_of(text: str, at: int) -> tuple[int, str]:
     return text.count("\n", 0, at) + 1, text[start : end if end >= 0 else len(text)].strip()[:80]
 
 
-def detect_lathe(head: bytes, dialect: str) -> tuple[int, str] | None:
-    """Where the program's first bytes ``head``, written in ``dialect``, show a lathe's program:
-    (line, its text), or None."""
+def _detect_lathe(h: _Head, dialect: str) -> tuple[int, str] | None:
+    """Where the program's head, written in ``dialect``, shows a lathe's program: (line, its
+    text), or None."""
     rule = _LATHE.get(dialect)
-    if rule is None:
-        return None
-    text = head.decode("utf-8", "replace").replace("\r\n", "\n")
-    m = rule.search(_blank_comments(text).translate(_UPPER))
-    return None if m is None else _line_of(text, m.start())
+    m = None if rule is None else rule.search(h.up_code)
+    return None if m is None else _line_of(h.text, m.start())
 
 
 def resolve(path: str | Path, choice: str = "auto", machine: str = "auto") -> Dialect:
@@ -253,15 +268,16 @@ def resolve(path: str | Path, choice: str = "auto", machine: str = "auto") -> Di
         raise ValueError(f"dialect must be one of {', '.join(CHOICES)}; got {choice!r}")
     if machine not in MACHINES:
         raise ValueError(f"machine must be one of {', '.join(MACHINES)}; got {machine!r}")
-    head = b""
+    raw = b""
     if choice == "auto" or machine == "auto":
         try:
             with open(path, "rb") as f:
-                head = f.read(HEAD_BYTES)
+                raw = f.read(HEAD_BYTES)
         except OSError as e:
             raise InputError(f"cannot read program: {e.strerror}", str(path)) from None
+    head = _read_head(raw)
     if choice == "auto":
-        d = detect(head, str(path))
+        d = _detect(head, str(path))
     else:
         d = Dialect(choice, False)
     if not d.read:
@@ -283,7 +299,7 @@ def resolve(path: str | Path, choice: str = "auto", machine: str = "auto") -> Di
         return replace(d, lathe=True, machine_detected=False)
     if machine == "mill":
         return replace(d, machine_detected=False)
-    at = detect_lathe(head, d.name)
+    at = _detect_lathe(head, d.name)
     if at is None:
         return d
     return replace(d, lathe=True, machine_line=at[0], machine_text=at[1])

@@ -131,7 +131,8 @@ class Blocks:
 #: controller reads them (see :mod:`ncadapt.dialects`). ``linuxcnc-lathe`` and ``fanuc-lathe`` are
 #: those controls on a lathe: no Y (0 throughout, the field evaluated there and its y not
 #: applied); X a diameter after LinuxCNC's G7, and always on a Fanuc lathe, whose U and W are
-#: increments of X and Z and whose G90/G92/G94 and G70-G76 are turning cycles (refused).
+#: increments of X and Z and whose G90/G92/G94 and G70-G76 are turning cycles (docs/nc-engine.md,
+#: "Lathes": which are followed and which refused).
 DIALECTS = ("linuxcnc", "fanuc", "grbl", "marlin", "linuxcnc-lathe", "fanuc-lathe")
 
 

@@ -162,7 +162,8 @@ impl Program {
     }
 
     /// Records as a dict of byte arrays: line (u32, 0-based), motion, plane, flags (u8 each:
-    /// inch 1, G91 2, G90.1 4, supported 8, a move of a canned cycle 16),
+    /// inch 1, G91 2, G90.1 4, supported 8, a move of a canned cycle 16, the field checked
+    /// around it 32: cutter or nose radius compensation, a lathe's G90/G94 cycle),
     /// named (u16), end (float64, 9 per record, mm / degrees, NaN unknown), origin (9 float64).
     fn records<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         records_dict(py, &self.inner.interp)

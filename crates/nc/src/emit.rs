@@ -1023,26 +1023,44 @@ impl<'a> Emitter<'a> {
             (0..n).collect()
         };
         let pieces = &keep[1..];
+        // G93's F word, when the move's time is shared among its pieces
+        let inverse_f = rec
+            .inverse_time
+            .then(|| words.iter().find(|w| w.letter == b'F'))
+            .flatten()
+            .map(|w| (w.num_start, w.end, w.value));
+        // the length of each piece written, from where the output stands (on a lathe, in its
+        // XZ plane: Y is 0)
+        let lens: Vec<f64> = if rec.nose > 0.0 || inverse_f.is_some() {
+            let mut prev = [epos0[0], epos0[1], epos0[2]];
+            keep.iter()
+                .map(|&k| {
+                    let p = xyz_at(k);
+                    let d = ((p[0] - prev[0]).powi(2)
+                        + (p[1] - prev[1]).powi(2)
+                        + (p[2] - prev[2]).powi(2))
+                    .sqrt();
+                    prev = p;
+                    d
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         // a lathe's nose radius compensation: the control offsets each written piece along its
         // own normal, which the rounding of its numbers turns by up to 2√2·half/length, moving
         // the nose centre by the nose radius times that
         if rec.nose > 0.0 {
             let shortest = rec.nose * 2.0 * std::f64::consts::SQRT_2 * half_mm / self.st.arc_tol;
-            let mut prev = [epos0[0], epos0[1], epos0[2]];
-            for &k in &keep {
-                let p = xyz_at(k);
-                let len = (p[0] - prev[0]).hypot(p[2] - prev[2]);
-                if len < shortest {
-                    return Err(NcError::Interpret {
-                        line: rec.line as usize + 1,
-                        col: 1,
-                        message: format!(
-                            "a piece {len:.4} mm long under nose radius compensation: the rounding of its numbers turns it enough to move the nose centre ({:.4} mm radius) by more than the chord tolerance {} mm (pieces under it must be at least {shortest:.4} mm); raise --max-segment or --chord-tol",
-                            rec.nose, self.st.arc_tol
-                        ),
-                    });
-                }
-                prev = p;
+            if let Some(&len) = lens.iter().find(|&&len| len < shortest) {
+                return Err(NcError::Interpret {
+                    line: rec.line as usize + 1,
+                    col: 1,
+                    message: format!(
+                        "a piece {len:.4} mm long under nose radius compensation: the rounding of its numbers turns it enough to move the nose centre ({:.4} mm radius) by more than the chord tolerance {} mm (pieces under it must be at least {shortest:.4} mm); raise --max-segment or --chord-tol",
+                        rec.nose, self.st.arc_tol
+                    ),
+                });
             }
         }
         // program stops move to the last piece (they stay where they are when there is none)
@@ -1057,25 +1075,7 @@ impl<'a> Emitter<'a> {
         // at one speed and they take the move's time; a piece's F is the move's over its share.
         // A move along no X Y Z (rotary axes alone) shares it by fraction along the move. A
         // piece left out (it moves no written digit) passes its share on to the next
-        let inverse_f = rec
-            .inverse_time
-            .then(|| words.iter().find(|w| w.letter == b'F'))
-            .flatten()
-            .map(|w| (w.num_start, w.end, w.value));
         let shares: Vec<f64> = if inverse_f.is_some() {
-            let mut prev = [epos0[0], epos0[1], epos0[2]];
-            let lens: Vec<f64> = keep
-                .iter()
-                .map(|&k| {
-                    let p = xyz_at(k);
-                    let d = ((p[0] - prev[0]).powi(2)
-                        + (p[1] - prev[1]).powi(2)
-                        + (p[2] - prev[2]).powi(2))
-                    .sqrt();
-                    prev = p;
-                    d
-                })
-                .collect();
             let total: f64 = lens.iter().sum();
             if total > 1e-9 {
                 lens.iter().map(|d| d / total).collect()

@@ -1554,13 +1554,13 @@ impl Interpreter {
                 ms[..nm].iter().any(|&(m, _)| m == 6)
             };
             if st.nose.is_some() && new_tool && st.active.cutter_comp.is_none() {
-                let idx = push_unsupported(
+                comp_not_followed(
                     out,
+                    st,
                     li,
                     0,
                     "a tool offset changed under nose radius compensation: its nose radius is not followed",
                 );
-                st.active.cutter_comp = Some((li as u32, idx));
             }
             if untraced.is_none() {
                 untraced = lathe_words(out, grouped, st, li, &mut axis, &mut named, &wcol)?;
@@ -2337,7 +2337,6 @@ fn push_unsupported(out: &mut Interp, li: usize, col: usize, construct: &str) ->
     out.unsupported.len() - 1
 }
 
-#[allow(clippy::too_many_arguments)]
 /// A lathe's axis words: U and W of a Fanuc lathe are increments of X and Z (read into `axis` as
 /// the absolute X and Z they reach); a diameter X (LinuxCNC's G7, a Fanuc lathe) is halved into
 /// the radius. A Y word on a lathe (the engine takes the tool in the plane through the spindle's
@@ -2412,6 +2411,7 @@ fn lathe_words(
     Ok(None)
 }
 
+#[allow(clippy::too_many_arguments)]
 /// Where the axis words of a block take the axes from `pos`: lengths scaled by `unit` (mm per
 /// program unit), rotary words in degrees; added to `pos` when incremental.
 fn target(
@@ -2793,8 +2793,6 @@ fn canned(
                 ),
             ));
         }
-    }
-    if lathe_modal_cycle(st.dialect, c) {
         let why = cycle_refused(st.dialect, c).unwrap_or_default();
         let idx = push_unsupported(out, li, w.col, &why);
         unknown_after(out, st, idx);

@@ -405,12 +405,10 @@ pub fn sample_range(
             let k = it.boxes.partition_point(|b| b.line < rec.line);
             if let Some(b) = it.boxes.get(k).filter(|b| b.line == rec.line) {
                 let c = [rec.end[0], 0.0, rec.end[2]];
-                s.check_groups
-                    .push((i as u32, (s.checks.len() / 3) as u32, 0));
-                let g = s.check_groups.len() - 1;
+                let g0 = s.checks.len() / 3;
                 s.checks.extend_from_slice(&c);
                 for far in [[c[0], 0.0, b.start[2]], [b.start[0], 0.0, c[2]]] {
-                    let len = ((far[0] - c[0]).powi(2) + (far[2] - c[2]).powi(2)).sqrt();
+                    let len = (far[0] - c[0]).hypot(far[2] - c[2]);
                     let n = (len / opts.max_segment).ceil().max(1.0) as usize;
                     for j in 1..=n {
                         let t = j as f64 / n as f64;
@@ -421,7 +419,8 @@ pub fn sample_range(
                         ]);
                     }
                 }
-                s.check_groups[g].2 = (s.checks.len() / 3) as u32 - s.check_groups[g].1;
+                s.check_groups
+                    .push((i as u32, g0 as u32, (s.checks.len() / 3 - g0) as u32));
             }
         }
         // a lathe's nose radius compensation: the field at the nose radius from each sample (the
