@@ -45,6 +45,9 @@ CORPUS = Path(__file__).resolve().parents[1].parent / "shared" / "corpus" / "nc"
 #: The displacements the programs are corrected by: a shift in Z, and a grid field of this amplitude.
 SHIFT = (0.0, 0.0, 0.05)
 AMPLITUDE = 0.02
+#: The motion mode a Sinumerik program that moves before stating one is read in: Siemens' setting
+#: of $MC_GCODE_RESET_VALUES (the user states the machine's with --start-motion).
+START_MOTION = "G1"
 #: Agreement of the corrected motion with the displaced input: mm programs, inch (or mixed) programs.
 TOL_MM, TOL_INCH = 0.005, 0.009
 #: Longest corrected piece (mm): coarser than the default (1 mm) to keep the run short.
@@ -128,6 +131,12 @@ def _strip_cycle_p(data: bytes) -> bytes:
     return _CYCLE_LINE.sub(lambda m: _P_WORD.sub(b"", m.group(0)), data)
 
 
+def _feed_first(data: bytes) -> bytes:
+    """A feed rate before the program: one that gives none (a program that only states positions,
+    or a Sinumerik machine's feed from its settings) moves the same, and rs274 refuses G1 at F0."""
+    return b"F1000\n" + data
+
+
 def _strip_u(data: bytes) -> bytes:
     """Without U words: a Marlin program's extruder, carried as U, which rs274 has no axis for."""
     return re.sub(rb"[ \t]*U[-+]?(?:\d+\.?\d*|\.\d+)", b"", data)
@@ -140,6 +149,7 @@ ADJUSTMENTS = {
     "Unknown m code used: M8": ("Haas auxiliary M codes removed", _strip_haas_m),
     "P word with no G2 G3 G4 G10 G64": ("P words of G81/G73/G83 removed", _strip_cycle_p),
     "Bad character 'u' used": ("U words (a Marlin program's E) removed", _strip_u),
+    "Cannot do g1 with zero feed rate": ("F1000 before the program", _feed_first),
 }
 
 
@@ -811,10 +821,18 @@ def _run_translated(entry: Entry, work: Path, r: Result, dialect: str) -> None:
     for byte."""
     data = entry.path.read_bytes()
     subs = [subprogram_folder(entry, work)] if dialect == "sinumerik" else []
+    start = None  # the machine's start motion mode (Sinumerik), stated when the program needs it
     try:
-        tr = sinumerik.translate(data, entry.file, subs) if subs else marlin.translate(data, entry.file)
+        try:
+            tr = sinumerik.translate(data, entry.file, subs) if subs else marlin.translate(data, entry.file)
+        except InputError as e:
+            if "--start-motion" not in e.message:
+                raise
+            # as the user is told: the machine's mode stated (Siemens' setting, G1)
+            start = START_MOTION
+            tr = sinumerik.translate(data, entry.file, subs, start)
     except InputError as e:
-        r.outcome = f"refused: line {e.line}: {e.message}"
+        r.outcome = f"refused: line {e.line}: {e.message}" + (f" (--start-motion {start})" if start else "")
         r.reason, r.refusal_line = _generic(e.message), e.line
         return
     folder = work / "straight"
@@ -829,8 +847,11 @@ def _run_translated(entry: Entry, work: Path, r: Result, dialect: str) -> None:
     if not r.accepted:
         return
     r.outcome = "accepted (run straight)" if dialect == "sinumerik" else "accepted (E as U)"
+    if start:
+        r.outcome += f" (--start-motion {start})"
     out = work / ("zero" + entry.path.suffix)
-    nc.correct_file(entry.path, out, fields.Shift((0.0, 0.0, 0.0)), dialect=dialect, subprograms=subs)
+    zero = fields.Shift((0.0, 0.0, 0.0))
+    nc.correct_file(entry.path, out, zero, dialect=dialect, subprograms=subs, start_motion=start)
     if out.read_bytes() != data:
         r.identity, r.identity_detail = False, _first_difference(data, out.read_bytes())
     if dialect != "sinumerik" or not ncgi.AVAILABLE or RS274 is None:
@@ -847,10 +868,21 @@ def _run_translated(entry: Entry, work: Path, r: Result, dialect: str) -> None:
         r.motion_detail = "nc-gcode-interpreter reports program units: a program in both units is not compared"
         return
     # the interpreter reports the program's numbers; rs274 reports mm
-    want = ncgi.ends(data.decode("utf-8", "replace")) * (25.4 if units == {b"G20 "} else 1.0)
-    canon = canonical(folder / straight)
-    got = ncgi.distinct(canon.ends) if canon.error is None else None
-    if got is None or got.shape != want.shape or np.abs(got - want).max() > ncgi.tolerance(want):
+    try:
+        want = ncgi.ends(data.decode("utf-8", "replace")) * (25.4 if units == {b"G20 "} else 1.0)
+    except BaseException as e:  # noqa: BLE001 - the oracle's own failures (a parse error, a Rust panic)
+        if isinstance(e, KeyboardInterrupt):
+            raise
+        why = str(e).splitlines()[0][:200] if str(e) else type(e).__name__
+        r.motion_detail = f"nc-gcode-interpreter does not run the source ({why}): not compared"
+        return
+    canon, _ = rs274_input(folder / straight, work)
+    if canon.error is not None:
+        r.motion = "mismatch"
+        r.motion_detail = "rs274 rejects the straight program: " + canon.error.replace("\n", " | ")
+        return
+    got = ncgi.distinct(canon.ends)
+    if got.shape != want.shape or np.abs(got - want).max() > ncgi.tolerance(want):
         detail = "the straight program does not move as nc-gcode-interpreter runs the source"
         r.motion = "mismatch"
         r.motion_detail = f"{detail} || {r.motion_detail}" if r.motion_detail else detail

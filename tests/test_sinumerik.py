@@ -1029,3 +1029,53 @@ def test_values_out_of_range_are_refused_not_crashing(text):
 def test_a_negative_dpr_is_its_magnitude():
     tr = sn.translate(b"G0 X0 Y0 Z10\nG1 F100\nCYCLE81(10, 0, 2, -5, -5)\n")
     assert "G98 G81 R2 Z-5" in tr.data.decode()
+
+
+# --------------------------------------------------------------------- the machine's start mode
+#: A program whose first moves come before it states a motion mode (as nc-gcode-interpreter's
+#: examples are written): the machine's machine data decides whether they are rapids or cuts.
+NO_MODE = "X0 Y0 Z0 F500\nTRANS X100 Y2\nX10 Y0\nX10 Y10\nG0 Z5\n"
+
+
+@needs_rs274
+@needs_oracle
+def test_the_start_motion_stated_makes_the_first_moves_rapids_or_cuts(tmp_path):
+    """Without --start-motion the first move is refused at its line (nothing written); with G1 its
+    moves are cuts, corrected: the oracle runs the output to the input's ends (with the frame)
+    shifted; with G0 they are rapids, left as written (the program comes back as it is)."""
+    p = tmp_path / "p.mpf"
+    p.write_text(NO_MODE)
+    out, js = tmp_path / "o.mpf", tmp_path / "c.json"
+    args = ["correct", str(p), "--dialect", "sinumerik", "--shift", "0.1,0,0.05", "-o", str(out)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and "p.mpf:1:1" in r.output and "--start-motion" in r.output and not out.exists()
+    r = CliRunner().invoke(main, [*args, "--start-motion", "g1", "--json", str(js)])
+    assert r.exit_code == 0, r.output
+    assert json.loads(js.read_text())["options"]["start_motion"] == "G1"
+    before = ncgi.ends(NO_MODE)
+    # by hand: (0,0,0); TRANS X100 Y2 puts X10 Y0 at (110, 2); then (110, 12); Z5 a rapid
+    np.testing.assert_allclose(before, [[110, 2, 0], [110, 12, 0], [110, 12, 5]], atol=1e-4)
+    after = ncgi.ends(out.read_text())
+    # the first move (from where the machine stands, not known) is left as written: the
+    # correction starts from it
+    ok, where = ncgi.contains_in_order(after, before[:2] + [0.1, 0.0, 0.05], 1e-4)
+    assert ok, where
+    assert "G1" not in out.read_text()  # the machine's mode is not written into the program
+    # the straight program's moves are cuts for rs274 too
+    _, rapid = straight_motion(sn.translate(NO_MODE.encode(), "p", (), "G1").data, tmp_path)
+    assert rapid.tolist() == [False, False, True]  # (the move to 0, 0, 0 goes nowhere from the start)
+    out.unlink()
+    r = CliRunner().invoke(main, [*args, "--start-motion", "G0"])
+    assert r.exit_code == 0 and out.read_bytes() == p.read_bytes(), r.output
+    _, rapid = straight_motion(sn.translate(NO_MODE.encode(), "p", (), "G0").data, tmp_path)
+    assert rapid.tolist() == [True, True, True]
+
+
+def test_the_start_motion_is_for_sinumerik_programs(tmp_path):
+    g = tmp_path / "p.ngc"
+    g.write_text("G0 X0\n")
+    for cmd in (["inspect", str(g)], ["correct", str(g), "--shift", "0,0,0", "-o", str(tmp_path / "o.ngc")]):
+        r = CliRunner().invoke(main, [*cmd, "--start-motion", "G1"])
+        assert r.exit_code == 2 and "--start-motion is for Sinumerik programs" in r.output, r.output
+    with pytest.raises(ValueError):
+        sn.translate(b"X1\n", "p", (), "G2")

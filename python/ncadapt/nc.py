@@ -161,6 +161,7 @@ def correct_file(
     read_ahead=None,
     expand: bool = False,
     subprograms: Sequence[str | os.PathLike] = (),
+    start_motion: str | None = None,
     **options,
 ) -> Correction:
     """Correct the program in file ``path`` and write it to ``output``, reading and writing it
@@ -179,7 +180,9 @@ def correct_file(
     block run (a Sinumerik program only with ``expand``, else :class:`RefusedError` naming the
     line). ``Correction.expanded`` says which (``written``) and how many blocks. A subprogram a
     Sinumerik program calls is looked for beside it, then in the folders ``subprograms``
-    (``Correction.expanded["subprograms"]`` names the files read).
+    (``Correction.expanded["subprograms"]`` names the files read); ``start_motion`` (``"G0"`` or
+    ``"G1"``) is the motion mode the machine starts a Sinumerik program in (its machine data), for
+    a program that moves before it states one.
 
     The output is written atomically: when a check refuses (an unsupported construct, a
     displacement over the limit, a point outside the field), nothing is written. Raises
@@ -193,7 +196,7 @@ def correct_file(
             read_ahead.cancel()
         if dialect == "marlin":
             return _correct_marlin(p, out, field, options)
-        return _correct_sinumerik(p, out, field, expand, subprograms, options)
+        return _correct_sinumerik(p, out, field, expand, subprograms, start_motion, options)
     if expand:
         if read_ahead is not None:
             read_ahead.cancel()
@@ -355,13 +358,15 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
     return _written(c, out, data, text, written, n, len(flat.lines), flat.blocks_run)
 
 
-def _correct_sinumerik(p: Path, out: Path, field, expand: bool, subprograms, options: dict) -> Correction:
+def _correct_sinumerik(
+    p: Path, out: Path, field, expand: bool, subprograms, start_motion: str | None, options: dict
+) -> Correction:
     """:func:`correct_file` for a Sinumerik program: run into straight RS274NGC
     (:func:`ncadapt.sinumerik.translate`), corrected, and written back in Sinumerik's syntax."""
     from . import sinumerik
 
     data = _read_program(p)
-    tr = sinumerik.translate(data, str(p), subprograms)
+    tr = sinumerik.translate(data, str(p), subprograms, start_motion)
     c, corrected = _correct_straight(tr.data, tr, p, field, *_TRANSLATED["sinumerik"], options, "sinumerik")
     try:
         text, rewritten, written = sinumerik.assemble(tr, corrected, expand)
@@ -440,11 +445,13 @@ def inspect_file(
     dialect: str = "linuxcnc",
     subprograms: Sequence[str | os.PathLike] = (),
     expand: bool = False,
+    start_motion: str | None = None,
 ) -> dict:
     """What the program in file ``path`` contains (as :meth:`Program.inspect`), read piece by
     piece: memory stays bounded whatever the program's length. A Sinumerik program is run into
     straight G-code first (:func:`ncadapt.sinumerik.translate`, its subprograms looked for beside
-    it and in ``subprograms``; ``subprograms`` in the result names the files read); with
+    it and in ``subprograms``, ``start_motion`` as :func:`correct_file` takes it; ``subprograms`` in
+    the result names the files read); with
     ``expand``, a LinuxCNC or Fanuc program's parameters, flow, subprograms and macros are first
     flattened as ``correct_file(expand=True)`` does (:func:`ncadapt.flatten.flatten`). The lines
     named are the program's own."""
@@ -460,7 +467,7 @@ def inspect_file(
     data = _read_program(Path(path))
     tr: sinumerik.Translation | marlin.Translation | Flat
     if dialect == "sinumerik":
-        tr = sinumerik.translate(data, str(path), subprograms)
+        tr = sinumerik.translate(data, str(path), subprograms, start_motion)
     elif dialect == "marlin":
         tr = marlin.translate(data, str(path))
     else:

@@ -501,6 +501,11 @@ def _targets(lines: list[_Line]) -> dict[str, list[int]]:
     return out
 
 
+#: The motion modes a machine may start a program in (``translate``'s ``start_motion``; None: not
+#: stated, and a move before the program states one is refused).
+START_MOTIONS = (None, "G0", "G1")
+
+
 @dataclass
 class _State:
     """What the control holds between blocks, as far as the path goes."""
@@ -1213,7 +1218,7 @@ class _Run:
             raise _Error(
                 "a move before any G0, G1, G2, G3 or CIP: the motion mode a program starts in is machine data "
                 "($MC_GCODE_RESET_VALUES: G1 in Siemens' setting, which the machine's maker may change); write G0 "
-                "or G1 before the first move",
+                "or G1 before the first move, or state the machine's with --start-motion",
                 col0,
             )
         at = self.lines[i].code_at
@@ -1491,10 +1496,19 @@ def _turn(x: float, y: float, degrees: float) -> tuple[float, float]:
     return c * x - s * y, s * x + c * y
 
 
-def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | os.PathLike] = ()) -> Translation:
+def translate(
+    data: bytes,
+    name: str = "<program>",
+    subprograms: Sequence[str | os.PathLike] = (),
+    start_motion: str | None = None,
+) -> Translation:
     """The straight RS274NGC program a Sinumerik program runs (see the module's text). A called
     subprogram is looked for beside the program (when ``name`` is its file), then in each folder
-    of ``subprograms``."""
+    of ``subprograms``. ``start_motion`` (``"G0"`` or ``"G1"``): the motion mode the machine
+    starts a program in, which its machine data sets ($MC_GCODE_RESET_VALUES); without it a move
+    before the program states one is refused."""
+    if start_motion not in START_MOTIONS:
+        raise ValueError(f"start_motion must be one of {START_MOTIONS}, not {start_motion!r}")
     text = data.decode("utf-8", "surrogateescape")
     lines = _read(text, name)
     path = Path(name) if name and not name.startswith("<") else None
@@ -1504,6 +1518,7 @@ def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | 
             raise InputError(f"subprogram folder {d} is not a folder", str(d))
         folders.append(d)
     run = _Run(lines, name, folders)
+    run.s.mode = start_motion
     i, blocks = 0, 0
     while True:
         if i >= len(run.lines) and not run.calls:
@@ -1525,10 +1540,16 @@ def translate(data: bytes, name: str = "<program>", subprograms: Sequence[str | 
         if nxt is None:
             break
         i = nxt
+    first = next((k for k, it in enumerate(run.items) if it.kind == "motion"), None)
+    if start_motion is not None and first is not None:
+        # the mode the machine starts in, just before the straight program's first move (after
+        # the words its block sets first, such as F: rs274 refuses a G1 without a feed rate)
+        run.items.insert(first, Item(run.items[first].line, "state", start_motion, ""))
     if any(it.rs.startswith("G52 ") for it in run.items):
         # the programmable frame is empty when a program starts (the control deletes it at reset
         # and at the end of a program): the engine follows the translations (the program's or a
-        # subprogram's) from there
+        # subprogram's) from there (before anything else: after a motion code, the engine takes
+        # G52 for an offset the machine may have moved under)
         run.items.insert(0, Item(0, "state", "G52 X0 Y0 Z0", ""))
     return Translation(
         rewrite.mark([it.rs for it in run.items]),

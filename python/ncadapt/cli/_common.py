@@ -382,10 +382,23 @@ subprograms_option = click.option(
 )
 
 
-def no_subprograms(subprograms, d) -> None:
-    """``--subprograms`` is for Sinumerik programs: given for another, it would be ignored."""
-    if subprograms and d.name != "sinumerik":
-        raise click.UsageError(f"--subprograms is for Sinumerik programs; this program is read as {d.describe()}")
+#: ``--start-motion`` of the commands that read an NC program.
+start_motion_option = click.option(
+    "--start-motion",
+    type=click.Choice(["G0", "G1"], case_sensitive=False),
+    callback=lambda _ctx, _param, v: None if v is None else v.upper(),
+    help="The motion mode the machine starts a Sinumerik program in (its machine data, "
+    "$MC_GCODE_RESET_VALUES), for a program that moves before it writes G0, G1, G2, G3 or CIP. "
+    "Without it such a move is refused: the program does not say whether it is a rapid or a cut.",
+)
+
+
+def sinumerik_only(d, subprograms, start_motion) -> None:
+    """``--subprograms`` and ``--start-motion`` are for Sinumerik programs: given for another,
+    they would be ignored."""
+    for given, name in ((subprograms, "--subprograms"), (start_motion, "--start-motion")):
+        if given and d.name != "sinumerik":
+            raise click.UsageError(f"{name} is for Sinumerik programs; this program is read as {d.describe()}")
 
 
 def expand_read(expand: bool, d) -> None:

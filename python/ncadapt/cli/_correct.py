@@ -16,9 +16,10 @@ from ._common import (
     expand_read,
     handle_errors,
     machine_option,
-    no_subprograms,
     progress,
     resolve_dialect,
+    sinumerik_only,
+    start_motion_option,
     subprograms_option,
     summary,
     write_json,
@@ -123,6 +124,7 @@ def _shift(ctx, param, value):
     help="Units of the tool table's numbers (the machine's; the table does not say).",
 )
 @subprograms_option
+@start_motion_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the figures as JSON.")
 @handle_errors
 def correct(
@@ -145,6 +147,7 @@ def correct(
     tool_table,
     tool_units,
     subprograms,
+    start_motion,
     json_path,
 ):
     """Apply a measured correction to PROGRAM and write the corrected program to OUTPUT.
@@ -158,7 +161,7 @@ def correct(
     if (tool_table is None) != (tool_units is None):
         raise click.UsageError("--tool-table and --tool-units go together: the table's numbers have no units")
     d = resolve_dialect(program, dialect, machine)
-    no_subprograms(subprograms, d)
+    sinumerik_only(d, subprograms, start_motion)
     expand_read(expand, d)
     tools = None
     if tool_table is not None:
@@ -200,6 +203,7 @@ def correct(
             tools=tools,
             expand=expand,
             subprograms=subprograms,
+            start_motion=start_motion,
         )
     summary(f"{program} -> {output}")
     summary(f"  dialect: {d.describe()}")
@@ -263,5 +267,6 @@ def correct(
             "tool_table": None if tool_table is None else str(tool_table),
             "tool_units": tool_units,
             "subprograms": [str(f) for f in subprograms],
+            "start_motion": start_motion,
         }
         write_json(json_path, payload)

@@ -13,8 +13,9 @@ from ._common import (
     expand_read,
     handle_errors,
     machine_option,
-    no_subprograms,
     resolve_dialect,
+    sinumerik_only,
+    start_motion_option,
     subprograms_option,
     summary,
     write_json,
@@ -32,15 +33,16 @@ from ._common import (
     "`correct --expand` does, and report what the flattened program contains (lines named are the program's).",
 )
 @subprograms_option
+@start_motion_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the report as JSON.")
 @handle_errors
-def inspect(program, dialect, machine, expand, subprograms, json_path):
+def inspect(program, dialect, machine, expand, subprograms, start_motion, json_path):
     """Report units, planes, motion counts, extents and unsupported constructs of PROGRAM."""
     check_outputs({"program": program}, {"--json": json_path})
     d = resolve_dialect(program, dialect, machine)
-    no_subprograms(subprograms, d)
+    sinumerik_only(d, subprograms, start_motion)
     expand_read(expand, d)
-    info = nc.inspect_file(program, d.engine, subprograms, expand)
+    info = nc.inspect_file(program, d.engine, subprograms, expand, start_motion)
     info["dialect"] = d.as_dict()
     m = info["motions"]
     summary(f"{program}: {info['lines']:,} lines, units {info['units']}")
