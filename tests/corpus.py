@@ -137,6 +137,11 @@ def _feed_first(data: bytes) -> bytes:
     return b"F1000\n" + data
 
 
+def _strip_bom(data: bytes) -> bytes:
+    """Without the UTF-8 byte order mark an editor put first, which LinuxCNC reads as a character."""
+    return data.removeprefix(b"\xef\xbb\xbf")
+
+
 def _strip_u(data: bytes) -> bytes:
     """Without U words: a Marlin program's extruder, carried as U, which rs274 has no axis for."""
     return re.sub(rb"[ \t]*U[-+]?(?:\d+\.?\d*|\.\d+)", b"", data)
@@ -150,6 +155,7 @@ ADJUSTMENTS = {
     "P word with no G2 G3 G4 G10 G64": ("P words of G81/G73/G83 removed", _strip_cycle_p),
     "Bad character 'u' used": ("U words (a Marlin program's E) removed", _strip_u),
     "Cannot do g1 with zero feed rate": ("F1000 before the program", _feed_first),
+    "Bad character '\\357' used": ("byte order mark removed", _strip_bom),
 }
 
 

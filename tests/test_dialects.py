@@ -281,3 +281,30 @@ def test_fanuc_extended_work_systems():
     c = reset.correct(fields.Shift((0, 0, 0.1)))
     assert c.text.splitlines()[4] == "G1 X10."  # its X in machine terms is not known: left as written
     assert "line 5: the end of X unknown" in c.correction.warnings[0]
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "dialect"),
+    [
+        ("p.ngc", "G21 G90\nG0 X0 Y0 Z1\nG1 Z0 F100\nX5 Y2\nM2\n", "linuxcnc"),
+        ("p.nc", "%\nO1000\nG21 G90 G0 X0. Y0. Z1.\nG1 Z0. F100.\nX5. Y2.\nM30\n%\n", "fanuc"),
+        ("p.mpf", "G1 X0 Y0 Z0 F100 ; start\nX5 Y2\nM30\n", "sinumerik"),
+        ("p.gcode", ";FLAVOR:Marlin\nG1 X0 Y0 Z0 E0 F100\nG1 X5 Y2 E1\n", "marlin"),
+    ],
+)
+def test_a_byte_order_mark_is_read_as_nothing_and_kept(tmp_path, name, text, dialect):
+    """A UTF-8 byte order mark before the first line (an editor's): the program is detected and
+    corrected as it is without it, and the output keeps it first (zero field: byte for byte)."""
+    bom, plain = tmp_path / name, tmp_path / ("plain" + name)
+    bom.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    plain.write_text(text)
+    assert dialects.resolve(bom).name == dialects.resolve(plain).name == dialect
+    field = fields.Shift((0.0, 0.0, 0.05))
+    for f in (fields.Shift((0.0, 0.0, 0.0)), field):
+        a = nc.correct_file(bom, tmp_path / ("a" + name), f, dialect=dialect)
+        b = nc.correct_file(plain, tmp_path / ("b" + name), f, dialect=dialect)
+        got, ref = (tmp_path / ("a" + name)).read_bytes(), (tmp_path / ("b" + name)).read_bytes()
+        assert got == b"\xef\xbb\xbf" + ref and a.blocks_changed == b.blocks_changed
+    assert b.blocks_changed > 0  # the shift did change the program
+    r = CliRunner().invoke(main, ["correct", str(bom), "--shift", "0,0,0", "-o", str(tmp_path / ("z" + name))])
+    assert r.exit_code == 0 and (tmp_path / ("z" + name)).read_bytes() == bom.read_bytes(), r.output

@@ -214,7 +214,7 @@ class _Head:
 
 
 def _read_head(head: bytes) -> _Head:
-    text = head.decode("utf-8", "replace").replace("\r\n", "\n")
+    text = head.decode("utf-8", "replace").replace("\r\n", "\n").removeprefix("\ufeff")
     if len(head) >= HEAD_BYTES:
         text = text[: text.rfind("\n") + 1]  # the last line may be cut
     return _Head(text, text.translate(_UPPER), _blank_comments(text).translate(_UPPER))

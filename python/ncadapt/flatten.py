@@ -571,7 +571,7 @@ def flatten(data: bytes, name: str = "<program>", dialect: str = "linuxcnc") -> 
     """
     if dialect not in ("linuxcnc", "fanuc"):
         raise ValueError(f"flatten reads LinuxCNC's and Fanuc's programs, not {dialect}")
-    lines = _read(data.decode("utf-8", "surrogateescape"), name, dialect == "fanuc")
+    lines = _read(rewrite.program_text(data), name, dialect == "fanuc")
     run = _Run(lines, *_match(lines, name), fanuc=dialect == "fanuc")
     i, blocks = 0, 0
     while i < len(lines):

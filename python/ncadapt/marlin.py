@@ -97,7 +97,7 @@ def _text(v: Decimal) -> str:
 
 def translate(data: bytes, name: str = "<program>") -> Translation:
     """The straight RS274NGC program of a Marlin program (see the module's text)."""
-    text = data.decode("utf-8", "surrogateescape")
+    text = rewrite.program_text(data)
     out: list[str] = []
     relative: list[bool] = []
     incremental: list[bool] = []

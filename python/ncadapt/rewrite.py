@@ -8,8 +8,8 @@ of lines per straight line (:func:`groups`), and a straight line whose group is 
 not change. Where every changed line of the straight program comes from a line of the program
 that runs once, that line can be rewritten in place and every other line kept as written.
 
-It also holds what the programs' runners share: the error a line's reading raises
-(:class:`LineError`), the rounding of their controls (:func:`round_half_away`) and the way a
+It also holds what the programs' runners share: how a program's bytes are read
+(:func:`program_text`), the error a line's reading raises (:class:`LineError`), the rounding of their controls (:func:`round_half_away`) and the way a
 straight line writes a number (:func:`number`).
 """
 
@@ -17,6 +17,16 @@ from __future__ import annotations
 
 import math
 import re
+
+#: A UTF-8 byte order mark, which editors put before a file's first byte: no part of the program.
+BOM = "\ufeff"
+
+
+def program_text(data: bytes) -> str:
+    """A program's bytes as the runners read them: UTF-8 (a byte that is not kept as it is), a
+    byte order mark at the start read as a blank (columns stay the file's)."""
+    text = data.decode("utf-8", "surrogateescape")
+    return " " + text[1:] if text.startswith(BOM) else text
 
 
 class LineError(Exception):
@@ -84,10 +94,13 @@ def split_lines(text: str) -> list[str]:
 
 def splice(source: bytes, repl: dict[int, list[str]]) -> bytes:
     """The program ``source`` with each line ``j`` of ``repl`` (0-based) replaced by the lines
-    ``repl[j]``, written with its line ending (LF where it has none); every other line as written."""
+    ``repl[j]``, written with its line ending (LF where it has none); every other line as written.
+    A byte order mark the program starts with stays first."""
     out = []
     for j, (body, eol) in enumerate(lines_of(source)):
         out += [t + (eol or "\n") for t in repl[j]] if j in repl else [body + eol]
+    if out and source.startswith(BOM.encode()) and not out[0].startswith(BOM):
+        out[0] = BOM + out[0]
     return "".join(out).encode("utf-8", "surrogateescape")
 
 

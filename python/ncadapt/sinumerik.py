@@ -968,7 +968,7 @@ class _Run:
             raise _Error(f"subprograms nested deeper than {MAX_DEPTH}", col)
         self.read.setdefault(name, str(path))
         if str(path) not in self.files:
-            lines = _read(path.read_bytes().decode("utf-8", "surrogateescape"), str(path))
+            lines = _read(rewrite.program_text(path.read_bytes()), str(path))
             self.files[str(path)] = (lines, _match(lines, str(path)), _targets(lines))
         lines, flow, targets = self.files[str(path)]
         proc = next((k for k, ln in enumerate(lines) if ln.keyword == "PROC"), None)
@@ -1509,7 +1509,7 @@ def translate(
     before the program states one is refused."""
     if start_motion not in START_MOTIONS:
         raise ValueError(f"start_motion must be one of {START_MOTIONS}, not {start_motion!r}")
-    text = data.decode("utf-8", "surrogateescape")
+    text = rewrite.program_text(data)
     lines = _read(text, name)
     path = Path(name) if name and not name.startswith("<") else None
     folders = [path.parent] if path is not None and path.is_file() else []
@@ -1880,7 +1880,7 @@ def _rewrite(body: str, it: Item, group: list[str]) -> list[str]:
         rest, after = _take_stops(rest)
         stops = before + after
         rest = rest.strip()
-    sep = "" if not head or head.endswith((" ", "\t")) else " "
+    sep = "" if not head.lstrip(rewrite.BOM) or head.endswith((" ", "\t")) else " "
     line = head + sep + first + (" " + rest if rest else "")
     tail = [_sinumerik(t).strip() for t in group[1:]]
     if stops:

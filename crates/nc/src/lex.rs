@@ -293,7 +293,13 @@ pub fn lex_at(src: &[u8], line_base: usize) -> Result<Lexed, NcError> {
             ..Default::default()
         };
         let s = &src[..end];
-        let mut i = pos;
+        // a UTF-8 byte order mark (an editor's, before the program's first byte) is no word: kept
+        // as it is in the output, with the line
+        let mut i = if lineno == 0 && pos == 0 && s.starts_with(b"\xEF\xBB\xBF") {
+            3
+        } else {
+            pos
+        };
         let mut first = true;
         let mut prev_word_end: Option<usize> = None;
         let mut bad: Option<NcError> = None;
