@@ -134,7 +134,9 @@ def _strip_cycle_p(data: bytes) -> bytes:
 def _feed_first(data: bytes) -> bytes:
     """A feed rate before the program: one that gives none (a program that only states positions,
     or a Sinumerik machine's feed from its settings) moves the same, and rs274 refuses G1 at F0."""
-    return b"F1000\n" + data
+    head = re.match(rb"(?:[ \t]*(?:%[^\n]*)?\r?\n)*", data)  # after the % line (and blank lines) it starts with
+    at = head.end() if head else 0
+    return data[:at] + b"F1000\n" + data[at:]
 
 
 def _strip_bom(data: bytes) -> bytes:

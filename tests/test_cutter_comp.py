@@ -181,7 +181,7 @@ def test_xy_displacement_refused():
         ("G41 D1\nG1 X10\nG40 G1 X20\n", "its diameter is not known; give the tool table"),
         ("G41 D9\nG1 X10\nG40 G1 X20\n", "tool 9, which the tool table does not hold"),
         ("G41\nG1 X10\nG40 G1 X20\n", "no D word and no tool loaded"),
-        ("G18 G41 D3\nG1 X10\nG40 G1 X20\n", "ZX or YZ plane"),
+        ("G18 G41 D3\nG1 X10\nG40 G1 X20\n", None),  # in G18: by its bound (test_g18_...)
         ("G41 D3\nG2 X10 R5\nG40 G1 X20\n", "an arc as the first move of cutter compensation"),
         ("G41 D3\nG1 X10\nG40\nG2 X20 R5\n", "an arc as the move after G40"),
         ("G41 D3\nG1 X1\nG40 G1 X20\n", "not longer than the tool radius"),
@@ -340,3 +340,147 @@ def test_corpus_compensated_contours(entry, tmp_path):
     tol = 0.005 if prog.units == "mm" else 0.009
     assert cKDTree(want).query(after)[0].max() < tol
     assert cKDTree(after).query(want)[0].max() < tol
+
+
+# ------------------------------------------------------------------ compensation in G18 (ZX plane)
+#: A contour in the ZX plane at Y = 7, cut by a mill: lines, arcs both ways, an outside and an
+#: inside corner.
+G18_PROGRAM = """G21 G18 G90
+F300
+G0 X-5 Y7 Z5
+G41 D3
+G1 X0 Z0
+G1 X20 Z0
+G3 X30 Z-10 I0 K-10
+G1 X30 Z-25
+G2 X40 Z-35 I10 K0
+G1 X60 Z-35
+G1 X60 Z-20
+G40 G1 X70 Z-15
+M2
+"""
+
+
+def xz_wave(p):
+    """A field of its own in X and Z: 10 µm over 25 mm (|∇f| ≤ 4e-4: under 0.6 µm within the
+    tool's 1.27 mm radius)."""
+    p = np.asarray(p, float)
+    d = np.zeros_like(p)
+    d[:, 0] = 0.01 * np.sin(p[:, 2] / 25.0)
+    d[:, 2] = 0.01 * np.cos(p[:, 0] / 25.0)
+    return d
+
+
+@needs_rs274
+def test_g18_compensation_offsets_the_corrected_contour(tmp_path):
+    """LinuxCNC compensates in G18 too: rs274 -t offsets the output's contour by the tool radius,
+    and that path is the input's offset path moved by a shift exactly, and by a field that
+    changes little within the radius within the chord tolerance (rs274's 4 decimals besides)."""
+    table = tmp_path / "tool.tbl"
+    table.write_text(TABLE_INCH)
+    src = tmp_path / "in.ngc"
+    src.write_text(G18_PROGRAM)
+    before = _motion(src, table)
+    # rs274 compensates: the tool centre is off the programmed line Z0 by the radius
+    on_z0 = (before[:, 0] > 3) & (before[:, 0] < 12) & (np.abs(before[:, 2]) < 2)
+    np.testing.assert_allclose(np.abs(before[on_z0, 2]), 1.27, atol=1e-3)
+    shift = (0.03, 0.0, -0.02)
+    after = _motion(_corrected(tmp_path, G18_PROGRAM, fields.Shift(shift), rapids=True), table)
+    d = max(cKDTree(before + shift).query(after)[0].max(), cKDTree(after).query(before + shift)[0].max())
+    assert d < 0.0012, d  # (the paths are sampled every 2 µm)
+    out = _corrected(tmp_path, G18_PROGRAM, xz_wave, rapids=True)
+    text = out.read_text()
+    assert text.count("G41 D3") == 1 and len(text.splitlines()) > 3 * len(G18_PROGRAM.splitlines())
+    after = _motion(out, table)
+    want = before + xz_wave(before)
+    d = max(cKDTree(want).query(after)[0].max(), cKDTree(after).query(want)[0].max())
+    assert d <= 0.002 + 0.0006, d
+    # the entry move stays one move; the next is cut in pieces
+    lines = text.splitlines()
+    k = lines.index("G41 D3")
+    assert lines[k + 1].startswith("G1 X0") and lines[k + 2].startswith("G1 X1"), lines[k : k + 3]
+
+
+def test_g18_compensation_refused_where_the_field_changes_within_the_radius():
+    def steep(p):  # 10 µm over 1 mm
+        d = np.zeros_like(np.asarray(p, float))
+        d[:, 2] = 0.01 * np.sin(np.asarray(p, float)[:, 0])
+        return d
+
+    with pytest.raises(RefusedError, match=r"line \d+: radius compensation in G18/G19 .*: the field changes"):
+        nc.parse(G18_PROGRAM).correct(steep, tools=TOOLS_MM)
+    (u,) = nc.parse(G18_PROGRAM).unsupported  # (no tool table: the radius is not known)
+    assert u.line == 4 and "give the tool table" in u.construct
+    # a reversal: the arc turns back along the line (G2 from X20 Z0 about X20 Z-10 heads to -X),
+    # where the control meets the offset paths of the exact arc but may go round those of its
+    # pieces
+    back = G18_PROGRAM.replace("G3 X30 Z-10", "G2 X30 Z-10")
+    (u,) = nc.parse(back, tools=TOOLS_MM).unsupported
+    assert u.line == 7 and "a reversal" in u.construct
+
+
+@needs_rs274
+def test_a_sharp_inside_corner_multiplies_the_bound(tmp_path):
+    """Where the contour turns sharply into an inside corner, the control meets the two offset
+    paths at a point an error of theirs moves up to 1/cos(turn/2) times as far. A V groove
+    (turns of 75° and 150°) under a field that grows the part about the groove's bottom (2 µm
+    within the 1.27 mm radius): rs274 finds the tool centre off the displaced path by more than
+    twice that at the bottom, within the corner's bound; so a tolerance under it is refused
+    there, and the contour without the groove is taken."""
+    vee = "G21 G18 G90\nF300\nG0 X-5 Y0 Z5\nG42 D3\nG1 X0 Z0\nG1 X20 Z0\nG1 X25 Z-18.66\nG1 X30 Z0\nG1 X50 Z0\nG40 G1 X55 Z5\nM2\n"
+    flat = vee.replace("G1 X25 Z-18.66\n", "")
+
+    def grow(p):
+        p = np.asarray(p, float)
+        d = np.zeros_like(p)
+        d[:, 0] = 0.0016 * (p[:, 0] - 25.0)
+        d[:, 2] = 0.0016 * (p[:, 2] + 18.66)
+        return d
+
+    table = tmp_path / "tool.tbl"
+    table.write_text(TABLE_INCH)
+    src = tmp_path / "in.ngc"
+    src.write_text(vee)
+    out = tmp_path / "out.ngc"
+    out.write_bytes(nc.parse(vee).correct(grow, tools=TOOLS_MM, chord_tol=0.016, rapids=True).data)
+    before, after = _motion(src, table), _motion(out, table)
+    want = before + grow(before)
+    d = max(cKDTree(want).query(after)[0].max(), cKDTree(after).query(want)[0].max())
+    assert 2 * 0.00203 < d < 2 * 0.00203 * 3.86, d
+    with pytest.raises(RefusedError, match=r"line 8: .*times 3.86 where it meets the move before, 150°"):
+        nc.parse(vee).correct(grow, tools=TOOLS_MM, chord_tol=0.006, rapids=True)
+    nc.parse(flat).correct(grow, tools=TOOLS_MM, chord_tol=0.006, rapids=True)
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    ("text", "line", "says"),
+    [
+        # LinuxCNC compensates in G17 and G18 only, and refuses a change of plane under it
+        ("G19 G41 D3\nG1 Y10 Z-1\nG40 G1 Y20\n", 3, "LinuxCNC compensates in G17 and G18 only"),
+        ("G18 G41 D3\nG1 X10 Z-1\nG17\nG40 G1 X20\n", 5, "a change of plane with cutter compensation on"),
+        ("G41 D3\nG1 X10 Y5\nG18 G1 X20\nG40 G1 X30\n", 4, "a change of plane with cutter compensation on"),
+        # the move after G41 is the entry move: not along Y in G18, nor shorter than the radius
+        ("G18 G41 D3\nG1 Y5\nG1 X10 Z-1\nG40 G1 X20\n", 4, "not longer than the tool radius in its plane"),
+        ("G18 G41 D3\nG1 X1 Z0.5\nG1 X10 Z-1\nG40 G1 X20\n", 4, "not longer than the tool radius in its plane"),
+    ],
+)
+def test_compensation_planes_rs274_refuses_are_refused(tmp_path, text, line, says):
+    prog = "G21 G0 X0 Y0 Z1 F100\n" + text.replace("G19 G41", "G19\nG41").replace("G18 G41", "G18\nG41") + "M2\n"
+    p = tmp_path / "p.ngc"
+    p.write_text(prog)
+    (tmp_path / "tool.tbl").write_text(TABLE_INCH)
+    assert rs274.canonical(p, tools=tmp_path / "tool.tbl").error is not None
+    with pytest.raises(InputError) as e:
+        nc.parse(prog, tools=TOOLS_MM)
+    assert (e.value.line, says in e.value.message) == (line, True), e.value
+
+
+def test_fanuc_compensates_in_g19_by_the_bound():
+    """A Fanuc mill compensates in G19 too (LinuxCNC does not): the contour in the YZ plane is
+    corrected where it is, compensation kept; a shift moves its points by the shift."""
+    text = "%\nO1\nG21 G90 G19\nG0 X5. Y-5. Z5.\nG41 D3 G1 Y0. Z0. F100.\nG1 Y20.\nG2 Y30. Z-10. J0. K-10.\nG40 G1 Y40. Z-5.\nM30\n%\n"
+    prog = nc.parse(text, dialect="fanuc", tools=TOOLS_MM)
+    assert prog.unsupported == ()
+    out = prog.correct(fields.Shift((0.0, 0.02, -0.01)), rapids=True).text
+    assert "G41 D3" in out and "G1 Y20.02" in out and "G2 Y30.02 Z-10.01" in out, out

@@ -310,7 +310,7 @@ def test_nose_compensation_needs_its_radius_and_a_field_calm_within_it():
     (u,) = nc.parse(NOSE, dialect="linuxcnc-lathe").unsupported
     assert (u.line, "its nose radius is not known" in u.construct) == (4, True)
     # a field that changes by microns within the nose radius: refused at the line
-    with pytest.raises(RefusedError, match="line [4-8]: nose radius compensation: the field changes"):
+    with pytest.raises(RefusedError, match="line [4-8]: radius compensation in G18/G19 .a lathe.s nose radius, or a cutter outside G17.: the field changes"):
         nc.parse(NOSE, dialect="linuxcnc-lathe", tools={1: 2 * NOSE_R}).correct(_field)
     # a Fanuc lathe's nose radius is its offset's: T0101 is tool 1, offset 1
     fanuc = "O1\nG21\nT0202\nG0 X40. Z5.\nG42 G1 X20. Z2. F0.1\nG1 Z-10.\nG40 G0 X50. Z5.\nM30\n"

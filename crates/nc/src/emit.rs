@@ -935,7 +935,7 @@ impl<'a> Emitter<'a> {
         }) || (rec.whole != 0 && !rec.motion.is_arc());
         let whole_why = match rec.whole {
             crate::interp::WHOLE_CONTOUR => "the first and the last block of a roughing cycle's contour (numbered P and Q) must stay one move: the pieces after the last would not belong to the contour, and the first's would move the point the cycle roughs from",
-            _ => "the move that starts or ends nose radius compensation must stay one move",
+            _ => "the move that starts or ends radius compensation in G18/G19 must stay one move",
         };
         if rec.whole != 0 && rec.motion.is_arc() && !keep_arc {
             return Err(NcError::Interpret {
@@ -1057,7 +1057,7 @@ impl<'a> Emitter<'a> {
                     line: rec.line as usize + 1,
                     col: 1,
                     message: format!(
-                        "a piece {len:.4} mm long under nose radius compensation: the rounding of its numbers turns it enough to move the nose centre ({:.4} mm radius) by more than the chord tolerance {} mm (pieces under it must be at least {shortest:.4} mm); raise --max-segment or --chord-tol",
+                        "a piece {len:.4} mm long under radius compensation in G18/G19: the rounding of its numbers turns it enough to move the tool centre ({:.4} mm radius) by more than the chord tolerance {} mm (pieces under it must be at least {shortest:.4} mm); raise --max-segment or --chord-tol",
                         rec.nose, self.st.arc_tol
                     ),
                 });

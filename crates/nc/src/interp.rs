@@ -156,17 +156,18 @@ pub struct Record {
     /// Lathe diameter mode (LinuxCNC's G7, a Fanuc lathe's X): the X word is twice the X
     /// coordinate (`end[0]` is the radius).
     pub diameter: bool,
-    /// A lathe's tool nose radius compensation (G41/G42 in G18) in force: the nose radius (mm),
-    /// 0 without. The move is corrected on the programmed contour, which the control offsets;
-    /// the field must not vary within the nose radius by more than the chord tolerance.
+    /// Radius compensation in G18 or G19 in force (a lathe's tool nose radius, or a cutter's
+    /// outside G17): the radius (mm), 0 without. The move is corrected on the programmed
+    /// contour, which the control offsets in the record's plane; the field must not vary within
+    /// the radius by more than half the chord tolerance.
     pub nose: f64,
     /// Why the move must stay one move (0: it need not): [`WHOLE_NOSE`], [`WHOLE_CONTOUR`].
     pub whole: u8,
 }
 
-/// [`Record::whole`] of the move that starts or ends a lathe's nose radius compensation (the
-/// first after G41/G42 or G40): the control goes between the programmed and the offset point
-/// along it.
+/// [`Record::whole`] of the move that starts or ends radius compensation in G18/G19 (the first
+/// in the plane after G41/G42 or G40): the control goes between the programmed and the offset
+/// point along it.
 pub const WHOLE_NOSE: u8 = 1;
 /// [`Record::whole`] of the first or last block of a roughing cycle's contour (numbered P or Q):
 /// the pieces after the last's line would not belong to the contour, and the first's would move
@@ -469,6 +470,10 @@ pub struct Interp {
     pub dialect: Dialect,
     /// Cutter radius compensation of the run's moves ([`Record::comp`]).
     pub comps: Vec<Comp>,
+    /// Moves under radius compensation in G18/G19 that turn from the move before ([`Record::nose`]):
+    /// (record, 1/cos(turn/2)), the most a corner where the control meets the two offset paths
+    /// multiplies their error by.
+    pub nose_corners: Vec<(u32, f64)>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -550,10 +555,13 @@ struct State {
     tlo: [f64; NAXES],
     /// Cutter radius compensation in force (G41/G42 with a known radius).
     comp: Option<CompOn>,
-    /// A lathe's nose radius compensation in force (G41/G42 in G18): the nose radius, mm.
+    /// Radius compensation in G18/G19 in force (a lathe's nose radius, a cutter's outside G17): the radius, mm.
     nose: Option<f64>,
-    /// The next move starts or ends nose radius compensation ([`WHOLE_NOSE`]).
+    /// The next move in the plane starts or ends that compensation ([`WHOLE_NOSE`]).
     nose_edge: bool,
+    /// Under that compensation: the direction (in the plane's coordinates) the last move in the
+    /// plane ended in; None before the first.
+    nose_dir: Option<[f64; 2]>,
     /// The block being read is the first or the last of a roughing cycle's contour
     /// ([`WHOLE_CONTOUR`]).
     contour_edge: bool,
@@ -718,6 +726,7 @@ impl Interpreter {
                 comp: None,
                 nose: None,
                 nose_edge: false,
+                nose_dir: None,
                 contour_edge: false,
                 contour: None,
                 contours: Vec::new(),
@@ -777,6 +786,7 @@ impl Interpreter {
             frame_lines: Vec::new(),
             dialect: self.st.dialect,
             comps: Vec::new(),
+            nose_corners: Vec::new(),
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
@@ -1293,7 +1303,21 @@ impl Interpreter {
                     }
                     40 => {}
                     170 | 180 | 190 => {
-                        st.plane = ((c - 170) / 10) as u8;
+                        let plane = ((c - 170) / 10) as u8;
+                        // (after G40 compensation is off, before the move that ends it)
+                        if plane != st.plane
+                            && (st.comp.is_some()
+                                || st.nose.is_some()
+                                || (st.active.cutter_comp.is_some() && !st.comp_unfollowed_exit))
+                        {
+                            // LinuxCNC and Fanuc (alarm PS0037) refuse it too
+                            return Err(ierr(
+                                li,
+                                gc,
+                                "a change of plane with cutter compensation on (G40 first)",
+                            ));
+                        }
+                        st.plane = plane;
                         st.plane_known = true;
                     }
                     200 => unit_change = Some(true),
@@ -1792,7 +1816,10 @@ impl Interpreter {
             }
             let any_axis = named != 0 || full_circle || standing;
             // under compensation (or before the move that ends it) only G0-G3 moves are followed
-            if (st.comp.is_some() || st.comp_exit.is_some())
+            // (a lathe's nose radius compensation: its contour cycles too)
+            if (st.comp.is_some()
+                || st.comp_exit.is_some()
+                || (st.nose.is_some() && !st.dialect.lathe()))
                 && (frame_code.is_some()
                     || nonmodal_axis_user.is_some()
                     || home.is_some()
@@ -1808,6 +1835,8 @@ impl Interpreter {
                 );
                 st.comp = None;
                 st.comp_exit = None;
+                st.nose = None;
+                st.nose_edge = false;
                 st.active.cutter_comp = Some((li as u32, idx));
             }
 
@@ -2087,6 +2116,18 @@ impl Interpreter {
                             None
                         }
                     };
+                    let nose_corner = match nose_turn(st, m, &end, center) {
+                        Ok(f) => f,
+                        Err(why) => {
+                            let idx = push_unsupported(out, li, axis_col, why);
+                            out.unsupported[idx].blocks += 1;
+                            st.nose = None;
+                            st.nose_edge = false;
+                            st.active.cutter_comp = Some((li as u32, idx));
+                            supported = false;
+                            1.0
+                        }
+                    };
                     if st.inverse_time && m != Motion::Rapid {
                         let gcol = motion_word.map_or(axis_col, |(_, c)| c);
                         let f = words.iter().find(|w| w.letter == b'F').map(|w| w.value);
@@ -2117,9 +2158,29 @@ impl Interpreter {
                     }
                     let leaves = st.comp_unfollowed_exit
                         && (m.is_arc() || (end[0] - st.pos[0]).hypot(end[1] - st.pos[1]) > 1e-9);
+                    // the move that ends compensation in G18/G19 is the next; the one that starts
+                    // it LinuxCNC's next (which must go further than the radius in the plane, as
+                    // rs274 checks), a Fanuc control's next in the plane (a position not known
+                    // counts as moving)
+                    let mut nose_edge = st.nose_edge;
+                    if let (true, Some(r)) = (nose_edge, st.nose) {
+                        let (a, b) = if st.plane == 2 { (1, 2) } else { (0, 2) };
+                        let along = (end[a] - st.pos[a]).hypot(end[b] - st.pos[b]);
+                        // (LinuxCNC compensates nothing with a radius of 0)
+                        if st.dialect.is_linuxcnc() && !m.is_arc() && r > 0.0 && along <= r {
+                            return Err(ierr(
+                                li,
+                                axis_col,
+                                "the move that starts cutter compensation is not longer than the tool radius in its plane (LinuxCNC refuses it)",
+                            ));
+                        }
+                        nose_edge = m.is_arc() || !(along <= 1e-9);
+                    }
+                    if nose_edge {
+                        st.nose_edge = false;
+                    }
                     st.pos = end;
                     push_record(out, st, li, m, supported && known, named, center, turns);
-                    let nose_edge = std::mem::take(&mut st.nose_edge);
                     out.records.last_mut().unwrap().whole = if std::mem::take(&mut st.contour_edge)
                     {
                         WHOLE_CONTOUR
@@ -2135,6 +2196,10 @@ impl Interpreter {
                     if let Some(c) = comp {
                         out.records.last_mut().unwrap().comp = out.comps.len() as u32;
                         out.comps.push(c);
+                    }
+                    if nose_corner > 1.0 {
+                        out.nose_corners
+                            .push(((out.records.len() - 1) as u32, nose_corner));
                     }
                     let s = &mut out.summary;
                     s.counts[m as usize] += 1;
@@ -3096,8 +3161,10 @@ fn comp_not_followed(out: &mut Interp, st: &mut State, li: usize, gc: usize, why
 }
 
 /// G41/G42 (tool D's diameter from the tool table, or the loaded tool's) or G41.1/G42.1 (D the
-/// diameter): compensation followed when the radius is known and the plane is XY; otherwise an
-/// unsupported construct that blocks the moves until G40.
+/// diameter): compensation followed when the radius is known: in the XY plane as LinuxCNC offsets
+/// the path ([`comp_move`]); in G18/G19 (a lathe's nose radius, or a cutter outside G17) by the
+/// bound on the field's change within the radius ([`Record::nose`]). Otherwise an unsupported
+/// construct that blocks the moves until G40.
 #[allow(clippy::too_many_arguments)]
 fn comp_on(
     out: &mut Interp,
@@ -3110,55 +3177,17 @@ fn comp_on(
     unit: f64,
 ) -> Result<(), NcError> {
     let name = g_name(c);
-    if st.dialect.lathe() && st.plane == 1 {
-        // the nose radius: G41.1/G42.1's D (a diameter); else the tool table's diameter of the
-        // tool loaded (LinuxCNC: T… M6, or D the tool), or of a Fanuc lathe's offset (T0101:
-        // tool 01, offset 01, which holds the nose radius)
-        let diameter: Result<f64, String> = if matches!(c, 411 | 421) {
-            match d_word {
-                Some(d) => Ok(d * unit),
-                None => {
-                    return Err(ierr(
-                        li,
-                        gc,
-                        format!("{name} needs a D word (the diameter)"),
-                    ))
-                }
-            }
-        } else {
-            let tool = if st.dialect == Dialect::FanucLathe {
-                st.tool_next.filter(|&t| t >= 100).map(|t| t % 100)
-            } else {
-                d_word.map(|d| d.max(0.0) as u32).or(st.tool_loaded)
-            };
-            match tool {
-                Some(t) => match table_diameter(st, t) {
-                    Some(d) => Ok(d),
-                    None => Err(format!(
-                        "nose radius compensation {name} with offset {t}: its nose radius is not known; give it in the tool table (--tool-table: tool {t}, D the nose diameter)"
-                    )),
-                },
-                None => Err(format!(
-                    "nose radius compensation {name} with no tool offset selected (a lathe's T0101, or T… M6 on LinuxCNC): the nose radius is not known"
-                )),
-            }
-        };
-        match diameter {
-            Ok(d) => {
-                st.nose = Some(d.abs() / 2.0);
-                st.nose_edge = true;
-            }
-            Err(why) => comp_not_followed(out, st, li, gc, &why),
-        }
-        return Ok(());
+    if st.plane == 2 && st.dialect.is_linuxcnc() {
+        return Err(ierr(
+            li,
+            gc,
+            format!("{name} in G19: LinuxCNC compensates in G17 and G18 only"),
+        ));
     }
-    let diameter: Result<f64, String> = if st.plane != 0 {
+    let lathe = st.dialect.lathe() && st.plane == 1;
+    let diameter: Result<f64, String> = if st.diameter && !lathe {
         Err(format!(
-            "cutter compensation {name} in the ZX or YZ plane (a lathe's nose radius): not treated"
-        ))
-    } else if st.diameter {
-        Err(format!(
-            "cutter compensation {name} in lathe diameter mode: not treated"
+            "cutter compensation {name} in lathe diameter mode outside G18: not treated"
         ))
     } else if st.comp_exit.is_some() {
         Err(format!(
@@ -3167,10 +3196,27 @@ fn comp_on(
     } else if matches!(c, 411 | 421) {
         match d_word {
             None => return Err(ierr(li, gc, format!("{name} needs a D word (the diameter)"))),
-            Some(_) if l_word.is_some() => Err(format!(
+            Some(_) if l_word.is_some() && !lathe => Err(format!(
                 "cutter compensation {name} with an L word (a lathe tool's orientation): not treated"
             )),
             Some(d) => Ok(d * unit),
+        }
+    } else if lathe {
+        // the nose radius: the tool table's diameter of the tool loaded (LinuxCNC: T… M6, or D
+        // the tool), or of a Fanuc lathe's offset (T0101: tool 01, offset 01, which holds the
+        // nose radius)
+        let tool = if st.dialect == Dialect::FanucLathe {
+            st.tool_next.filter(|&t| t >= 100).map(|t| t % 100)
+        } else {
+            d_word.map(|d| d.max(0.0) as u32).or(st.tool_loaded)
+        };
+        match tool {
+            Some(t) => table_diameter(st, t).ok_or_else(|| format!(
+                "nose radius compensation {name} with offset {t}: its nose radius is not known; give it in the tool table (--tool-table: tool {t}, D the nose diameter)"
+            )),
+            None => Err(format!(
+                "nose radius compensation {name} with no tool offset selected (a lathe's T0101, or T… M6 on LinuxCNC): the nose radius is not known"
+            )),
         }
     } else {
         let tool = match d_word {
@@ -3201,6 +3247,13 @@ fn comp_on(
         }
     };
     match diameter {
+        Ok(d) if st.plane != 0 => {
+            // in G18/G19: the contour is corrected where it is, and the field's change within
+            // the radius bounded (the tool's side does not matter to the bound)
+            st.nose = Some(d.abs() / 2.0);
+            st.nose_edge = true;
+            st.nose_dir = None;
+        }
         Ok(d) => {
             // a negative diameter puts the tool on the other side, as LinuxCNC reads it
             let side = if matches!(c, 410 | 411) { 1.0 } else { -1.0 };
@@ -3212,6 +3265,59 @@ fn comp_on(
         Err(why) => comp_not_followed(out, st, li, gc, &why),
     }
     Ok(())
+}
+
+/// Under radius compensation in G18/G19: the factor by which the corner before the move may
+/// multiply the error of the offset paths where the control meets them (1/cos of half the turn;
+/// 1 without a turn), and the direction the move ends in kept for the next. Err for a reversal,
+/// where whether the control meets the paths or goes round is its reading of a tiny turn.
+fn nose_turn(
+    st: &mut State,
+    m: Motion,
+    end: &[f64; NAXES],
+    center: [f64; 2],
+) -> Result<f64, &'static str> {
+    if st.nose.is_none() {
+        return Ok(1.0);
+    }
+    let [a1, a2, _] = PLANE_AXES[st.plane as usize];
+    let (s, e) = ([st.pos[a1], st.pos[a2]], [end[a1], end[a2]]);
+    let unit = |x: f64, y: f64| {
+        let l = x.hypot(y);
+        [x / l, y / l]
+    };
+    let (t0, t1) = if m.is_arc() {
+        let ccw = m == Motion::ArcCcw;
+        let tan = |p: [f64; 2]| {
+            let u = unit(p[0] - center[0], p[1] - center[1]);
+            if ccw {
+                [-u[1], u[0]]
+            } else {
+                [u[1], -u[0]]
+            }
+        };
+        (tan(s), tan(e))
+    } else if (e[0] - s[0]).hypot(e[1] - s[1]) > 1e-9 {
+        let t = unit(e[0] - s[0], e[1] - s[1]);
+        (t, t)
+    } else {
+        return Ok(1.0); // (no move in the plane: the tool stands)
+    };
+    if !(t0.iter().chain(&t1).all(|v| v.is_finite())) {
+        st.nose_dir = None;
+        return Ok(1.0);
+    }
+    let before = st.nose_dir.replace(t1);
+    let Some(ta) = before else {
+        return Ok(1.0);
+    };
+    let turn = (ta[0] * t0[1] - ta[1] * t0[0])
+        .atan2(ta[0] * t0[0] + ta[1] * t0[1])
+        .abs();
+    if turn > COMP_REVERSAL {
+        return Err("a reversal (a turn of more than 175°) under radius compensation in G18/G19: where the controller meets the offset paths is not followed");
+    }
+    Ok(1.0 / (turn / 2.0).cos())
 }
 
 /// Turn between directions: an angle (rad) of the corner arc's pieces checked.

@@ -423,10 +423,12 @@ pub fn sample_range(
                     .push((i as u32, g0 as u32, (s.checks.len() / 3 - g0) as u32));
             }
         }
-        // a lathe's nose radius compensation: the field at the nose radius from each sample (the
-        // contact point the control offsets the nose from), in eight directions of the XZ plane
+        // compensation in G18/G19 (a lathe's nose radius, a cutter's outside G17): the field at
+        // the radius from each sample (the contact point the control offsets the tool from), in
+        // eight directions of the compensation's plane
         if rec.nose > 0.0 {
             let r = rec.nose;
+            let (u, v) = if rec.plane == 2 { (1, 2) } else { (0, 2) };
             for k in first..s.t.len() {
                 let p = [s.xyz[3 * k], s.xyz[3 * k + 1], s.xyz[3 * k + 2]];
                 s.check_groups
@@ -434,8 +436,10 @@ pub fn sample_range(
                 s.checks.extend_from_slice(&p);
                 for d in 0..8 {
                     let a = d as f64 * std::f64::consts::FRAC_PI_4;
-                    s.checks
-                        .extend_from_slice(&[p[0] + r * a.cos(), p[1], p[2] + r * a.sin()]);
+                    let mut q = p;
+                    q[u] += r * a.cos();
+                    q[v] += r * a.sin();
+                    s.checks.extend_from_slice(&q);
                 }
             }
         }
@@ -604,13 +608,27 @@ pub fn comp_check(
         if rec.nose > 0.0 {
             // where the field is evaluated (the contact point, not the nose centre), and the
             // normal the control offsets the moved contour along, turned by the field's change:
-            // each off by up to the change within the nose radius
-            if !(2.0 * worst <= budget) {
-                let um = 2.0 * worst * 1000.0;
+            // each off by up to the change within the nose radius; where the move turns from the
+            // one before, the point where the control meets the two offset paths by up to
+            // 1/cos(turn/2) times that
+            let corner = it
+                .nose_corners
+                .binary_search_by_key(&ri, |&(r, _)| r)
+                .map_or(1.0, |k| it.nose_corners[k].1);
+            if !(2.0 * worst * corner <= budget) {
+                let um = 2.0 * worst * corner * 1000.0;
+                let at_corner = if corner > 1.0 {
+                    format!(
+                        " (times {corner:.2} where it meets the move before, {:.0}° off its direction)",
+                        2.0 * (1.0 / corner).acos().to_degrees()
+                    )
+                } else {
+                    String::new()
+                };
                 return Some((
                     rec.line + 1,
                     format!(
-                        "nose radius compensation: the field changes by {:.1} µm within the nose radius ({:.4} mm), so the nose centre the control offsets from the corrected contour may be off by up to {um:.1} µm, more than the chord tolerance {budget} mm (raise --chord-tol to accept it)",
+                        "radius compensation in G18/G19 (a lathe's nose radius, or a cutter outside G17): the field changes by {:.1} µm within the radius ({:.4} mm), so the tool centre the control offsets from the corrected contour may be off by up to {um:.1} µm{at_corner}, more than the chord tolerance {budget} mm (raise --chord-tol to accept it)",
                         worst * 1000.0,
                         rec.nose
                     ),
