@@ -171,7 +171,7 @@ def test_what_a_lathe_program_does_that_is_not_followed_is_refused_at_its_line()
         7,
         "axis words with no motion mode (G80 or none yet)",
     )
-    assert _unsupported(head + "G76 X10. Z-5. K1. D.2 F1.\nM30\n") == [(4, "lathe cycle G76")]
+    assert _unsupported(head + "G73 U1. W1. R3\nM30\n") == [(4, "lathe cycle G73")]
     assert _unsupported(head + "G71 P10 Q20 U0.2 W0.1 D1. F0.2\nM30\n") == [
         (5, "the contour of G71 P10 Q20 does not follow it from block N10")
     ]
@@ -310,7 +310,10 @@ def test_nose_compensation_needs_its_radius_and_a_field_calm_within_it():
     (u,) = nc.parse(NOSE, dialect="linuxcnc-lathe").unsupported
     assert (u.line, "its nose radius is not known" in u.construct) == (4, True)
     # a field that changes by microns within the nose radius: refused at the line
-    with pytest.raises(RefusedError, match="line [4-8]: radius compensation in G18/G19 .a lathe.s nose radius, or a cutter outside G17.: the field changes"):
+    with pytest.raises(
+        RefusedError,
+        match="line [4-8]: radius compensation in G18/G19 .a lathe.s nose radius, or a cutter outside G17.: the field changes",
+    ):
         nc.parse(NOSE, dialect="linuxcnc-lathe", tools={1: 2 * NOSE_R}).correct(_field)
     # a Fanuc lathe's nose radius is its offset's: T0101 is tool 1, offset 1
     fanuc = "O1\nG21\nT0202\nG0 X40. Z5.\nG42 G1 X20. Z2. F0.1\nG1 Z-10.\nG40 G0 X50. Z5.\nM30\n"
@@ -625,3 +628,103 @@ def test_what_box_cycles_the_engine_does_not_follow_leave_out_is_not_taken_from_
     assert [(u.line, u.construct) for u in nc.parse(haas, dialect="fanuc-lathe").unsupported] == [
         (4, "taper turning cycle G90 (R, or I on a Haas: a Fanuc lathe's, G-code system A)")
     ]
+
+
+# ------------------------------------------------------------ grooving and threading cycles
+#: Haas's one-block forms (X, Z the end: the root diameter and the thread's end; K the thread's
+#: height, D the first cut, A the tool's angle, I a taper; a groove's I and K its increments) and
+#: Fanuc's two-block forms (the first block's P Q R the parameters).
+CUTS = """%
+O2
+G18 G21 G99
+T0303
+G00 X30. Z5.
+G01 X26. Z2. F0.2
+G76 X22.2 Z-30. K1. D0.3 A60 F1.5
+G00 X40.
+Z-40.
+G01 X36. F0.1
+G75 X20. I0.5
+G01 X36.
+G00 X30. Z5.
+G76 P020060 Q50 R0.05
+G76 U-7.8 W-35. R0. P1000 Q300 F1.5
+G00 X50.
+G00 Z-50.
+G75 X20. Z-60. I0.5 K2. D0.1
+M30
+%
+"""
+
+
+def _cut_words(text, code):
+    """(X, Z) of each G<code> block that has them, and each block's line (1-based)."""
+    out = []
+    for k, ln in enumerate(text.splitlines(), 1):
+        if re.search(rf"\bG{code}\b", ln) and re.search(r"\b[XU]-?[\d.]", ln):
+            out.append((k, ln))
+    return out
+
+
+def test_grooving_and_threading_cycles_move_as_one():
+    """Fanuc's rules: the cycle runs from where the tool stands (its start) and back there; its
+    X (a diameter) and Z (U, W from the start) give the end. A constant field moves the cut: the
+    end by the field (X by twice its x), and the start with it, so that the thread's phase and the
+    groove's place move too. Where the move to the start is a rapid (not corrected), a move to the
+    moved start is written before the block, in the mode in force."""
+    prog = nc.parse(CUTS, dialect="fanuc-lathe")
+    assert prog.unsupported == ()
+    assert prog.correct(fields.Shift((0, 0, 0))).text == CUTS
+    out = prog.correct(fields.Shift((0.05, 0.0, -0.1)), rapids=False).text.splitlines()
+    # line 6 (a cut) ends at its end moved; the G76 after it starts there: no move added
+    k = out.index("G76 X22.3 Z-30.1 K1. D0.3 A60 F1.5")
+    assert out[k - 1] == "X26.1 Z1.9"  # (the cut's last piece)
+    # the groove: its start (line 10, a cut) moved, its bottom X moved, no Z (the start's)
+    assert "G75 X20.1 I0.5" in out
+    # the two-block thread starts after a rapid to X30. Z5.: a rapid to the moved start is
+    # added, and its U W (from there) stay
+    k = out.index("G76 P020060 Q50 R0.05")
+    assert (
+        out[k - 1] == "G00 X30. Z5."
+        and out[k + 1] == "X30.1 Z4.9"
+        and out[k + 2] == "G76 U-7.8 W-35. R0. P1000 Q300 F1.5"
+    )
+    # the last groove: after two rapids, its start moved by a move added in G00
+    k = out.index("G75 X20.1 Z-60.1 I0.5 K2. D0.1")
+    assert out[k - 1] == "X50.1 Z-50.1" and out[k - 2] == "G00 Z-50."
+
+
+def test_grooving_and_threading_cycles_the_engine_does_not_follow():
+    head = "O1\nG18 G21\nG0 X30. Z5.\n"
+    # from where the program does not tell, and under nose radius compensation
+    assert _unsupported("O1\nG18 G21\nG76 X22. Z-30. K1. D0.3 F1.5\nM30\n") == [
+        (3, "threading cycle G76 from a position the program does not tell")
+    ]
+    nose = "O1\nG18 G21\nT0101\nG0 X30. Z5.\nG42 G1 X28. Z2. F0.2\nG75 X20. I0.5\nG40 G0 X40.\nM30\n"
+    assert (6, "grooving cycle G75 under nose radius compensation") in [
+        (u.line, u.construct) for u in nc.parse(nose, dialect="fanuc-lathe", tools={1: 0.8}).unsupported
+    ]
+    # a field that varies over the area the cycle cuts in more than the chord tolerance
+    with pytest.raises(RefusedError, match=r"line 4: threading cycle G76: the field varies by [\d.]+ µm over the area"):
+        nc.parse(head + "G76 X22. Z-30. K1. D0.3 F1.5\nM30\n", dialect="fanuc-lathe").correct(_field)
+    # the move to the moved start needs G0 or G1 in force
+    arc = "O1\nG18 G21\nG0 X30. Z5.\nG02 X32. Z4. R1. F0.2\nG76 X22. Z-30. K1. D0.3 F1.5\nM30\n"
+    nc.parse(arc, dialect="fanuc-lathe").correct(fields.Shift((0, 0, 0.05)))  # (the arc's end moved: no move added)
+
+    # a field that moves the start a little less than the thread: within the chord tolerance,
+    # but the start must move with the thread, and G02 is in force
+    def slope(p):
+        d = np.zeros_like(np.asarray(p, float))
+        d[:, 2] = 1e-4 * np.asarray(p, float)[:, 2]
+        return d
+
+    with pytest.raises(InputError, match="no G0 or G1 is in force") as e:
+        nc.parse(arc, dialect="fanuc-lathe").correct(slope, chord_tol=0.005)
+    assert e.value.line == 5
+
+
+def test_a_cycle_s_start_moved_by_a_corrected_cut_needs_no_move_before_it():
+    text = "O1\nG18 G21\nG00 X40. Z-20.\nG01 X36. F0.1\nG75 X20. I0.5\nG00 X40.\nM30\n"
+    out = nc.parse(text, dialect="fanuc-lathe").correct(fields.Shift((0.02, 0, 0.03))).text.splitlines()
+    k = out.index("G75 X20.04 I0.5")
+    assert out[k - 1] == "X36.04"  # (the cut's last piece: the groove starts where it ends)

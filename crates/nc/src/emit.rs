@@ -8,7 +8,7 @@
 use crate::error::NcError;
 use crate::interp::{
     axis_index, axis_unit, cycle_steps, peck_clearance, polar_xy, CycleStep, Dialect, Hole, Interp,
-    Motion, Record, AXES, CYCLE_BOTTOM, MM_PER_INCH, NAXES, PLANE_AXES,
+    Motion, Record, AXES, CYCLE_BOTTOM, LATHE_CUTS, MM_PER_INCH, NAXES, PLANE_AXES,
 };
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
@@ -488,7 +488,14 @@ impl<'a> Emitter<'a> {
                     &uvw[3 * f..3 * (f + c)]
                 };
                 if self.it.records[ri].cycle == crate::interp::CYCLE_LATHE {
-                    self.lathe_box(li, ri, samples, disp);
+                    let line = self.it.records[ri].line;
+                    let k = self.it.boxes.partition_point(|b| b.line < line);
+                    match self.it.boxes.get(k) {
+                        Some(&b) if b.line == line && LATHE_CUTS.contains(&b.code) => {
+                            self.lathe_cut(li, ri, samples, disp, &b)?
+                        }
+                        _ => self.lathe_box(li, ri, samples, disp),
+                    }
                 } else if self.it.records[ri].cycle != 0 {
                     if uvw.iter().any(|&v| v != 0.0) {
                         return Err(NcError::Interpret {
@@ -1812,6 +1819,85 @@ impl<'a> Emitter<'a> {
                 t1: self.st.arena.len() as u32,
             });
         }
+    }
+
+    /// A Fanuc lathe's grooving or threading cycle block ([`crate::interp::LatheBox`], one of
+    /// [`LATHE_CUTS`]; `ri` its last record, the return to its start): moved as one by the field
+    /// at its end. The output must stand at the start so moved (the thread's phase and the
+    /// groove's place are reckoned from it): where it does not (the move there was a rapid, not
+    /// corrected), a move there is written before the block, in the motion mode in force (G0 or
+    /// G1). Its X and Z (or U and W, from there) are aimed at the end moved; an axis it leaves
+    /// out is the start's. A block not treated is copied.
+    fn lathe_cut(
+        &mut self,
+        li: usize,
+        ri: usize,
+        samples: &Samples,
+        disp: &[f64],
+        b: &crate::interp::LatheBox,
+    ) -> Result<(), NcError> {
+        let rec = &self.it.records[ri - 1];
+        let (f, c) = samples.of(ri - 1);
+        if !rec.supported || c == 0 {
+            return Ok(());
+        }
+        let d = [disp[3 * f], disp[3 * f + 2]];
+        let half = self.fmt.half(rec.inch);
+        let start = [b.start[0] + d[0], b.start[2] + d[1]];
+        let (ux, uz) = (Self::unit(rec, 0), Self::unit(rec, 2));
+        let away = (start[0] - self.st.epos[0]).abs() / ux >= half
+            || (start[1] - self.st.epos[2]).abs() / uz >= half;
+        if away {
+            if !matches!(b.g01, Some(Motion::Rapid | Motion::Feed)) {
+                return Err(NcError::Interpret {
+                    line: li + 1,
+                    col: 1,
+                    message: "a grooving or threading cycle starts where the tool stands, which the correction moves with the cycle; the move there is not corrected (a rapid) and no G0 or G1 is in force for a move to add before the block: write G0 or G1 before it".into(),
+                });
+            }
+            // a line of its own before the block: X and Z of the moved start
+            let at = self.lx.lines[li].start;
+            let t0 = self.st.arena.len();
+            for (k, (a, u)) in [(0usize, ux), (2, uz)].into_iter().enumerate() {
+                if k > 0 {
+                    let sep = self.sep();
+                    self.st.arena.extend_from_slice(sep);
+                }
+                self.st.arena.push(AXES[a]);
+                let v = self
+                    .fmt
+                    .number((start[k] - self.off[a]) / u, rec.inch, &mut self.st.arena);
+                self.st.epos[a] = self.off[a] + v * u;
+            }
+            let eol = self.eol;
+            self.st.arena.extend_from_slice(eol);
+            self.st.edits.push(Edit {
+                start: at,
+                end: at,
+                t0: t0 as u32,
+                t1: self.st.arena.len() as u32,
+            });
+            self.st.stats.lines_added += 1;
+        }
+        for w in self.lx.line_words(li) {
+            let Some((a, incremental)) = self.word_axis(rec, w.letter) else {
+                continue;
+            };
+            if a != 0 && a != 2 {
+                continue;
+            }
+            let u = Self::unit(rec, a);
+            let from = if incremental {
+                self.st.epos[a]
+            } else {
+                self.off[a]
+            };
+            let want = (rec.end[a] + d[a / 2] - from) / u;
+            if (want - w.value).abs() >= half {
+                self.edit_number(w.num_start, w.end, want, rec.inch);
+            }
+        }
+        Ok(())
     }
 
     /// Remove the polar words of line `li`: the block's X and Y are then written as its other

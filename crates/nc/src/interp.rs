@@ -241,15 +241,34 @@ pub const CYCLE_LATHE: u8 = 3;
 /// a feed back out along the other axis, and a rapid back to A. Its two cuts meet at the corner,
 /// which the field moves as a whole (the block's X and Z rewritten); the field must not vary
 /// along the cuts by more than the chord tolerance.
+///
+/// Its grooving and threading cycles (G74, G75, G76: [`LATHE_CUTS`]) are records of the same
+/// shape: the end of the cut (X, Z) and the return to the start. They cut within the rectangle
+/// between the start and that end, which the field moves as one: the end is moved by the field
+/// there, and the start too (the thread's phase and the groove's place are reckoned from it), so
+/// the output must stand at the start so moved when the cycle begins.
 #[derive(Clone, Copy, Debug)]
 pub struct LatheBox {
     /// 0-based line.
     pub line: u32,
-    /// 900 (G90) or 940 (G94).
+    /// 900 (G90), 940 (G94), or one of [`LATHE_CUTS`].
     pub code: i32,
     /// The start A (mm): radius, Y 0, Z.
     pub start: [f64; 3],
+    /// How far (mm) beyond the rectangle the cycle may cut, in X (radius) and Z: a thread's taper,
+    /// a groove's clearance or relief.
+    pub margin: [f64; 2],
+    /// The motion of G-code group 01 in force (the one a move the output adds before a grooving
+    /// or threading cycle runs in).
+    pub g01: Option<Motion>,
 }
+
+/// [`LatheBox::code`] of a Fanuc lathe's face grooving (G74), grooving (G75) and threading (G76)
+/// cycles.
+pub const LATHE_CUTS: [i32; 3] = [740, 750, 760];
+
+/// The axis bits ([`Record::named`]) of a Fanuc lathe's X, Z, U and W.
+const LATHE_XZ: u16 = 1 | (1 << 2) | (1 << 6) | (1 << 8);
 
 /// A canned-cycle block as the interpreter read it: what the emitter needs to rewrite it. Its
 /// holes are the ends of its [`CYCLE_BOTTOM`] records.
@@ -1053,10 +1072,17 @@ impl Interpreter {
                         && !gs[..ng]
                             .iter()
                             .any(|&(c, _)| matches!(c, 0 | 10 | 20 | 30 | 800)));
+                // a lathe's grooving and threading cycles: A the tool's angle, P and Q integers
+                // (Fanuc's parameters and depths in least increments, Haas's method and start
+                // angle), K a length (the thread's height, the groove's step)
+                let lathe_cut = st.dialect == Dialect::FanucLathe
+                    && gs[..ng].iter().any(|&(c, _)| matches!(c, 740 | 750 | 760));
                 if let Some(w) = words.iter().find(|w| {
                     w.decimals < 0
                         && w.value != 0.0
                         && match w.letter {
+                            b'A' | b'P' | b'Q' if lathe_cut => false,
+                            b'K' if lathe_cut => true,
                             b'Q' => cycle,
                             b'K' => !cycle,
                             l => INCREMENT_WORDS.contains(&l),
@@ -1207,6 +1233,8 @@ impl Interpreter {
             // a lathe's roughing or finishing cycle whose contour the engine corrects: its
             // block moves nothing here (its U and W are allowances)
             let mut cycle_line = false;
+            // a Fanuc lathe's grooving or threading cycle block ([`LatheCut`]): its code and column
+            let mut lathe_cut: Option<(i32, usize)> = None;
             for &(c, gc) in &gs[..ng] {
                 match c {
                     // a Fanuc lathe in G-code system A: G90, G92 and G94 are its turning,
@@ -1251,6 +1279,24 @@ impl Interpreter {
                             && named & !((1 << 6) | (1 << 8)) == 0 =>
                     {
                         cycle_line = true;
+                    }
+                    // grooving (G74 face, G75 outside/inside) and threading (G76): the block
+                    // with X/Z (U/W) runs the cycle, one without sets its parameters (the first
+                    // block of Fanuc's two-block form), copied
+                    740 | 750 | 760
+                        if st.dialect == Dialect::FanucLathe
+                            && named & LATHE_XZ == 0
+                            && axis[3].is_none() =>
+                    {
+                        cycle_line = true;
+                    }
+                    740 | 750 | 760 if st.dialect == Dialect::FanucLathe => {
+                        if c == 760 {
+                            // (a Haas G76's A is the tool tip's angle)
+                            axis[3] = None;
+                            named &= !(1 << 3);
+                        }
+                        lathe_cut = Some((c, gc));
                     }
                     700 | 710 | 720 | 730 | 740 | 750 | 760
                         if st.dialect == Dialect::FanucLathe =>
@@ -1673,6 +1719,10 @@ impl Interpreter {
                 st.box_taper = true;
                 seen &= !((1 << (b'I' - b'A')) | (1 << (b'K' - b'A')));
             }
+            if lathe_cut.is_some() {
+                // (their depths, increments, taper, clearance and angles)
+                seen &= !CHECKED_WORDS;
+            }
             if untraced.is_none() && unknown_m.is_none() && seen & CHECKED_WORDS != 0 {
                 let to_be = match motion_word {
                     Some((m, _)) => Some(m),
@@ -1921,167 +1971,191 @@ impl Interpreter {
             }
 
             let blocker = st.active.first();
-            match st.mode {
-                Mode::Probe => {
-                    let what = "G38 probing move: kept as written, not corrected; the axes it moves are unknown afterwards (it stops where the probe trips)";
-                    untraced_move(out, st, li, &axis, &mut end, named, what);
-                }
-                Mode::None => {
-                    let idx = push_unsupported(
-                        out,
-                        li,
-                        axis_col,
-                        "axis words with no motion mode (G80 or none yet)",
-                    );
-                    out.unsupported[idx].blocks += 1;
-                    st.pos = [f64::NAN; NAXES];
-                    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-                }
-                Mode::Canned(c) => {
-                    let words = CycleWords {
-                        axis: &axis,
-                        r,
-                        q: q_word,
-                        p,
-                        l: l_word,
-                        polar: polar_used.then_some(polar),
-                        col: motion_word.map_or(axis_col, |(_, c)| c),
-                    };
-                    let mut blocked = blocker.or(e_construct);
-                    if st.inverse_time && blocked.is_none() {
-                        // rs274 stops there: "Cannot feed with zero feed rate"
+            if let Some((c, gc)) = lathe_cut {
+                let margin = match c {
+                    // a Haas G76's I, Fanuc's R: the taper (radius); G74/G75: a Haas D, Fanuc's
+                    // R, the clearance or relief at the bottom
+                    760 => [ijk[0].or(r.map(|v| v.0)).unwrap_or(0.0).abs() * unit, 0.0],
+                    _ => {
+                        let m = d_word.or(r.map(|v| v.0)).unwrap_or(0.0).abs() * unit;
+                        [m, m]
+                    }
+                };
+                lathe_cut_block(
+                    out,
+                    st,
+                    li,
+                    c,
+                    gc,
+                    &end,
+                    named,
+                    margin,
+                    blocker.or(e_construct),
+                );
+            } else {
+                match st.mode {
+                    Mode::Probe => {
+                        let what = "G38 probing move: kept as written, not corrected; the axes it moves are unknown afterwards (it stops where the probe trips)";
+                        untraced_move(out, st, li, &axis, &mut end, named, what);
+                    }
+                    Mode::None => {
                         let idx = push_unsupported(
                             out,
                             li,
-                            words.col,
-                            "canned cycle under inverse-time feed G93 (LinuxCNC refuses it)",
+                            axis_col,
+                            "axis words with no motion mode (G80 or none yet)",
                         );
-                        blocked = Some(idx);
+                        out.unsupported[idx].blocks += 1;
+                        st.pos = [f64::NAN; NAXES];
+                        push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                     }
-                    canned(out, st, li, c, &words, blocked, unit)?;
-                }
-                Mode::Motion(m) => {
-                    let mut center = [0.0; 2];
-                    let mut turns = 1u32;
-                    if m.is_arc() {
-                        let [a1, a2, _] = PLANE_AXES[st.plane as usize];
-                        let s = [st.pos[a1], st.pos[a2]];
-                        let e = [end[a1], end[a2]];
-                        // offsets by plane: XY uses I J, ZX uses K I, YZ uses J K
-                        let (o1, o2) = match st.plane {
-                            0 => (ijk[0], ijk[1]),
-                            1 => (ijk[2], ijk[0]),
-                            _ => (ijk[1], ijk[2]),
+                    Mode::Canned(c) => {
+                        let words = CycleWords {
+                            axis: &axis,
+                            r,
+                            q: q_word,
+                            p,
+                            l: l_word,
+                            polar: polar_used.then_some(polar),
+                            col: motion_word.map_or(axis_col, |(_, c)| c),
                         };
-                        let gcol = motion_word.map_or(axis_col, |(_, c)| c);
-                        if let Some(pv) = p {
-                            if pv < 1.0 || pv.fract() != 0.0 {
-                                return Err(ierr(
-                                    li,
-                                    gcol,
-                                    format!("arc turns P must be a whole number >= 1, got {pv}"),
-                                ));
-                            }
-                            turns = pv as u32;
+                        let mut blocked = blocker.or(e_construct);
+                        if st.inverse_time && blocked.is_none() {
+                            // rs274 stops there: "Cannot feed with zero feed rate"
+                            let idx = push_unsupported(
+                                out,
+                                li,
+                                words.col,
+                                "canned cycle under inverse-time feed G93 (LinuxCNC refuses it)",
+                            );
+                            blocked = Some(idx);
                         }
-                        if let Some((rv, rc)) = r {
-                            if o1.is_some() || o2.is_some() {
-                                return Err(ierr(
-                                    li,
-                                    rc,
-                                    "arc with both R and I/J/K; use one form",
-                                ));
-                            }
-                            let rr = rv * unit;
-                            let dx = e[0] - s[0];
-                            let dy = e[1] - s[1];
-                            let d = (dx * dx + dy * dy).sqrt();
-                            if d.is_nan() {
-                                center = [f64::NAN; 2];
-                            } else {
-                                if d < 1e-9 {
-                                    return Err(ierr(li, rc, "R-format arc with the same start and end point; use I/J/K for a full circle"));
+                        canned(out, st, li, c, &words, blocked, unit)?;
+                    }
+                    Mode::Motion(m) => {
+                        let mut center = [0.0; 2];
+                        let mut turns = 1u32;
+                        if m.is_arc() {
+                            let [a1, a2, _] = PLANE_AXES[st.plane as usize];
+                            let s = [st.pos[a1], st.pos[a2]];
+                            let e = [end[a1], end[a2]];
+                            // offsets by plane: XY uses I J, ZX uses K I, YZ uses J K
+                            let (o1, o2) = match st.plane {
+                                0 => (ijk[0], ijk[1]),
+                                1 => (ijk[2], ijk[0]),
+                                _ => (ijk[1], ijk[2]),
+                            };
+                            let gcol = motion_word.map_or(axis_col, |(_, c)| c);
+                            if let Some(pv) = p {
+                                if pv < 1.0 || pv.fract() != 0.0 {
+                                    return Err(ierr(
+                                        li,
+                                        gcol,
+                                        format!(
+                                            "arc turns P must be a whole number >= 1, got {pv}"
+                                        ),
+                                    ));
                                 }
-                                let half = d / 2.0;
-                                let mut h2 = rr * rr - half * half;
-                                if h2 < 0.0 {
-                                    if rr.abs() < half - ARC_ABS_TOL_MM {
-                                        return Err(ierr(li, rc, format!("arc radius {} too small to reach the end point {:.4} away", rv.abs(), d / unit)));
+                                turns = pv as u32;
+                            }
+                            if let Some((rv, rc)) = r {
+                                if o1.is_some() || o2.is_some() {
+                                    return Err(ierr(
+                                        li,
+                                        rc,
+                                        "arc with both R and I/J/K; use one form",
+                                    ));
+                                }
+                                let rr = rv * unit;
+                                let dx = e[0] - s[0];
+                                let dy = e[1] - s[1];
+                                let d = (dx * dx + dy * dy).sqrt();
+                                if d.is_nan() {
+                                    center = [f64::NAN; 2];
+                                } else {
+                                    if d < 1e-9 {
+                                        return Err(ierr(li, rc, "R-format arc with the same start and end point; use I/J/K for a full circle"));
                                     }
-                                    h2 = 0.0;
+                                    let half = d / 2.0;
+                                    let mut h2 = rr * rr - half * half;
+                                    if h2 < 0.0 {
+                                        if rr.abs() < half - ARC_ABS_TOL_MM {
+                                            return Err(ierr(li, rc, format!("arc radius {} too small to reach the end point {:.4} away", rv.abs(), d / unit)));
+                                        }
+                                        h2 = 0.0;
+                                    }
+                                    let h = h2.sqrt();
+                                    let (ux, uy) = (dx / d, dy / d);
+                                    let mid = [(s[0] + e[0]) / 2.0, (s[1] + e[1]) / 2.0];
+                                    // clockwise minor arcs have their centre to the right of the chord
+                                    let right = (m == Motion::ArcCw) == (rr > 0.0);
+                                    let (px, py) = if right { (uy, -ux) } else { (-uy, ux) };
+                                    center = [mid[0] + h * px, mid[1] + h * py];
                                 }
-                                let h = h2.sqrt();
-                                let (ux, uy) = (dx / d, dy / d);
-                                let mid = [(s[0] + e[0]) / 2.0, (s[1] + e[1]) / 2.0];
-                                // clockwise minor arcs have their centre to the right of the chord
-                                let right = (m == Motion::ArcCw) == (rr > 0.0);
-                                let (px, py) = if right { (uy, -ux) } else { (-uy, ux) };
-                                center = [mid[0] + h * px, mid[1] + h * py];
-                            }
-                        } else {
-                            if o1.is_none() && o2.is_none() {
-                                return Err(ierr(
+                            } else {
+                                if o1.is_none() && o2.is_none() {
+                                    return Err(ierr(
                                     li,
                                     gcol,
                                     "arc needs I/J/K (centre) or R (radius) words for its plane",
                                 ));
-                            }
-                            let scale = unit;
-                            if st.arc_absolute {
-                                let [a1, a2, _] = PLANE_AXES[st.plane as usize];
-                                center = [
-                                    o1.unwrap_or(0.0) * scale + st.off[a1],
-                                    o2.unwrap_or(0.0) * scale + st.off[a2],
-                                ];
-                            } else {
-                                center = [
-                                    s[0] + o1.unwrap_or(0.0) * scale,
-                                    s[1] + o2.unwrap_or(0.0) * scale,
-                                ];
-                            }
-                            let r1 =
-                                ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2)).sqrt();
-                            let r2 =
-                                ((e[0] - center[0]).powi(2) + (e[1] - center[1]).powi(2)).sqrt();
-                            let abs_err = (r1 - r2).abs() / unit;
-                            let spiral = if st.inch {
-                                SPIRAL_ABS_TOL_INCH
-                            } else {
-                                SPIRAL_ABS_TOL_MM
-                            };
-                            if abs_err > 100.0 * spiral
-                                || (abs_err > spiral
-                                    && abs_err * unit / r1.max(r2) > SPIRAL_REL_TOL)
-                            {
-                                return Err(ierr(li, gcol, format!(
+                                }
+                                let scale = unit;
+                                if st.arc_absolute {
+                                    let [a1, a2, _] = PLANE_AXES[st.plane as usize];
+                                    center = [
+                                        o1.unwrap_or(0.0) * scale + st.off[a1],
+                                        o2.unwrap_or(0.0) * scale + st.off[a2],
+                                    ];
+                                } else {
+                                    center = [
+                                        s[0] + o1.unwrap_or(0.0) * scale,
+                                        s[1] + o2.unwrap_or(0.0) * scale,
+                                    ];
+                                }
+                                let r1 = ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2))
+                                    .sqrt();
+                                let r2 = ((e[0] - center[0]).powi(2) + (e[1] - center[1]).powi(2))
+                                    .sqrt();
+                                let abs_err = (r1 - r2).abs() / unit;
+                                let spiral = if st.inch {
+                                    SPIRAL_ABS_TOL_INCH
+                                } else {
+                                    SPIRAL_ABS_TOL_MM
+                                };
+                                if abs_err > 100.0 * spiral
+                                    || (abs_err > spiral
+                                        && abs_err * unit / r1.max(r2) > SPIRAL_REL_TOL)
+                                {
+                                    return Err(ierr(li, gcol, format!(
                                 "radius to the end of the arc ({:.4}) differs from radius to its start ({:.4})",
                                 r2 / unit, r1 / unit)));
-                            }
-                            if r1 < ARC_MIN_RADIUS_MM || r2 < ARC_MIN_RADIUS_MM {
-                                return Err(ierr(li, gcol, "arc with zero radius"));
+                                }
+                                if r1 < ARC_MIN_RADIUS_MM || r2 < ARC_MIN_RADIUS_MM {
+                                    return Err(ierr(li, gcol, "arc with zero radius"));
+                                }
                             }
                         }
-                    }
-                    // correctable when every axis it moves has a known end (a straight move from an
-                    // unknown start is corrected at its end only); arcs need their centre
-                    // an arc, and an axis other than XYZ that the block moves, needs its start too: their
-                    // pieces are interpolated from it (a move is never changed in kind from an unknown start)
-                    let finite = |p: &[f64; NAXES], axes: u16| {
-                        let mut bits = axes;
-                        let mut ok = true;
-                        while bits != 0 {
-                            ok &= p[bits.trailing_zeros() as usize].is_finite();
-                            bits &= bits - 1;
-                        }
-                        ok
-                    };
-                    let known = finite(&end, 0b111 | named)
-                        && center[0].is_finite()
-                        && center[1].is_finite()
-                        && (!m.is_arc() || finite(&st.pos, 0b111))
-                        && finite(&st.pos, named & !0b111);
-                    // LinuxCNC's absolute arc centre (G90.1) in diameter mode: not followed
-                    let blocker = blocker.or_else(|| {
+                        // correctable when every axis it moves has a known end (a straight move from an
+                        // unknown start is corrected at its end only); arcs need their centre
+                        // an arc, and an axis other than XYZ that the block moves, needs its start too: their
+                        // pieces are interpolated from it (a move is never changed in kind from an unknown start)
+                        let finite = |p: &[f64; NAXES], axes: u16| {
+                            let mut bits = axes;
+                            let mut ok = true;
+                            while bits != 0 {
+                                ok &= p[bits.trailing_zeros() as usize].is_finite();
+                                bits &= bits - 1;
+                            }
+                            ok
+                        };
+                        let known = finite(&end, 0b111 | named)
+                            && center[0].is_finite()
+                            && center[1].is_finite()
+                            && (!m.is_arc() || finite(&st.pos, 0b111))
+                            && finite(&st.pos, named & !0b111);
+                        // LinuxCNC's absolute arc centre (G90.1) in diameter mode: not followed
+                        let blocker = blocker.or_else(|| {
                         let why = if !m.is_arc() {
                             None
                         } else if st.arc_absolute && st.diameter {
@@ -2097,114 +2171,116 @@ impl Interpreter {
                             push_unsupported(out, li, motion_word.map_or(axis_col, |(_, c)| c), why)
                         })
                     });
-                    let mut supported = blocker.is_none() && e_construct.is_none();
-                    if let Some(idx) = blocker {
-                        out.unsupported[idx].blocks += 1;
-                    }
-                    if let Some(idx) = e_construct {
-                        out.unsupported[idx].blocks += 1;
-                    }
-                    let comp = match comp_move(st, m, &st.pos.clone(), &end, center) {
-                        Ok(c) => c,
-                        Err(why) => {
-                            let idx = push_unsupported(out, li, axis_col, why);
+                        let mut supported = blocker.is_none() && e_construct.is_none();
+                        if let Some(idx) = blocker {
                             out.unsupported[idx].blocks += 1;
-                            st.comp = None;
-                            st.comp_exit = None;
-                            st.active.cutter_comp = Some((li as u32, idx));
-                            supported = false;
-                            None
                         }
-                    };
-                    let nose_corner = match nose_turn(st, m, &end, center) {
-                        Ok(f) => f,
-                        Err(why) => {
-                            let idx = push_unsupported(out, li, axis_col, why);
+                        if let Some(idx) = e_construct {
                             out.unsupported[idx].blocks += 1;
-                            st.nose = None;
-                            st.nose_edge = false;
-                            st.active.cutter_comp = Some((li as u32, idx));
-                            supported = false;
-                            1.0
                         }
-                    };
-                    if st.inverse_time && m != Motion::Rapid {
-                        let gcol = motion_word.map_or(axis_col, |(_, c)| c);
-                        let f = words.iter().find(|w| w.letter == b'F').map(|w| w.value);
-                        match f {
-                            None => {
-                                let g = match m {
-                                    Motion::ArcCw => "G2",
-                                    Motion::ArcCcw => "G3",
-                                    _ => "G1",
-                                };
-                                return Err(ierr(
+                        let comp = match comp_move(st, m, &st.pos.clone(), &end, center) {
+                            Ok(c) => c,
+                            Err(why) => {
+                                let idx = push_unsupported(out, li, axis_col, why);
+                                out.unsupported[idx].blocks += 1;
+                                st.comp = None;
+                                st.comp_exit = None;
+                                st.active.cutter_comp = Some((li as u32, idx));
+                                supported = false;
+                                None
+                            }
+                        };
+                        let nose_corner = match nose_turn(st, m, &end, center) {
+                            Ok(f) => f,
+                            Err(why) => {
+                                let idx = push_unsupported(out, li, axis_col, why);
+                                out.unsupported[idx].blocks += 1;
+                                st.nose = None;
+                                st.nose_edge = false;
+                                st.active.cutter_comp = Some((li as u32, idx));
+                                supported = false;
+                                1.0
+                            }
+                        };
+                        if st.inverse_time && m != Motion::Rapid {
+                            let gcol = motion_word.map_or(axis_col, |(_, c)| c);
+                            let f = words.iter().find(|w| w.letter == b'F').map(|w| w.value);
+                            match f {
+                                None => {
+                                    let g = match m {
+                                        Motion::ArcCw => "G2",
+                                        Motion::ArcCcw => "G3",
+                                        _ => "G1",
+                                    };
+                                    return Err(ierr(
                                     li,
                                     gcol,
                                     format!(
                                         "F word missing with inverse time {g} move (G93: every G1, G2, G3 gives its time)"
                                     ),
                                 ));
+                                }
+                                Some(v) if !(v > 0.0 && v.is_finite()) => {
+                                    return Err(ierr(
+                                        li,
+                                        wcol[(b'F' - b'A') as usize],
+                                        format!("inverse-time feed F{v}: it must be above 0"),
+                                    ))
+                                }
+                                _ => {}
                             }
-                            Some(v) if !(v > 0.0 && v.is_finite()) => {
-                                return Err(ierr(
-                                    li,
-                                    wcol[(b'F' - b'A') as usize],
-                                    format!("inverse-time feed F{v}: it must be above 0"),
-                                ))
-                            }
-                            _ => {}
                         }
-                    }
-                    let leaves = st.comp_unfollowed_exit
-                        && (m.is_arc() || (end[0] - st.pos[0]).hypot(end[1] - st.pos[1]) > 1e-9);
-                    // the move that ends compensation in G18/G19 is the next; the one that starts
-                    // it LinuxCNC's next (which must go further than the radius in the plane, as
-                    // rs274 checks), a Fanuc control's next in the plane (a position not known
-                    // counts as moving)
-                    let mut nose_edge = st.nose_edge;
-                    if let (true, Some(r)) = (nose_edge, st.nose) {
-                        let (a, b) = if st.plane == 2 { (1, 2) } else { (0, 2) };
-                        let along = (end[a] - st.pos[a]).hypot(end[b] - st.pos[b]);
-                        // (LinuxCNC compensates nothing with a radius of 0)
-                        if st.dialect.is_linuxcnc() && !m.is_arc() && r > 0.0 && along <= r {
-                            return Err(ierr(
+                        let leaves = st.comp_unfollowed_exit
+                            && (m.is_arc()
+                                || (end[0] - st.pos[0]).hypot(end[1] - st.pos[1]) > 1e-9);
+                        // the move that ends compensation in G18/G19 is the next; the one that starts
+                        // it LinuxCNC's next (which must go further than the radius in the plane, as
+                        // rs274 checks), a Fanuc control's next in the plane (a position not known
+                        // counts as moving)
+                        let mut nose_edge = st.nose_edge;
+                        if let (true, Some(r)) = (nose_edge, st.nose) {
+                            let (a, b) = if st.plane == 2 { (1, 2) } else { (0, 2) };
+                            let along = (end[a] - st.pos[a]).hypot(end[b] - st.pos[b]);
+                            // (LinuxCNC compensates nothing with a radius of 0)
+                            if st.dialect.is_linuxcnc() && !m.is_arc() && r > 0.0 && along <= r {
+                                return Err(ierr(
                                 li,
                                 axis_col,
                                 "the move that starts cutter compensation is not longer than the tool radius in its plane (LinuxCNC refuses it)",
                             ));
+                            }
+                            nose_edge = m.is_arc() || !(along <= 1e-9);
                         }
-                        nose_edge = m.is_arc() || !(along <= 1e-9);
-                    }
-                    if nose_edge {
-                        st.nose_edge = false;
-                    }
-                    st.pos = end;
-                    push_record(out, st, li, m, supported && known, named, center, turns);
-                    out.records.last_mut().unwrap().whole = if std::mem::take(&mut st.contour_edge)
-                    {
-                        WHOLE_CONTOUR
-                    } else if nose_edge {
-                        WHOLE_NOSE
-                    } else {
-                        0
-                    };
-                    if leaves {
-                        st.comp_unfollowed_exit = false;
-                        st.active.cutter_comp = None;
-                    }
-                    if let Some(c) = comp {
-                        out.records.last_mut().unwrap().comp = out.comps.len() as u32;
-                        out.comps.push(c);
-                    }
-                    if nose_corner > 1.0 {
-                        out.nose_corners
-                            .push(((out.records.len() - 1) as u32, nose_corner));
-                    }
-                    let s = &mut out.summary;
-                    s.counts[m as usize] += 1;
-                    if m.is_arc() {
-                        s.planes[st.plane as usize] += 1;
+                        if nose_edge {
+                            st.nose_edge = false;
+                        }
+                        st.pos = end;
+                        push_record(out, st, li, m, supported && known, named, center, turns);
+                        out.records.last_mut().unwrap().whole =
+                            if std::mem::take(&mut st.contour_edge) {
+                                WHOLE_CONTOUR
+                            } else if nose_edge {
+                                WHOLE_NOSE
+                            } else {
+                                0
+                            };
+                        if leaves {
+                            st.comp_unfollowed_exit = false;
+                            st.active.cutter_comp = None;
+                        }
+                        if let Some(c) = comp {
+                            out.records.last_mut().unwrap().comp = out.comps.len() as u32;
+                            out.comps.push(c);
+                        }
+                        if nose_corner > 1.0 {
+                            out.nose_corners
+                                .push(((out.records.len() - 1) as u32, nose_corner));
+                        }
+                        let s = &mut out.summary;
+                        s.counts[m as usize] += 1;
+                        if m.is_arc() {
+                            s.planes[st.plane as usize] += 1;
+                        }
                     }
                 }
             }
@@ -2765,9 +2841,75 @@ fn lathe_box(
         line: li as u32,
         code: c,
         start: [a[0], a[1], a[2]],
+        margin: [0.0; 2],
+        g01: st.g01,
     });
     out.summary.counts[Motion::Feed as usize] += 2;
     Ok(())
+}
+
+/// A Fanuc lathe's grooving or threading cycle block (G74, G75, G76 with X/Z or U/W; see
+/// [`LatheBox`]): from the start A where the tool stands, cuts within the rectangle to `end` (X
+/// and Z the block leaves out are A's), and back to A. From an unknown start, or under nose
+/// radius compensation, refused.
+#[allow(clippy::too_many_arguments)]
+fn lathe_cut_block(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    c: i32,
+    col: usize,
+    end: &[f64; NAXES],
+    named: u16,
+    margin: [f64; 2],
+    blocked: Option<usize>,
+) {
+    let a = st.pos;
+    let name = match c {
+        740 => "face grooving cycle G74",
+        750 => "grooving cycle G75",
+        _ => "threading cycle G76",
+    };
+    let why = if !(a[0].is_finite() && a[2].is_finite()) {
+        Some(format!("{name} from a position the program does not tell"))
+    } else if st.nose.is_some() || st.active.cutter_comp.is_some() {
+        Some(format!("{name} under nose radius compensation"))
+    } else if !(end[0].is_finite() && end[2].is_finite()) {
+        Some(format!("{name} to a position the program does not tell"))
+    } else {
+        None
+    };
+    let blocked = why
+        .map(|why| push_unsupported(out, li, col, &why))
+        .or(blocked);
+    if let Some(idx) = blocked {
+        out.unsupported[idx].blocks += 1;
+    }
+    st.pos = *end;
+    st.pos[1] = a[1];
+    push_record(
+        out,
+        st,
+        li,
+        Motion::Feed,
+        blocked.is_none(),
+        named,
+        [0.0; 2],
+        1,
+    );
+    out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
+    // (the cycle ends where it began)
+    st.pos = a;
+    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+    out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
+    out.boxes.push(LatheBox {
+        line: li as u32,
+        code: c,
+        start: [a[0], a[1], a[2]],
+        margin,
+        g01: st.g01,
+    });
+    out.summary.counts[Motion::Feed as usize] += 2;
 }
 
 /// Why the engine does not follow a canned cycle, or None when it does.

@@ -2,7 +2,7 @@
 //! linearised by a chord tolerance, and every piece split again where it crosses a grid line.
 
 use crate::error::NcError;
-use crate::interp::{Interp, Motion, Record, NAXES, PLANE_AXES};
+use crate::interp::{Interp, Motion, Record, LATHE_CUTS, NAXES, PLANE_AXES};
 use std::f64::consts::PI;
 
 /// Most pieces one block may be cut into. A block that would need more (a coordinate of 1e20, an
@@ -403,7 +403,39 @@ pub fn sample_range(
         // sample), from (corner X, start Z) and to (start X, corner Z)
         if rec.cycle == crate::interp::CYCLE_LATHE && s.t.len() > first {
             let k = it.boxes.partition_point(|b| b.line < rec.line);
-            if let Some(b) = it.boxes.get(k).filter(|b| b.line == rec.line) {
+            if let Some(b) = it
+                .boxes
+                .get(k)
+                .filter(|b| b.line == rec.line && LATHE_CUTS.contains(&b.code))
+            {
+                // a grooving or threading cycle: the field over the rectangle it cuts in (from
+                // its start to its end, widened by its margins), a grid of points at most
+                // --max-segment apart, against the end's
+                let c = [rec.end[0], 0.0, rec.end[2]];
+                let g0 = s.checks.len() / 3;
+                s.checks.extend_from_slice(&c);
+                let lo = [
+                    c[0].min(b.start[0]) - b.margin[0],
+                    c[2].min(b.start[2]) - b.margin[1],
+                ];
+                let hi = [
+                    c[0].max(b.start[0]) + b.margin[0],
+                    c[2].max(b.start[2]) + b.margin[1],
+                ];
+                let n =
+                    [0, 1].map(|j| ((hi[j] - lo[j]) / opts.max_segment).ceil().max(1.0) as usize);
+                for i in 0..=n[0] {
+                    for j in 0..=n[1] {
+                        s.checks.extend_from_slice(&[
+                            lo[0] + (hi[0] - lo[0]) * i as f64 / n[0] as f64,
+                            0.0,
+                            lo[1] + (hi[1] - lo[1]) * j as f64 / n[1] as f64,
+                        ]);
+                    }
+                }
+                s.check_groups
+                    .push((i as u32, g0 as u32, (s.checks.len() / 3 - g0) as u32));
+            } else if let Some(b) = it.boxes.get(k).filter(|b| b.line == rec.line) {
                 let c = [rec.end[0], 0.0, rec.end[2]];
                 let g0 = s.checks.len() / 3;
                 s.checks.extend_from_slice(&c);
@@ -594,6 +626,25 @@ pub fn comp_check(
         }
         let rec = &it.records[ri as usize];
         if rec.cycle == crate::interp::CYCLE_LATHE {
+            let k = it.boxes.partition_point(|b| b.line < rec.line);
+            let cut = it
+                .boxes
+                .get(k)
+                .filter(|b| b.line == rec.line && LATHE_CUTS.contains(&b.code));
+            if let (Some(b), false) = (cut, worst <= budget) {
+                let name = match b.code {
+                    740 => "face grooving cycle G74",
+                    750 => "grooving cycle G75",
+                    _ => "threading cycle G76",
+                };
+                return Some((
+                    rec.line + 1,
+                    format!(
+                        "{name}: the field varies by {:.1} µm over the area it cuts in (from its start to its end), more than the chord tolerance {budget} mm, and the cycle is moved as one (its start and end by one displacement); raise --chord-tol to accept it",
+                        worst * 1000.0
+                    ),
+                ));
+            }
             if !(worst <= budget) {
                 let um = worst * 1000.0;
                 return Some((
