@@ -171,7 +171,7 @@ def test_what_a_lathe_program_does_that_is_not_followed_is_refused_at_its_line()
         7,
         "axis words with no motion mode (G80 or none yet)",
     )
-    assert _unsupported(head + "G73 U1. W1. R3\nM30\n") == [(4, "lathe cycle G73")]
+    assert _unsupported(head + "G73 U1. W1. R3.\nM30\n") == [(4, "lathe cycle G73")]
     assert _unsupported(head + "G71 P10 Q20 U0.2 W0.1 D1. F0.2\nM30\n") == [
         (5, "the contour of G71 P10 Q20 does not follow it from block N10")
     ]
