@@ -279,3 +279,71 @@ def test_r_arcs_under_absolute_centres_keep_their_r_alone(tmp_path, shift):
             want = (ra[1] + shift[plane[0]], ra[2] + shift[plane[1]])
             assert rb[0] == ra[0] and rb[3] == ra[3]
             np.testing.assert_allclose(rb[1:3], want, atol=1e-4)
+
+
+# ----------------------------------------------------------------------- spindle-synchronised G33
+#: A thread cut with G33 as LinuxCNC's threading.ngc cuts it: a feed to the start, the thread
+#: along Z, the exit at 45° still synchronised, a rapid out.
+G33_PASS = "G20 G18\nG0 X0.2 Y0 Z0.5\nS500 M3\nG1 X0.15 F10\nG33 Z-0.5 K0.05\nG33 X0.2 Z-0.55 K0.07\nG0 X0.3\nM2\n"
+
+
+def _synced(canon):
+    """rs274's feeds (mm) and how many synchronised motions it starts."""
+    return canon.ends[[k for k, kind in enumerate(canon.kinds) if kind == "feed"], :3]
+
+
+def test_a_synchronised_move_is_moved_whole(tmp_path):
+    """Each G33 block synchronises anew with the spindle (rs274: START_SPEED_FEED_SYNC per block),
+    so it stays one block: a shift moves its end, and its start by the corrected feed before it,
+    so rs274 runs the same synchronised moves displaced; a field that bends it is refused."""
+    shift = (0.01, 0.0, 0.02)
+    out = nc.read(_write(tmp_path, G33_PASS)).correct(fields.Shift(shift))
+    text = out.text
+    assert text.count("G33") == 2 and "K0.05" in text and "K0.07" in text
+    before, after = _run(tmp_path, G33_PASS, "in.ngc"), canonical(out.write(tmp_path / "out.ngc"))
+    assert after.error is None, after.error
+    np.testing.assert_allclose(
+        _synced(after)[-2:], _synced(before)[-2:] + shift, atol=3e-3
+    )  # rs274: 4 decimals of an inch
+    syncs = lambda p: p.read_text().count("G33")  # noqa: E731
+    assert syncs(tmp_path / "out.ngc") == 2
+
+    def bend(p):
+        d = np.zeros_like(np.asarray(p, float))
+        d[:, 0] = 0.02 * np.sin(np.asarray(p, float)[:, 2] / 5.0)
+        return d
+
+    with pytest.raises(
+        InputError, match=r":5:1: a spindle-synchronised move \(G33\) (must stay one move|starts where)"
+    ):
+        nc.read(_write(tmp_path, G33_PASS)).correct(bend)
+
+
+def test_a_synchronised_move_after_a_rapid_needs_the_rapid_corrected(tmp_path):
+    src = G33_PASS.replace("G1 X0.15 F10", "G0 X0.15")
+    with pytest.raises(
+        InputError, match=r":5:1: a spindle-synchronised move \(G33\) starts where the tool stands.*--rapids"
+    ):
+        nc.read(_write(tmp_path, src)).correct(fields.Shift((0.0, 0.0, 0.02)))
+    out = nc.read(_write(tmp_path, src)).correct(fields.Shift((0.0, 0.0, 0.02)), rapids=True)
+    assert canonical(out.write(tmp_path / "out.ngc")).error is None
+
+
+@pytest.mark.parametrize(
+    ("src", "where", "says"),
+    [
+        # rs274: "K word missing with g33/g33.1", on each block
+        (G33_PASS.replace("G33 X0.2 Z-0.55 K0.07", "X0.2 Z-0.55"), ":6:", "K word missing with G33"),
+        (G33_PASS.replace("G33 Z-0.5 K0.05", "G33 Z-0.5"), ":5:", "K word missing with G33"),
+    ],
+)
+def test_a_synchronised_move_without_its_pitch_is_refused(tmp_path, src, where, says):
+    assert "K word missing" in _run(tmp_path, src).error
+    with pytest.raises(InputError, match=f"{where}.*{says}"):
+        nc.read(_write(tmp_path, src)).blocks  # noqa: B018
+
+
+def test_a_synchronised_move_under_cutter_compensation_is_refused(tmp_path):
+    src = "G20 G17\nG0 X0 Y0 Z0.1\nS500 M3\nG41 D1\nG1 X1 F10\nG33 X2 K0.05\nG40\nM2\n"
+    (u,) = nc.read(_write(tmp_path, src), tools={1: 2.54}).unsupported
+    assert (u.line, "G33 under cutter compensation" in u.construct) == (6, True)

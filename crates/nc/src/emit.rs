@@ -942,6 +942,7 @@ impl<'a> Emitter<'a> {
         }) || (rec.whole != 0 && !rec.motion.is_arc());
         let whole_why = match rec.whole {
             crate::interp::WHOLE_CONTOUR => "the first and the last block of a roughing cycle's contour (numbered P and Q) must stay one move: the pieces after the last would not belong to the contour, and the first's would move the point the cycle roughs from",
+            crate::interp::WHOLE_SYNC => "a spindle-synchronised move (G33) must stay one move: each block synchronises anew with the spindle, so its pieces would each start the thread again",
             _ => "the move that starts or ends radius compensation in G18/G19 must stay one move",
         };
         if rec.whole != 0 && rec.motion.is_arc() && !keep_arc {
@@ -950,6 +951,26 @@ impl<'a> Emitter<'a> {
                 col: 1,
                 message: format!("{whole_why}, and this arc is not moved alike along it (it would be cut in chords)"),
             });
+        }
+        // a synchronised move's thread is reckoned from where it starts: the output must stand at
+        // its start moved by the field (the first sample's displacement, the move being straight
+        // within the chord tolerance)
+        if rec.whole == crate::interp::WHOLE_SYNC {
+            let off = (0..3)
+                .map(|a| (epos0[a] - (start[a] + d0[a])).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            if !(off <= self.st.arc_tol) {
+                return Err(NcError::Interpret {
+                    line: rec.line as usize + 1,
+                    col: 1,
+                    message: format!(
+                        "a spindle-synchronised move (G33) starts where the tool stands, {:.1} µm from where the field moves its start (more than the chord tolerance {} mm): its thread is reckoned from there; correct the move before it (--rapids for a rapid)",
+                        off * 1000.0,
+                        self.st.arc_tol
+                    ),
+                });
+            }
         }
         if comp_whole && !straight {
             let e = xyz_at(n - 1);

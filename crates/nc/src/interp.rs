@@ -173,6 +173,9 @@ pub const WHOLE_NOSE: u8 = 1;
 /// the pieces after the last's line would not belong to the contour, and the first's would move
 /// the point the cycle roughs from.
 pub const WHOLE_CONTOUR: u8 = 2;
+/// [`Record::whole`] of a spindle-synchronised move (LinuxCNC's G33): each block synchronises
+/// anew with the spindle, so cut in pieces each would start its thread again.
+pub const WHOLE_SYNC: u8 = 3;
 
 /// A Fanuc lathe's roughing cycle (G71/G72 with P and Q) whose contour, the blocks numbered P
 /// through Q right after it, is being read: corrected where it is (the control roughs along it
@@ -578,6 +581,8 @@ struct State {
     nose: Option<f64>,
     /// The next move in the plane starts or ends that compensation ([`WHOLE_NOSE`]).
     nose_edge: bool,
+    /// LinuxCNC's G33 in force: the feed moves are synchronised with the spindle ([`WHOLE_SYNC`]).
+    sync: bool,
     /// Under that compensation: the direction (in the plane's coordinates) the last move in the
     /// plane ended in; None before the first.
     nose_dir: Option<[f64; 2]>,
@@ -746,6 +751,7 @@ impl Interpreter {
                 nose: None,
                 nose_edge: false,
                 nose_dir: None,
+                sync: false,
                 contour_edge: false,
                 contour: None,
                 contours: Vec::new(),
@@ -1216,6 +1222,8 @@ impl Interpreter {
 
             // modal and non-modal G codes, in LinuxCNC's order of execution
             let mut motion_word: Option<(Mode, usize)> = None;
+            // LinuxCNC's G33 in the block (a feed synchronised with the spindle)
+            let mut sync_word = false;
             let mut g53 = false;
             let mut nonmodal_axis_user: Option<(i32, usize)> = None;
             let mut home: Option<(i32, usize)> = None;
@@ -1585,6 +1593,10 @@ impl Interpreter {
                     51 if st.dialect.is_fanuc() && q_word.is_some() && named == 0 => {}
                     50 if st.dialect.is_fanuc() && p.is_some() && named == 0 => {}
                     1870 if st.dialect.is_fanuc() && named == 0 => {}
+                    330 if st.dialect.is_linuxcnc() => {
+                        motion_word = Some((Mode::Motion(Motion::Feed), gc));
+                        sync_word = true;
+                    }
                     _ => {
                         let what = match c {
                             50..=53 => "spline",
@@ -1692,6 +1704,7 @@ impl Interpreter {
                     }
                 }
                 st.mode = m;
+                st.sync = sync_word;
                 match m {
                     Mode::Motion(mo) => st.g01 = Some(mo),
                     // (of group 01 itself: no G0/G1/G2/G3 is in force after them)
@@ -1722,6 +1735,10 @@ impl Interpreter {
             if lathe_cut.is_some() {
                 // (their depths, increments, taper, clearance and angles)
                 seen &= !CHECKED_WORDS;
+            }
+            let sync_block = motion_word.map_or(st.sync, |_| sync_word);
+            if sync_block && motion_word.is_none() {
+                seen &= !(1 << (b'K' - b'A')); // (a G33's pitch, on each of its blocks)
             }
             if untraced.is_none() && unknown_m.is_none() && seen & CHECKED_WORDS != 0 {
                 let to_be = match motion_word {
@@ -2149,6 +2166,13 @@ impl Interpreter {
                             }
                             ok
                         };
+                        if st.sync && ijk[2].is_none() {
+                            return Err(ierr(
+                                li,
+                                motion_word.map_or(axis_col, |(_, c)| c),
+                                "K word missing with G33 (the pitch, on each of its blocks), as rs274 refuses it",
+                            ));
+                        }
                         let known = finite(&end, 0b111 | named)
                             && center[0].is_finite()
                             && center[1].is_finite()
@@ -2156,7 +2180,15 @@ impl Interpreter {
                             && finite(&st.pos, named & !0b111);
                         // LinuxCNC's absolute arc centre (G90.1) in diameter mode: not followed
                         let blocker = blocker.or_else(|| {
-                        let why = if !m.is_arc() {
+                        let why = if st.sync
+                            && (st.comp.is_some()
+                                || st.nose.is_some()
+                                || st.active.cutter_comp.is_some())
+                        {
+                            Some("spindle-synchronised motion G33 under cutter compensation (LinuxCNC refuses it)")
+                        } else if st.sync && st.inverse_time {
+                            Some("spindle-synchronised motion G33 under inverse-time feed G93")
+                        } else if !m.is_arc() {
                             None
                         } else if st.arc_absolute && st.diameter {
                             Some("an arc with an absolute centre (G90.1) in lathe diameter mode")
@@ -2259,6 +2291,8 @@ impl Interpreter {
                         out.records.last_mut().unwrap().whole =
                             if std::mem::take(&mut st.contour_edge) {
                                 WHOLE_CONTOUR
+                            } else if st.sync {
+                                WHOLE_SYNC
                             } else if nose_edge {
                                 WHOLE_NOSE
                             } else {
