@@ -322,7 +322,13 @@ def test_nose_compensation_needs_its_radius_and_a_field_calm_within_it():
     changed = fanuc.replace("G1 Z-10.", "T0101\nG1 Z-10.")
     assert [
         (u.line, u.construct) for u in nc.parse(changed, dialect="fanuc-lathe", tools={1: 0.4, 2: 1.6}).unsupported
-    ] == [(6, "a tool offset changed under nose radius compensation: its nose radius is not followed")]
+    ] == [
+        (
+            6,
+            "a tool offset changed under radius compensation in G18/G19 (a lathe's nose radius, a cutter's "
+            "outside G17): its radius is not followed",
+        )
+    ]
     (u,) = nc.parse(fanuc, dialect="fanuc-lathe", tools={1: 1.6}).unsupported
     assert "offset 2: its nose radius is not known" in u.construct
 

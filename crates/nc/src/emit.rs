@@ -329,6 +329,10 @@ pub struct EmitState {
     /// has of the last move in the plane; a move after an inside corner needs it longer than the
     /// tool stops short there ([`crate::interp::Comp::trim`]).
     comp_piece: f64,
+    /// Under radius compensation in G18/G19: the length (in the plane) of the last piece written.
+    nose_piece: f64,
+    /// The last move under radius compensation in G18/G19 was an arc written in chords.
+    nose_chords: bool,
     /// The output's modal X and Z (mm) of a lathe's G90/G94 box cycle, as last written.
     out_box: [f64; 2],
 }
@@ -346,6 +350,8 @@ impl EmitState {
             tail_ends: Vec::new(),
             expand_cycles: false,
             comp_piece: f64::INFINITY,
+            nose_piece: f64::INFINITY,
+            nose_chords: false,
             arc_tol: 0.0,
             cyc_level: f64::NAN,
             cyc_r: None,
@@ -482,6 +488,7 @@ impl<'a> Emitter<'a> {
                 let (f, c) = samples.of(ri);
                 self.off = self.it.frames[self.it.records[ri].frame as usize];
                 self.comp_inside_corner(ri)?;
+                self.nose_exit(ri)?;
                 let uvw = if uvw.is_empty() {
                     uvw
                 } else {
@@ -795,6 +802,25 @@ impl<'a> Emitter<'a> {
         Ok(())
     }
 
+    /// The move after G40 that ends radius compensation in G18/G19 starts where the control's
+    /// offset of the move before ends: after an arc written in chords, along the last chord's
+    /// normal, not the arc's (by the radius times half a chord's angle): refused.
+    fn nose_exit(&mut self, ri: usize) -> Result<(), NcError> {
+        let rec = &self.it.records[ri];
+        if rec.whole == crate::interp::WHOLE_NOSE && rec.nose == 0.0 {
+            if std::mem::take(&mut self.st.nose_chords) {
+                return Err(NcError::Interpret {
+                    line: rec.line as usize + 1,
+                    col: 1,
+                    message: "the move that ends radius compensation in G18/G19 comes right after an arc the field does not move alike along it, written in chords: the control starts it from its offset of the last chord, not of the arc; end the compensation after a straight move, or raise --chord-tol to keep the arc an arc".into(),
+                });
+            }
+        } else if rec.nose > 0.0 && rec.motion != Motion::Other {
+            self.st.nose_chords = false;
+        }
+        Ok(())
+    }
+
     /// Write a sampled block with its displacements.
     fn corrected(
         &mut self,
@@ -1001,9 +1027,66 @@ impl<'a> Emitter<'a> {
                 });
             }
         }
+        // radius compensation in G18/G19: an arc the field bends is not cut into chords (the
+        // control would offset its ends along the chords, and meet the moves beside it elsewhere);
+        // at an inside corner the tool stops R·tan(turn/2) short of it on both moves, so the
+        // pieces next to it must be longer; and the entry move must stay longer than the radius
+        let [p1, p2, _] = PLANE_AXES[rec.plane as usize];
+        let in_plane = |a: &[f64], b: &[f64]| (b[p1] - a[p1]).hypot(b[p2] - a[p2]);
+        let trim = if rec.nose > 0.0 {
+            self.it
+                .nose_corners
+                .binary_search_by_key(&(ri as u32), |&(r, _, _)| r)
+                .map_or(0.0, |k| self.it.nose_corners[k].2)
+        } else {
+            0.0
+        };
+        if rec.nose > 0.0 {
+            let refuse = |message: String| NcError::Interpret {
+                line: rec.line as usize + 1,
+                col: 1,
+                message,
+            };
+            let chords = rec.motion.is_arc() && !keep_arc && !straight;
+            let an = PLANE_AXES[rec.plane as usize][2];
+            if chords && (rec.end[an] - start[an]).abs() > 1e-9 {
+                return Err(refuse(
+                    "a helical arc under radius compensation in G18/G19 that the field does not move alike along it: cut into chords, the control's corners between them would hold the helix's axis still".into(),
+                ));
+            }
+            self.st.nose_chords = chords;
+            if trim > 0.0 && !(self.st.nose_piece > trim) {
+                return Err(refuse(format!(
+                    "an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected program's piece before it is {:.4} mm long (the control would find the corner unreachable); raise --max-segment or --chord-tol so the move before stays whole",
+                    self.st.nose_piece
+                )));
+            }
+        }
         if straight || keep_arc || comp_whole {
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
+            if rec.nose > 0.0 {
+                let len = in_plane(&epos0, &target);
+                if trim > 0.0 && !(len > trim) {
+                    return Err(NcError::Interpret {
+                        line: rec.line as usize + 1,
+                        col: 1,
+                        message: format!("an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected move after it is {len:.4} mm long (the control would find the corner unreachable)"),
+                    });
+                }
+                if rec.whole == crate::interp::WHOLE_NOSE
+                    && self.it.dialect.is_linuxcnc()
+                    && !rec.motion.is_arc()
+                    && !(len > rec.nose)
+                {
+                    return Err(NcError::Interpret {
+                        line: rec.line as usize + 1,
+                        col: 1,
+                        message: format!("the move that starts cutter compensation, corrected, is {len:.4} mm long in its plane, not longer than the tool radius {:.4} mm (LinuxCNC refuses it)", rec.nose),
+                    });
+                }
+                self.st.nose_piece = len;
+            }
             // polar words that reach the corrected end stay; others are written as X and Y
             if let Some(p) = polar_end {
                 if (0..2).all(|a| (p[a] - target[a]).abs() < half_mm) {
@@ -1079,6 +1162,26 @@ impl<'a> Emitter<'a> {
         // own normal, which the rounding of its numbers turns by up to 2√2·half/length, moving
         // the nose centre by the nose radius times that
         if rec.nose > 0.0 {
+            let mut prev = [epos0[0], epos0[1], epos0[2]];
+            let plens: Vec<f64> = keep
+                .iter()
+                .map(|&k| {
+                    let p = xyz_at(k);
+                    let d = in_plane(&prev, &p);
+                    prev = p;
+                    d
+                })
+                .collect();
+            if let (Some(&first), true) = (plens.first(), trim > 0.0) {
+                if !(first > trim) {
+                    return Err(NcError::Interpret {
+                        line: rec.line as usize + 1,
+                        col: 1,
+                        message: format!("an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected program's first piece after it is {first:.4} mm long (the control would find the corner unreachable); raise --max-segment or --chord-tol"),
+                    });
+                }
+            }
+            self.st.nose_piece = plens.last().copied().unwrap_or(f64::INFINITY);
             let shortest = rec.nose * 2.0 * std::f64::consts::SQRT_2 * half_mm / self.st.arc_tol;
             if let Some(&len) = lens.iter().find(|&&len| len < shortest) {
                 return Err(NcError::Interpret {

@@ -492,10 +492,11 @@ pub struct Interp {
     pub dialect: Dialect,
     /// Cutter radius compensation of the run's moves ([`Record::comp`]).
     pub comps: Vec<Comp>,
-    /// Moves under radius compensation in G18/G19 that turn from the move before ([`Record::nose`]):
-    /// (record, 1/cos(turn/2)), the most a corner where the control meets the two offset paths
-    /// multiplies their error by.
-    pub nose_corners: Vec<(u32, f64)>,
+    /// Moves under radius compensation in G18/G19 that turn from the move before into an inside
+    /// corner ([`Record::nose`]): (record, 1/cos(turn/2), the most a corner where the control
+    /// meets the two offset paths multiplies their error by; R·tan(turn/2), how far short of the
+    /// corner the tool stops on both moves, which the pieces next to it must be longer than).
+    pub nose_corners: Vec<(u32, f64, f64)>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -586,6 +587,8 @@ struct State {
     /// Under that compensation: the direction (in the plane's coordinates) the last move in the
     /// plane ended in; None before the first.
     nose_dir: Option<[f64; 2]>,
+    /// Its side: 1 left of the path (G41), -1 right (G42), in the plane's coordinates.
+    nose_side: f64,
     /// The block being read is the first or the last of a roughing cycle's contour
     /// ([`WHOLE_CONTOUR`]).
     contour_edge: bool,
@@ -751,6 +754,7 @@ impl Interpreter {
                 nose: None,
                 nose_edge: false,
                 nose_dir: None,
+                nose_side: 1.0,
                 sync: false,
                 contour_edge: false,
                 contour: None,
@@ -1241,6 +1245,11 @@ impl Interpreter {
             // a lathe's roughing or finishing cycle whose contour the engine corrects: its
             // block moves nothing here (its U and W are allowances)
             let mut cycle_line = false;
+            // compensation on as the block begins (a change of plane is checked against it
+            // whatever the order of the block's words, as LinuxCNC sets the plane before G40)
+            let comp_at_start = st.comp.is_some()
+                || st.nose.is_some()
+                || (st.active.cutter_comp.is_some() && !st.comp_unfollowed_exit);
             // a Fanuc lathe's grooving or threading cycle block ([`LatheCut`]): its code and column
             let mut lathe_cut: Option<(i32, usize)> = None;
             for &(c, gc) in &gs[..ng] {
@@ -1359,11 +1368,7 @@ impl Interpreter {
                     170 | 180 | 190 => {
                         let plane = ((c - 170) / 10) as u8;
                         // (after G40 compensation is off, before the move that ends it)
-                        if plane != st.plane
-                            && (st.comp.is_some()
-                                || st.nose.is_some()
-                                || (st.active.cutter_comp.is_some() && !st.comp_unfollowed_exit))
-                        {
+                        if plane != st.plane && comp_at_start {
                             // LinuxCNC and Fanuc (alarm PS0037) refuse it too
                             return Err(ierr(
                                 li,
@@ -1641,7 +1646,7 @@ impl Interpreter {
                     st,
                     li,
                     0,
-                    "a tool offset changed under nose radius compensation: its nose radius is not followed",
+                    "a tool offset changed under radius compensation in G18/G19 (a lathe's nose radius, a cutter's outside G17): its radius is not followed",
                 );
             }
             if untraced.is_none() {
@@ -2231,7 +2236,7 @@ impl Interpreter {
                                 st.nose_edge = false;
                                 st.active.cutter_comp = Some((li as u32, idx));
                                 supported = false;
-                                1.0
+                                (1.0, 0.0)
                             }
                         };
                         if st.inverse_time && m != Motion::Rapid {
@@ -2306,9 +2311,12 @@ impl Interpreter {
                             out.records.last_mut().unwrap().comp = out.comps.len() as u32;
                             out.comps.push(c);
                         }
-                        if nose_corner > 1.0 {
-                            out.nose_corners
-                                .push(((out.records.len() - 1) as u32, nose_corner));
+                        if nose_corner.0 > 1.0 {
+                            out.nose_corners.push((
+                                (out.records.len() - 1) as u32,
+                                nose_corner.0,
+                                nose_corner.1,
+                            ));
                         }
                         let s = &mut out.summary;
                         s.counts[m as usize] += 1;
@@ -3429,6 +3437,8 @@ fn comp_on(
             st.nose = Some(d.abs() / 2.0);
             st.nose_edge = true;
             st.nose_dir = None;
+            // (a negative diameter puts the tool on the other side, as LinuxCNC reads it)
+            st.nose_side = if matches!(c, 410 | 411) { 1.0 } else { -1.0 } * d.signum();
         }
         Ok(d) => {
             // a negative diameter puts the tool on the other side, as LinuxCNC reads it
@@ -3443,19 +3453,23 @@ fn comp_on(
     Ok(())
 }
 
-/// Under radius compensation in G18/G19: the factor by which the corner before the move may
-/// multiply the error of the offset paths where the control meets them (1/cos of half the turn;
-/// 1 without a turn), and the direction the move ends in kept for the next. Err for a reversal,
-/// where whether the control meets the paths or goes round is its reading of a tiny turn.
+/// Under radius compensation in G18/G19, at an inside corner before the move: the factor by which
+/// it may multiply the error of the offset paths where the control meets them (1/cos of half the
+/// turn), and how far short of the corner the tool stops on both moves (R·tan of half the turn);
+/// (1, 0) elsewhere. The direction the move ends in is kept for the next. Err for a reversal,
+/// where whether the control meets the paths or goes round is its reading of a tiny turn. Which
+/// side is inside is LinuxCNC's reading of G41/G42 in the plane's coordinates (G18: Z, X); in the
+/// Fanuc dialects, whose lathes and mills view the plane from either side, every corner is taken
+/// for an inside one.
 fn nose_turn(
     st: &mut State,
     m: Motion,
     end: &[f64; NAXES],
     center: [f64; 2],
-) -> Result<f64, &'static str> {
-    if st.nose.is_none() {
-        return Ok(1.0);
-    }
+) -> Result<(f64, f64), &'static str> {
+    let Some(r) = st.nose else {
+        return Ok((1.0, 0.0));
+    };
     let [a1, a2, _] = PLANE_AXES[st.plane as usize];
     let (s, e) = ([st.pos[a1], st.pos[a2]], [end[a1], end[a2]]);
     let unit = |x: f64, y: f64| {
@@ -3477,23 +3491,26 @@ fn nose_turn(
         let t = unit(e[0] - s[0], e[1] - s[1]);
         (t, t)
     } else {
-        return Ok(1.0); // (no move in the plane: the tool stands)
+        return Ok((1.0, 0.0)); // (no move in the plane: the tool stands)
     };
     if !(t0.iter().chain(&t1).all(|v| v.is_finite())) {
         st.nose_dir = None;
-        return Ok(1.0);
+        return Ok((1.0, 0.0));
     }
     let before = st.nose_dir.replace(t1);
     let Some(ta) = before else {
-        return Ok(1.0);
+        return Ok((1.0, 0.0));
     };
-    let turn = (ta[0] * t0[1] - ta[1] * t0[0])
-        .atan2(ta[0] * t0[0] + ta[1] * t0[1])
-        .abs();
-    if turn > COMP_REVERSAL {
+    // positive to the left
+    let turn = (ta[0] * t0[1] - ta[1] * t0[0]).atan2(ta[0] * t0[0] + ta[1] * t0[1]);
+    if turn.abs() > COMP_REVERSAL {
         return Err("a reversal (a turn of more than 175°) under radius compensation in G18/G19: where the controller meets the offset paths is not followed");
     }
-    Ok(1.0 / (turn / 2.0).cos())
+    let inside = st.dialect.is_fanuc() || st.nose_side * turn > 0.0;
+    if !inside || turn.abs() <= 1e-12 {
+        return Ok((1.0, 0.0));
+    }
+    Ok((1.0 / (turn / 2.0).cos(), r * (turn.abs() / 2.0).tan()))
 }
 
 /// Turn between directions: an angle (rad) of the corner arc's pieces checked.

@@ -121,14 +121,24 @@ fn pieces_for(len: f64, max: f64) -> f64 {
 
 /// Number of pieces for an arc.
 pub fn arc_pieces(geom: (f64, f64, f64, f64), dn: f64, opts: &SampleOpts) -> f64 {
+    arc_pieces_within(geom, dn, opts, opts.chord_tol)
+}
+
+/// [`arc_pieces`] with chords within `chord_tol` (mm).
+fn arc_pieces_within(
+    geom: (f64, f64, f64, f64),
+    dn: f64,
+    opts: &SampleOpts,
+    chord_tol: f64,
+) -> f64 {
     let (_, d, r0, r1) = geom;
     let r = r0.max(r1);
     let ad = d.abs();
     let mut n = (ad / (PI / 2.0)).ceil().max(1.0);
-    if r > opts.chord_tol {
+    if r > chord_tol {
         // the angle whose chord stays within the tolerance: 1 - cos(θ/2) = tol / r, written
         // with asin so that it keeps its precision for tolerances far below the radius
-        let dth = 4.0 * (opts.chord_tol / (2.0 * r)).sqrt().asin();
+        let dth = 4.0 * (chord_tol / (2.0 * r)).sqrt().asin();
         if dth > 0.0 {
             n = n.max((ad / dth).ceil());
         }
@@ -333,10 +343,18 @@ pub fn sample_range(
             // joints the controller neither rounds nor trims when they turn by under 0.05 rad: it
             // cuts chords of the offset circle, so their number is that circle's
             let out = comp.map_or(0.0, |c| c.radial.max(0.0));
-            let n = arc_pieces(
+            // (under radius compensation in G18/G19 half the tolerance goes to the chords, half
+            // to the field's change within the radius: see comp_check)
+            let tol = if rec.nose > 0.0 {
+                opts.chord_tol / 2.0
+            } else {
+                opts.chord_tol
+            };
+            let n = arc_pieces_within(
                 (geom.0, geom.1, geom.2 + out, geom.3 + out),
                 rec.end[an] - start[an],
                 opts,
+                tol,
             );
             if !(n <= MAX_PIECES_PER_BLOCK) {
                 return Err(too_many(rec, n));
@@ -664,8 +682,14 @@ pub fn comp_check(
             // 1/cos(turn/2) times that
             let corner = it
                 .nose_corners
-                .binary_search_by_key(&ri, |&(r, _)| r)
+                .binary_search_by_key(&ri, |&(r, _, _)| r)
                 .map_or(1.0, |k| it.nose_corners[k].1);
+            // (an arc's chords take half the tolerance)
+            let budget = if rec.motion.is_arc() {
+                budget / 2.0
+            } else {
+                budget
+            };
             if !(2.0 * worst * corner <= budget) {
                 let um = 2.0 * worst * corner * 1000.0;
                 let at_corner = if corner > 1.0 {
