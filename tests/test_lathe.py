@@ -707,7 +707,7 @@ def test_grooving_and_threading_cycles_the_engine_does_not_follow():
         (3, "threading cycle G76 from a position the program does not tell")
     ]
     nose = "O1\nG18 G21\nT0101\nG0 X30. Z5.\nG42 G1 X28. Z2. F0.2\nG75 X20. I0.5\nG40 G0 X40.\nM30\n"
-    assert (6, "grooving cycle G75 under nose radius compensation") in [
+    assert (6, "grooving cycle G75 under cutter (nose) radius compensation") in [
         (u.line, u.construct) for u in nc.parse(nose, dialect="fanuc-lathe", tools={1: 0.8}).unsupported
     ]
     # a field that varies over the area the cycle cuts in more than the chord tolerance

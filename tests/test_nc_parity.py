@@ -347,3 +347,50 @@ def test_a_synchronised_move_under_cutter_compensation_is_refused(tmp_path):
     src = "G20 G17\nG0 X0 Y0 Z0.1\nS500 M3\nG41 D1\nG1 X1 F10\nG33 X2 K0.05\nG40\nM2\n"
     (u,) = nc.read(_write(tmp_path, src), tools={1: 2.54}).unsupported
     assert (u.line, "G33 under cutter compensation" in u.construct) == (6, True)
+
+
+# ------------------------------------------------------------------------- LinuxCNC's G76 cycle
+G76_PASS = (
+    "G20 G18 G8\nG0 X0.6 Z0.1\nS500 M3\nG1 X0.55 F10\n"
+    "G76 P0.05 Z-0.5 I-0.075 J0.008 K0.045 Q29.5 H1 E0.02 L2\nG0 X0.7\nM2\n"
+)
+
+
+@pytest.mark.parametrize("before", ["G1 X0.55 F10", "G0 X0.55"])
+def test_linuxcnc_threading_cycle_moves_as_one(tmp_path, before):
+    """rs274 runs G76 as passes from where the tool stands (the drive line) to the block's Z and a
+    rapid to its end: moved as one by a shift, every move of the cycle is the input's shifted. The
+    start moves with it: by the corrected feed before it, or by a move added before the block
+    where the move there is a rapid."""
+    src = G76_PASS.replace("G1 X0.55 F10", before)
+    shift = (0.01, 0.0, 0.02)
+    out = nc.read(_write(tmp_path, src), dialect="linuxcnc-lathe").correct(fields.Shift(shift))
+    lines = out.text.splitlines()
+    assert "G76 P0.05 Z-0.49921 I-0.075 J0.008 K0.045 Q29.5 H1 E0.02 L2" in lines
+    if before.startswith("G0"):
+        assert lines[lines.index("G0 X0.55") + 1] == "X0.55039 Z0.10079"  # the start, moved
+    canon_in = _run(tmp_path, src, "in.ngc")
+    canon_out = canonical(out.write(tmp_path / "out.ngc"))
+    assert canon_in.error is None and canon_out.error is None, canon_out.error
+    # the cycle's moves: after the move to the start, before the last rapid
+    n = len(canon_in.ends) - 3
+    assert n > 20
+    cycle_in, cycle_out = canon_in.ends[2:-1, :3], canon_out.ends[-1 - n : -1, :3]
+    np.testing.assert_allclose(cycle_out, cycle_in + shift, atol=3e-3)  # (rs274: 4 decimals of an inch)
+
+
+def test_linuxcnc_threading_cycle_refusals(tmp_path):
+    def wave(p):
+        p = np.asarray(p, float)
+        d = np.zeros_like(p)
+        d[:, 0] = 0.01 * np.sin(p[:, 2] / 3.0)
+        return d
+
+    with pytest.raises(RefusedError, match=r"line 5: threading cycle G76: the field varies"):
+        nc.read(_write(tmp_path, G76_PASS), dialect="linuxcnc-lathe").correct(wave)
+    # rs274's own errors, at the line
+    for bad, says in (("I-0.075", "I must not be 0"), ("K0.045", "K must be greater than J")):
+        src = G76_PASS.replace(bad, bad[0] + "0")
+        assert says in _run(tmp_path, src).error
+        with pytest.raises(InputError, match=f":5:.*{says}"):
+            nc.read(_write(tmp_path, src), dialect="linuxcnc-lathe").blocks  # noqa: B018

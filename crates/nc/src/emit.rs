@@ -2003,6 +2003,7 @@ impl<'a> Emitter<'a> {
             });
             self.st.stats.lines_added += 1;
         }
+        let mut ends = [self.st.epos[0], self.st.epos[2]];
         for w in self.lx.line_words(li) {
             let Some((a, incremental)) = self.word_axis(rec, w.letter) else {
                 continue;
@@ -2017,9 +2018,18 @@ impl<'a> Emitter<'a> {
                 self.off[a]
             };
             let want = (rec.end[a] + d[a / 2] - from) / u;
-            if (want - w.value).abs() >= half {
-                self.edit_number(w.num_start, w.end, want, rec.inch);
-            }
+            let v = if (want - w.value).abs() >= half {
+                self.edit_number(w.num_start, w.end, want, rec.inch)
+            } else {
+                w.value
+            };
+            ends[a / 2] = from + v * u;
+        }
+        if self.it.dialect.is_linuxcnc() {
+            // LinuxCNC's G76 ends at the block's end (moved; an axis it leaves out where it
+            // started), not at its start
+            self.st.epos[0] = ends[0];
+            self.st.epos[2] = ends[1];
         }
         Ok(())
     }

@@ -982,6 +982,7 @@ impl Interpreter {
             let mut l_word: Option<f64> = None;
             let mut q_word: Option<f64> = None;
             let mut e_word: Option<usize> = None;
+            let mut e_value: Option<f64> = None;
             let mut d_word: Option<f64> = None;
             // LinuxCNC's polar distance @ and angle ^ (degrees), with the column of the first
             let mut polar: [Option<f64>; 2] = [None; 2];
@@ -1033,7 +1034,10 @@ impl Interpreter {
                     b'P' => p = Some(w.value),
                     b'L' => l_word = Some(w.value),
                     b'Q' => q_word = Some(w.value),
-                    b'E' => e_word = Some(col(w)),
+                    b'E' => {
+                        e_word = Some(col(w));
+                        e_value = Some(w.value);
+                    }
                     b'D' => d_word = Some(w.value),
                     b'@' | b'^' => {
                         let k = (w.letter == b'^') as usize;
@@ -2040,6 +2044,8 @@ impl Interpreter {
                             l: l_word,
                             polar: polar_used.then_some(polar),
                             col: motion_word.map_or(axis_col, |(_, c)| c),
+                            ijk,
+                            e: e_value,
                         };
                         let mut blocked = blocker.or(e_construct);
                         if st.inverse_time && blocked.is_none() {
@@ -2915,7 +2921,7 @@ fn lathe_cut_block(
     let why = if !(a[0].is_finite() && a[2].is_finite()) {
         Some(format!("{name} from a position the program does not tell"))
     } else if st.nose.is_some() || st.active.cutter_comp.is_some() {
-        Some(format!("{name} under nose radius compensation"))
+        Some(format!("{name} under cutter (nose) radius compensation"))
     } else if !(end[0].is_finite() && end[2].is_finite()) {
         Some(format!("{name} to a position the program does not tell"))
     } else {
@@ -2954,6 +2960,69 @@ fn lathe_cut_block(
     out.summary.counts[Motion::Feed as usize] += 2;
 }
 
+/// LinuxCNC's threading cycle G76 (`G76 P Z I J K [R Q H E L]`), as `convert_threading_cycle`
+/// runs it: passes from the drive line (X where the tool stands, I to the thread's peak, K its
+/// depth; halved in diameter mode) and the start's Z to the block's Z, then a rapid to the block's
+/// end. Moved as one ([`LatheBox`]): the rectangle from the start to the end, widened by the
+/// depths (X) and by the compound angle's and the taper's run (Z). Its errors are rs274's.
+fn linuxcnc_g76(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    w: &CycleWords,
+    blocked: Option<usize>,
+    unit: f64,
+) -> Result<(), NcError> {
+    // (where the block is blocked already, by parameters or flow the engine does not follow, its
+    // words may not be what the control reads: reported, not an error)
+    if (st.comp.is_some() || st.nose.is_some()) && blocked.is_none() {
+        return Err(ierr(
+            li,
+            w.col,
+            "Cannot use G76 threading cycle with cutter radius compensation on (rs274)",
+        ));
+    }
+    let [i, j, k] = w.ijk.map(|v| v.unwrap_or(0.0));
+    let why = if i == 0.0 {
+        Some("In G76, I must not be 0")
+    } else if j <= 0.0 {
+        Some("In G76, J must be greater than 0")
+    } else if k <= j {
+        Some("In G76, K must be greater than J")
+    } else if w.p.is_none_or(|p| !(p > 0.0)) {
+        Some("In G76, P (the pitch) must be greater than 0")
+    } else {
+        None
+    };
+    let blocked = match why {
+        Some(why) if blocked.is_none() => return Err(ierr(li, w.col, format!("{why} (rs274)"))),
+        _ => blocked,
+    };
+    let end = target(&st.pos, w.axis, st.incremental, unit, &st.off);
+    let named = (0..NAXES).fold(0u16, |m, k| m | ((w.axis[k].is_some() as u16) << k));
+    let half = if st.diameter { 0.5 } else { 1.0 };
+    let q = w.q.filter(|&q| q != -1.0).unwrap_or(0.0).to_radians();
+    let margin = [
+        (i.abs() + k.abs()) * half * unit,
+        (k.abs() * half * q.tan().abs() + w.e.unwrap_or(0.0).abs()) * unit,
+    ];
+    let col = w.col;
+    let why = if named & !0b101 != 0 {
+        Some("threading cycle G76 with axis words other than X and Z")
+    } else {
+        None
+    };
+    let blocked = why
+        .map(|why| push_unsupported(out, li, col, why))
+        .or(blocked);
+    lathe_cut_block(out, st, li, 760, col, &end, named, margin, blocked);
+    // (LinuxCNC's ends at the block's end, not at its start)
+    st.pos = end;
+    let n = out.records.len();
+    out.records[n - 1].end = end;
+    Ok(())
+}
+
 /// Why the engine does not follow a canned cycle, or None when it does.
 fn cycle_refused(d: Dialect, c: i32) -> Option<String> {
     if d == Dialect::FanucLathe {
@@ -2967,7 +3036,8 @@ fn cycle_refused(d: Dialect, c: i32) -> Option<String> {
         });
     }
     match c {
-        760 => Some("threading cycle G76".into()),
+        760 if !d.is_linuxcnc() => Some("threading cycle G76".into()),
+        760 => None,
         870 => Some(
             "canned cycle G87 (back boring, with spindle orientation) the engine does not follow"
                 .into(),
@@ -2993,6 +3063,9 @@ struct CycleWords<'a> {
     polar: Option<[Option<f64>; 2]>,
     /// Where errors point: the cycle's G word, or the first axis word.
     col: usize,
+    /// I J K and E (LinuxCNC's G76: the thread's offsets and depths, and its taper's length).
+    ijk: [Option<f64>; 3],
+    e: Option<f64>,
 }
 
 /// A block in canned-cycle mode: its holes traced move by move as LinuxCNC runs them, or, when
@@ -3023,6 +3096,9 @@ fn canned(
     if let Some((_, idx)) = st.active.canned {
         unknown_after(out, st, idx);
         return Ok(());
+    }
+    if c == 760 && st.dialect.is_linuxcnc() {
+        return linuxcnc_g76(out, st, li, w, blocked, unit);
     }
     if lathe_modal_cycle(st.dialect, c) {
         // (R, the taper, is modal like X and Z)

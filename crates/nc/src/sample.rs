@@ -429,7 +429,7 @@ pub fn sample_range(
                 // a grooving or threading cycle: the field over the rectangle it cuts in (from
                 // its start to its end, widened by its margins), a grid of points at most
                 // --max-segment apart, against the end's
-                let c = [rec.end[0], 0.0, rec.end[2]];
+                let c = [rec.end[0], rec.end[1], rec.end[2]];
                 let g0 = s.checks.len() / 3;
                 s.checks.extend_from_slice(&c);
                 let lo = [
@@ -446,7 +446,7 @@ pub fn sample_range(
                     for j in 0..=n[1] {
                         s.checks.extend_from_slice(&[
                             lo[0] + (hi[0] - lo[0]) * i as f64 / n[0] as f64,
-                            0.0,
+                            c[1],
                             lo[1] + (hi[1] - lo[1]) * j as f64 / n[1] as f64,
                         ]);
                     }
