@@ -286,6 +286,14 @@ def test_arcs_have_the_centres_siemens_rules_give(tmp_path):
         ("(3 > 1) AND 0", 0.0),
         ("NOT 0 OR 0", 1.0),
         ("MINVAL(4, 2) + MAXVAL(4, 2)", 6.0),
+        # bit operators (Siemens: B_NOT first, then after + and -: B_AND, B_XOR, B_OR, then AND)
+        ("6 B_AND 3", 2.0),
+        ("6 B_OR 3", 7.0),
+        ("6 B_XOR 3", 5.0),
+        ("1 B_OR 2 B_AND 6", 3.0),  # 1 B_OR (2 B_AND 6)
+        ("1 + 1 B_AND 3", 2.0),  # (1 + 1) B_AND 3
+        ("B_NOT 0 B_AND 5", 5.0),  # (B_NOT 0) B_AND 5: all bits set
+        ("1 B_OR 0 AND 0", 0.0),  # (1 B_OR 0) AND 0
     ],
 )
 def test_expressions_follow_siemens_priorities(expr, want):
@@ -1079,3 +1087,8 @@ def test_the_start_motion_is_for_sinumerik_programs(tmp_path):
         assert r.exit_code == 2 and "--start-motion is for Sinumerik programs" in r.output, r.output
     with pytest.raises(ValueError):
         sn.translate(b"X1\n", "p", (), "G2")
+
+
+def test_bit_operators_take_whole_numbers():
+    with pytest.raises(InputError, match="B_AND of 2.5: the bit operators are read for whole numbers"):
+        sn.translate(b"R1 = 2.5 B_AND 1\nG1 X=R1 F100\n")

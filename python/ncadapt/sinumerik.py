@@ -26,7 +26,7 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   with axes are refused;
 - R parameters (``R1``, ``R[expr]``; one read before the program sets it is refused: its value is
   the machine's), ``DEF INT|REAL|BOOL`` variables, assignments, expressions (``+ - * / DIV MOD``,
-  comparisons, ``AND OR XOR NOT``, ``SIN COS TAN ASIN ACOS ATAN2`` in degrees, ``SQRT ABS POT
+  comparisons, ``AND OR XOR NOT``, ``B_AND B_OR B_XOR B_NOT`` on whole numbers, ``SIN COS TAN ASIN ACOS ATAN2`` in degrees, ``SQRT ABS POT
   TRUNC ROUND MINVAL MAXVAL LN EXP``), ``IF/ELSE/ENDIF``, ``WHILE/ENDWHILE``, ``FOR … TO …/ENDFOR``,
   ``REPEAT/UNTIL``, ``LOOP/ENDLOOP``, ``GOTOF/GOTOB/GOTO/GOTOC`` to a label or block number,
   ``IF … GOTOF``, ``CASE(…) OF … DEFAULT …``;
@@ -157,7 +157,17 @@ _FUNCS = {
 }
 # binary operators by priority, lowest first (Siemens, Job Planning, "Priority of the operations":
 # the comparisons come last, after the logic, so ``A > 1 AND B`` compares ``A`` with ``1 AND B``)
-_LEVELS = (("==", "<>", "<", ">", "<=", ">="), ("OR",), ("XOR",), ("AND",), ("+", "-"), ("*", "/", "DIV", "MOD"))
+_LEVELS = (
+    ("==", "<>", "<", ">", "<=", ">="),
+    ("OR",),
+    ("XOR",),
+    ("AND",),
+    ("B_OR",),
+    ("B_XOR",),
+    ("B_AND",),
+    ("+", "-"),
+    ("*", "/", "DIV", "MOD"),
+)
 #: Comparisons test relative equality (Siemens, "Precision correction on comparison errors"):
 #: two values within this fraction of the larger are equal.
 RELATIVE_EQUAL = 1e-12
@@ -335,6 +345,9 @@ def _binary(op: str, a: float, b: float, col: int) -> float:
 def _operate(op: str, a: float, b: float, col: int) -> float:
     if op in ("/", "DIV", "MOD") and b == 0.0:
         raise _Error("division by zero", col)
+    if op.startswith("B_"):
+        x, y = _bits(a, op, col), _bits(b, op, col)
+        return float({"B_AND": x & y, "B_OR": x | y, "B_XOR": x ^ y}[op])
     match op:
         case "+":
             return a + b
@@ -362,6 +375,14 @@ def _operate(op: str, a: float, b: float, col: int) -> float:
     return float(a != 0.0 or b != 0.0)
 
 
+def _bits(v: float, op: str, col: int) -> int:
+    """A bit operator's operand: a whole number (an INT's value); the rounding of a REAL one is
+    the control's, not read."""
+    if v != math.trunc(v) or abs(v) >= 2.0**31:
+        raise _Error(f"{op} of {v:g}: the bit operators are read for whole numbers (INT) only", col)
+    return int(v)
+
+
 def _unary(t: _Tokens, m: _Machine) -> float:
     tok = t.peek()
     if tok[0] == "end":
@@ -373,6 +394,8 @@ def _unary(t: _Tokens, m: _Machine) -> float:
         return _unary(t, m)
     if t.take("NOT"):
         return float(_unary(t, m) == 0.0)
+    if t.take("B_NOT"):
+        return float(~_bits(_unary(t, m), "B_NOT", col))
     if t.take("("):
         v = _expr(t, m)
         t.need(")")
