@@ -331,6 +331,14 @@ def test_nose_compensation_needs_its_radius_and_a_field_calm_within_it():
     ]
     (u,) = nc.parse(fanuc, dialect="fanuc-lathe", tools={1: 1.6}).unsupported
     assert "offset 2: its nose radius is not known" in u.construct
+    # offset 00 (T0000, T0100): no offset, no nose radius: compensation moves nothing
+    for t in ("T0000", "T0100"):
+        none = fanuc.replace("T0202", t)
+        assert nc.parse(none, dialect="fanuc-lathe").unsupported == ()
+        assert "X20.1 Z2." in nc.parse(none, dialect="fanuc-lathe").correct(fields.Shift((0.05, 0, 0))).text
+    # a T of two digits does not say which offset
+    (u,) = nc.parse(fanuc.replace("T0202", "T2"), dialect="fanuc-lathe").unsupported
+    assert "no tool offset selected" in u.construct
 
 
 def test_a_roughing_cycle_s_contour_is_not_read_as_moves():

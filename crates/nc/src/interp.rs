@@ -3466,11 +3466,17 @@ fn comp_on(
         // the tool), or of a Fanuc lathe's offset (T0101: tool 01, offset 01, which holds the
         // nose radius)
         let tool = if st.dialect == Dialect::FanucLathe {
-            st.tool_next.filter(|&t| t >= 100).map(|t| t % 100)
+            // (T0100, T0000: offset 00, none: no nose radius)
+            st.tool_next.and_then(|t| match t {
+                0 => Some(0),
+                100.. => Some(t % 100),
+                _ => None,
+            })
         } else {
             d_word.map(|d| d.max(0.0) as u32).or(st.tool_loaded)
         };
         match tool {
+            Some(0) if st.dialect == Dialect::FanucLathe => Ok(0.0),
             Some(t) => table_diameter(st, t).ok_or_else(|| format!(
                 "nose radius compensation {name} with offset {t}: its nose radius is not known; give it in the tool table (--tool-table: tool {t}, D the nose diameter)"
             )),
@@ -3511,7 +3517,8 @@ fn comp_on(
             // in G18/G19: the contour is corrected where it is, and the field's change within
             // the radius bounded (the tool's side does not matter to the bound)
             st.nose = Some(d.abs() / 2.0);
-            st.nose_edge = true;
+            // (a radius of 0 compensates nothing: its moves need not stay whole)
+            st.nose_edge = d != 0.0;
             st.nose_dir = None;
             // (a negative diameter puts the tool on the other side, as LinuxCNC reads it)
             st.nose_side = if matches!(c, 410 | 411) { 1.0 } else { -1.0 } * d.signum();
