@@ -768,8 +768,11 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
                 "grid": prog.correct(grid, max_segment=MAX_SEGMENT, expand_cycles=True),
             }
     except RefusedError as e:
-        r.outcome = f"refused: {_first_line(e)}"
-        r.reason, r.refusal_line = _generic(e.message), _refusal_line(e)
+        # (the message names the file and the line first, and ends saying nothing was written)
+        why = re.sub(r"^.*?: line \d+: |; nothing written$", "", _first_line(e))
+        r.refusal_line = _refusal_line(e)
+        r.outcome = f"refused: line {r.refusal_line}: {why}" if r.refusal_line else f"refused: {why}"
+        r.reason = _generic(why)
         return
     except InputError as e:  # a construct the correction cannot write faithfully, at its line
         r.outcome = f"refused: line {e.line}: {e.message}"
