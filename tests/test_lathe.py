@@ -700,12 +700,12 @@ def test_grooving_and_threading_cycles_move_as_one():
     k = out.index("G76 P020060 Q50 R0.05")
     assert (
         out[k - 1] == "G00 X30. Z5."
-        and out[k + 1] == "X30.1 Z4.9"
+        and out[k + 1] == "G00 X30.1 Z4.9"
         and out[k + 2] == "G76 U-7.8 W-35. R0. P1000 Q300 F1.5"
     )
     # the last groove: after two rapids, its start moved by a move added in G00
     k = out.index("G75 X20.1 Z-60.1 I0.5 K2. D0.1")
-    assert out[k - 1] == "X50.1 Z-50.1" and out[k - 2] == "G00 Z-50."
+    assert out[k - 1] == "G00 X50.1 Z-50.1" and out[k - 2] == "G00 Z-50."
 
 
 def test_grooving_and_threading_cycles_the_engine_does_not_follow():

@@ -368,7 +368,7 @@ def test_linuxcnc_threading_cycle_moves_as_one(tmp_path, before):
     lines = out.text.splitlines()
     assert "G76 P0.05 Z-0.49921 I-0.075 J0.008 K0.045 Q29.5 H1 E0.02 L2" in lines
     if before.startswith("G0"):
-        assert lines[lines.index("G0 X0.55") + 1] == "X0.55039 Z0.10079"  # the start, moved
+        assert lines[lines.index("G0 X0.55") + 1] == "G0 X0.55039 Z0.10079"  # the start, moved
     canon_in = _run(tmp_path, src, "in.ngc")
     canon_out = canonical(out.write(tmp_path / "out.ngc"))
     assert canon_in.error is None and canon_out.error is None, canon_out.error
@@ -394,3 +394,76 @@ def test_linuxcnc_threading_cycle_refusals(tmp_path):
         assert says in _run(tmp_path, src).error
         with pytest.raises(InputError, match=f":5:.*{says}"):
             nc.read(_write(tmp_path, src), dialect="linuxcnc-lathe").blocks  # noqa: B018
+
+
+def _feeds(canon):
+    return canon.ends[[k for k, kind in enumerate(canon.kinds) if kind == "feed"], :3]
+
+
+@pytest.mark.parametrize(
+    ("src", "dialect"),
+    [
+        # the move added to the moved start is written in the state before the block: G91 ...
+        ("G21 G18 G8\nG0 X10 Z2\nS500 M3\nG91\nG76 P1 Z-12 I-1 J0.2 K0.8 X2\nG90 G0 X20\nM2\n", "linuxcnc-lathe"),
+        # ... radius mode when the block turns diameter mode on, mm when it turns inches on ...
+        ("G21 G18 G8\nG0 X10 Z2\nS500 M3\nG7 G76 P1 Z-10 I-1 J0.2 K0.8\nG8 G0 X20\nM2\n", "linuxcnc-lathe"),
+        ("G21 G18 G8\nG0 X10 Z2\nS500 M3\nG20 G76 P0.04 Z-0.4 I-0.04 J0.008 K0.03\nG21 G0 X20\nM2\n", "linuxcnc-lathe"),
+        # ... and a mill's Y too
+        ("G21 G18\nG0 X10 Y5 Z2\nS500 M3\nG76 P1 Z-10 I-1 J0.2 K0.8\nG0 X20\nM2\n", "linuxcnc"),
+    ],
+)
+def test_the_move_to_a_cycle_s_moved_start_runs_in_the_state_before_it(tmp_path, src, dialect):
+    """rs274 runs the output's thread passes where it runs the input's, shifted."""
+    shift = (0.01, 0.02 if dialect == "linuxcnc" else 0.0, 0.02)
+    out = nc.read(_write(tmp_path, src), dialect=dialect).correct(fields.Shift(shift))
+    assert len(out.text.splitlines()) == len(src.splitlines()) + 1  # (the added move)
+    canon_in, canon_out = _run(tmp_path, src, "in.ngc"), canonical(out.write(tmp_path / "out.ngc"))
+    assert canon_in.error is None and canon_out.error is None, canon_out.error
+    feeds_in, feeds_out = _feeds(canon_in), _feeds(canon_out)
+    assert len(feeds_in) == len(feeds_out) >= 4
+    np.testing.assert_allclose(feeds_out, feeds_in + shift, atol=3e-3)
+
+
+@pytest.mark.parametrize(
+    "before",
+    [
+        "G81 X10 Y0 Z-1 R3 F100\nG18\n",  # a drilling cycle still in force (group 1)
+        "G33 Z1.5 K1\n",  # a synchronised move in force
+    ],
+)
+def test_no_move_is_added_to_a_cycle_s_start_in_another_mode(tmp_path, before):
+    src = f"G21 G17\nG0 X10 Y0 Z5\nS500 M3\n{before}G18\nG76 P1 Z-10 I-1 J0.2 K0.8\nG0 X20\nM2\n".replace(
+        "G18\nG18\n", "G18\n"
+    )
+
+    def lean(p):
+        d = np.zeros_like(np.asarray(p, float))
+        d[:, 0] = 0.01 + 0.00015 * np.asarray(p, float)[:, 2]
+        d[:, 2] = 0.02
+        return d
+
+    with pytest.raises(InputError, match="no G0 or G1 is in force"):
+        nc.read(_write(tmp_path, src)).correct(lean, chord_tol=0.01, rapids=True)
+
+
+def test_a_repeated_g76_and_a_copied_one(tmp_path):
+    # a G76 block repeated without its code (modal, as rs274 runs it): read
+    src = "G21 G18 G8\nG0 X10 Z2\nS500 M3\nG76 P1 Z-3 I-1 J0.2 K0.8\nP1 Z-6 I-1 J0.2 K0.8\nG80\nM2\n"
+    assert _run(tmp_path, src).error is None
+    assert nc.read(_write(tmp_path, src), dialect="linuxcnc-lathe").unsupported == ()
+    # a G76 copied (--keep-unsupported) ends at its end: an increment after it is from there
+    src = "G21 G18\nG0 X10 Y0 Z2\nS500 M3\nG76 P1 Z-10 I-1 J0.2 K0.8 Y1\nG91\nG1 X1 F100\nG90\nM2\n"
+    out = nc.read(_write(tmp_path, src)).correct(fields.Shift((0.0, 0.0, 0.02)), keep_unsupported=True)
+    canon = canonical(out.write(tmp_path / "out.ngc"))
+    assert canon.error is None, canon.error
+    np.testing.assert_allclose(_feeds(canon)[-1], [11.0, 1.0, -9.98], atol=2e-3)
+
+
+def test_cycles_too_large_to_check_and_g33_from_nowhere_are_refused(tmp_path):
+    huge = "O1\nG18 G21\nG0 X30. Z5.\nG75 X-20000. Z-50000. I2. K3. F0.1\nM30\n"
+    with pytest.raises(InputError, match="pieces"):
+        nc.parse(huge, dialect="fanuc-lathe").correct(fields.Shift((0, 0, 0.01)))
+    # a G33 from where the program does not tell (Y here): left as written, with the warning
+    src = "G21 G18\nG0 X10 Z2\nS500 M3\nG33 Z-5 K1\nM2\n"
+    out = nc.read(_write(tmp_path, src)).correct(fields.Shift((0, 0, 0.01)))
+    assert out.text == src and "not corrected because the position is unknown" in " ".join(out.correction.warnings)

@@ -986,6 +986,13 @@ impl<'a> Emitter<'a> {
                 .map(|a| (epos0[a] - (start[a] + d0[a])).powi(2))
                 .sum::<f64>()
                 .sqrt();
+            if off.is_nan() {
+                return Err(NcError::Interpret {
+                    line: rec.line as usize + 1,
+                    col: 1,
+                    message: "a spindle-synchronised move (G33) from a position the program does not tell: its thread is reckoned from where it starts; give X, Y and Z before it".into(),
+                });
+            }
             if !(off <= self.st.arc_tol) {
                 return Err(NcError::Interpret {
                     line: rec.line as usize + 1,
@@ -1961,37 +1968,80 @@ impl<'a> Emitter<'a> {
         b: &crate::interp::LatheBox,
     ) -> Result<(), NcError> {
         let rec = &self.it.records[ri - 1];
+        let linuxcnc = self.it.dialect.is_linuxcnc();
         let (f, c) = samples.of(ri - 1);
         if !rec.supported || c == 0 {
+            // copied: a LinuxCNC G76 ends at the block's end, from where the output is
+            if linuxcnc {
+                for a in 0..3 {
+                    let named = rec.named & (1 << a) != 0;
+                    self.st.epos[a] = if named && !rec.incremental {
+                        rec.end[a]
+                    } else {
+                        self.st.epos[a] + (rec.end[a] - b.start[a])
+                    };
+                }
+            }
             return Ok(());
         }
-        let d = [disp[3 * f], disp[3 * f + 2]];
+        let lathe = self.it.dialect.lathe();
+        let d = [
+            disp[3 * f],
+            if lathe { 0.0 } else { disp[3 * f + 1] },
+            disp[3 * f + 2],
+        ];
         let half = self.fmt.half(rec.inch);
-        let start = [b.start[0] + d[0], b.start[2] + d[1]];
-        let (ux, uz) = (Self::unit(rec, 0), Self::unit(rec, 2));
-        let away = (start[0] - self.st.epos[0]).abs() / ux >= half
-            || (start[1] - self.st.epos[2]).abs() / uz >= half;
+        let start = [b.start[0] + d[0], b.start[1] + d[1], b.start[2] + d[2]];
+        // the move to the moved start, in the state in force before the block
+        let bf = b.before;
+        let unit_before = |a: usize| {
+            let u = axis_unit(a, if bf.inch { MM_PER_INCH } else { 1.0 });
+            if a == 0 && bf.diameter {
+                u / 2.0
+            } else {
+                u
+            }
+        };
+        let axes: &[usize] = if lathe { &[0, 2] } else { &[0, 1, 2] };
+        let half_before = self.fmt.half(bf.inch);
+        let away = axes
+            .iter()
+            .any(|&a| !((start[a] - self.st.epos[a]).abs() / unit_before(a) < half_before));
         if away {
-            if !matches!(b.g01, Some(Motion::Rapid | Motion::Feed)) {
+            let Some(m) = bf
+                .motion
+                .filter(|_| axes.iter().all(|&a| self.st.epos[a].is_finite()))
+            else {
                 return Err(NcError::Interpret {
                     line: li + 1,
                     col: 1,
-                    message: "a grooving or threading cycle starts where the tool stands, which the correction moves with the cycle; the move there is not corrected (a rapid) and no G0 or G1 is in force for a move to add before the block: write G0 or G1 before it".into(),
+                    message: "a grooving or threading cycle starts where the tool stands, which the correction moves with the cycle; the move there is not corrected (a rapid) and no G0 or G1 is in force for a move to add before the block (or the position there is not known): write G0 or G1 before it".into(),
                 });
-            }
-            // a line of its own before the block: X and Z of the moved start
+            };
+            // a line of its own before the block: its motion (the one in force) and the moved
+            // start, absolute or from where the output is as the block before leaves the mode
             let at = self.lx.lines[li].start;
             let t0 = self.st.arena.len();
-            for (k, (a, u)) in [(0usize, ux), (2, uz)].into_iter().enumerate() {
-                if k > 0 {
-                    let sep = self.sep();
-                    self.st.arena.extend_from_slice(sep);
-                }
+            if self.lx.lines[li].block_delete {
+                self.st.arena.push(b'/');
+            }
+            self.st
+                .arena
+                .extend_from_slice(motion_text(m, self.lx.style.padded_g).as_bytes());
+            for &a in axes {
+                let sep = self.sep();
+                self.st.arena.extend_from_slice(sep);
                 self.st.arena.push(AXES[a]);
+                let u = unit_before(a);
+                let from = if bf.incremental {
+                    self.st.epos[a]
+                } else {
+                    bf.off[a]
+                };
                 let v = self
                     .fmt
-                    .number((start[k] - self.off[a]) / u, rec.inch, &mut self.st.arena);
-                self.st.epos[a] = self.off[a] + v * u;
+                    .number((start[a] - from) / u, bf.inch, &mut self.st.arena);
+                self.st.epos[a] = from + v * u;
             }
             let eol = self.eol;
             self.st.arena.extend_from_slice(eol);
@@ -2003,7 +2053,7 @@ impl<'a> Emitter<'a> {
             });
             self.st.stats.lines_added += 1;
         }
-        let mut ends = [self.st.epos[0], self.st.epos[2]];
+        let mut ends = [self.st.epos[0], self.st.epos[1], self.st.epos[2]];
         for w in self.lx.line_words(li) {
             let Some((a, incremental)) = self.word_axis(rec, w.letter) else {
                 continue;
@@ -2017,19 +2067,19 @@ impl<'a> Emitter<'a> {
             } else {
                 self.off[a]
             };
-            let want = (rec.end[a] + d[a / 2] - from) / u;
+            let want = (rec.end[a] + d[a] - from) / u;
             let v = if (want - w.value).abs() >= half {
                 self.edit_number(w.num_start, w.end, want, rec.inch)
             } else {
                 w.value
             };
-            ends[a / 2] = from + v * u;
+            ends[a] = from + v * u;
         }
-        if self.it.dialect.is_linuxcnc() {
+        if linuxcnc {
             // LinuxCNC's G76 ends at the block's end (moved; an axis it leaves out where it
             // started), not at its start
             self.st.epos[0] = ends[0];
-            self.st.epos[2] = ends[1];
+            self.st.epos[2] = ends[2];
         }
         Ok(())
     }

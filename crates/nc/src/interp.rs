@@ -261,9 +261,23 @@ pub struct LatheBox {
     /// How far (mm) beyond the rectangle the cycle may cut, in X (radius) and Z: a thread's taper,
     /// a groove's clearance or relief.
     pub margin: [f64; 2],
-    /// The motion of G-code group 01 in force (the one a move the output adds before a grooving
-    /// or threading cycle runs in).
-    pub g01: Option<Motion>,
+    /// The state in force before the block: a move the output adds before a grooving or
+    /// threading cycle (to its moved start) is written in it.
+    pub before: Before,
+}
+
+/// The modal state in force before a block (see [`LatheBox::before`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Before {
+    /// The motion in force: G0 or G1; None for another (an arc, a cycle, G33, none), in which no
+    /// move can be added.
+    pub motion: Option<Motion>,
+    pub incremental: bool,
+    pub inch: bool,
+    /// Lathe diameter mode: X words are diameters.
+    pub diameter: bool,
+    /// The program's origin (mm): work offset and G92/G52 shifts.
+    pub off: [f64; NAXES],
 }
 
 /// [`LatheBox::code`] of a Fanuc lathe's face grooving (G74), grooving (G75) and threading (G76)
@@ -584,6 +598,8 @@ struct State {
     nose_edge: bool,
     /// LinuxCNC's G33 in force: the feed moves are synchronised with the spindle ([`WHOLE_SYNC`]).
     sync: bool,
+    /// The modal state as the block being read began.
+    before: Before,
     /// Under that compensation: the direction (in the plane's coordinates) the last move in the
     /// plane ended in; None before the first.
     nose_dir: Option<[f64; 2]>,
@@ -756,6 +772,13 @@ impl Interpreter {
                 nose_dir: None,
                 nose_side: 1.0,
                 sync: false,
+                before: Before {
+                    motion: None,
+                    incremental: false,
+                    inch: false,
+                    diameter: false,
+                    off: [0.0; NAXES],
+                },
                 contour_edge: false,
                 contour: None,
                 contours: Vec::new(),
@@ -845,6 +868,16 @@ impl Interpreter {
                 st.pos[1] = 0.0;
             }
             let words = lx.line_words(lj);
+            st.before = Before {
+                motion: match st.mode {
+                    Mode::Motion(m @ (Motion::Rapid | Motion::Feed)) if !st.sync => Some(m),
+                    _ => None,
+                },
+                incremental: st.incremental,
+                inch: st.inch,
+                diameter: st.diameter,
+                off: st.off,
+            };
             if line.percent {
                 if !*first_content_seen {
                     *percent_open = true;
@@ -2422,9 +2455,21 @@ fn unused_word(
         .any(|&c| g(c));
     let user_m = m(|c| (100..=199).contains(&c));
     let rules: [(u8, bool, &'static str); 9] = [
-        (b'I', arc || cycle(&[870]) || other, "G2, G3 or G87"),
-        (b'J', arc || cycle(&[870]) || other, "G2, G3 or G87"),
-        (b'K', arc || cycle(&[870]) || other, "G2, G3 or G87"),
+        (
+            b'I',
+            arc || cycle(&[760, 870]) || other,
+            "G2, G3, G76 or G87",
+        ),
+        (
+            b'J',
+            arc || cycle(&[760, 870]) || other,
+            "G2, G3, G76 or G87",
+        ),
+        (
+            b'K',
+            arc || cycle(&[760, 870]) || other,
+            "G2, G3, G76 or G87",
+        ),
         (
             b'R',
             arc || any_cycle || other || m(|c| c == 19),
@@ -2443,7 +2488,7 @@ fn unused_word(
         ),
         (
             b'Q',
-            cycle(&[730, 830])
+            cycle(&[730, 760, 830])
                 || g(640)
                 || other
                 || user_m
@@ -2455,7 +2500,11 @@ fn unused_word(
             any_cycle || g(411) || g(421) || other || m(|c| c == 66 || c == 98),
             "canned cycle, G10 or M code",
         ),
-        (b'H', g(430) || g(432) || other, "G43"),
+        (
+            b'H',
+            g(430) || g(432) || cycle(&[760]) || other,
+            "G43 or G76",
+        ),
         (
             b'D',
             g(410) || g(411) || g(420) || g(421) || g(960) || other,
@@ -2890,7 +2939,7 @@ fn lathe_box(
         code: c,
         start: [a[0], a[1], a[2]],
         margin: [0.0; 2],
-        g01: st.g01,
+        before: st.before,
     });
     out.summary.counts[Motion::Feed as usize] += 2;
     Ok(())
@@ -2934,7 +2983,6 @@ fn lathe_cut_block(
         out.unsupported[idx].blocks += 1;
     }
     st.pos = *end;
-    st.pos[1] = a[1];
     push_record(
         out,
         st,
@@ -2955,7 +3003,7 @@ fn lathe_cut_block(
         code: c,
         start: [a[0], a[1], a[2]],
         margin,
-        g01: st.g01,
+        before: st.before,
     });
     out.summary.counts[Motion::Feed as usize] += 2;
 }

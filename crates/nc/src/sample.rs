@@ -440,8 +440,11 @@ pub fn sample_range(
                     c[0].max(b.start[0]) + b.margin[0],
                     c[2].max(b.start[2]) + b.margin[1],
                 ];
-                let n =
-                    [0, 1].map(|j| ((hi[j] - lo[j]) / opts.max_segment).ceil().max(1.0) as usize);
+                let n = [0, 1].map(|j| ((hi[j] - lo[j]) / opts.max_segment).ceil().max(1.0));
+                if !((n[0] + 1.0) * (n[1] + 1.0) <= MAX_PIECES_PER_BLOCK) {
+                    return Err(too_many(rec, (n[0] + 1.0) * (n[1] + 1.0)));
+                }
+                let n = n.map(|v| v as usize);
                 for i in 0..=n[0] {
                     for j in 0..=n[1] {
                         s.checks.extend_from_slice(&[
