@@ -419,14 +419,15 @@ def test_a_roughing_cycle_s_contour_is_corrected_where_it_is(tmp_path):
     assert after_out[0] == after_in[0] == "G70 P10 Q20 F0.05"
     assert c_out.count("\n") > c_in.count("\n") + 10  # cut in pieces, between N10 and N20
     _check_displaced(tmp_path, _for_rs274(c_in), _for_rs274(c_out), 0.0035)
-    # after the cycles the control is back at the cycle's start, which is not followed: the move
-    # from there is corrected at its end only, and the next one from it as usual
-    assert after_out[1] == "G00 X50.0017 Z9.9987"  # (50, 10) moved by the field at radius 25
+    # after the cycles the control is back at the cycle's start (12, 3): the move from there is
+    # corrected along its length (--rapids: in pieces), to its end moved by the field there
+    assert after_out[1].startswith("G00 X13.") and "X50.0017 Z9.9987" in after_out
     d = _field([[25.0, 0.0, 10.0]])[0]
     assert (round(50 + 2 * d[0], 4), round(10 + d[2], 4)) == (50.0017, 9.9987)
-    # (likewise after the second cycle's contour: its first move, whatever it is, at its end)
+    # (likewise after the second cycle's contour, from its start (45, 5))
     d = _field([[23.0, 0.0, -31.0]])[0]
-    assert after_out[-3] == f"G01 X{46 + 2 * d[0]:.4f} Z{-31 + d[2]:.4f} F0.1"
+    assert after_out[-3] == f"X{46 + 2 * d[0]:.4f} Z{-31 + d[2]:.4f}"
+    assert any(ln.startswith("G01 X45.0565 Z4.0077") for ln in after_out)  # (its first piece, from there)
 
 
 def test_what_a_roughing_cycle_s_contour_cannot_be():
@@ -742,3 +743,20 @@ def test_a_cycle_s_start_moved_by_a_corrected_cut_needs_no_move_before_it():
     out = nc.parse(text, dialect="fanuc-lathe").correct(fields.Shift((0.02, 0, 0.03))).text.splitlines()
     k = out.index("G75 X20.04 I0.5")
     assert out[k - 1] == "X36.04"  # (the cut's last piece: the groove starts where it ends)
+
+
+def test_after_a_roughing_contour_the_control_is_back_at_the_cycle_s_start():
+    """Fanuc's G71 roughs, then goes back to where the tool stood at its block (the start), and G70
+    finishes and goes back to its own: the position after them is known, so a grooving cycle from
+    there is moved with its start (a rapid brought the tool to the start: a move to the moved
+    start is added, in G00, the motion in force)."""
+    text = (
+        "%\nO1\nG18 G20 G99\nT0101\nG00 X3.0 Z0.1\nG71 P10 Q20 U0.01 W0.005 D0.05 F0.010\n"
+        "N10 G00 X1.0 Z0.1\nG01 Z-1.0\nX3.0\nN20 G00 Z0.1\nG70 P10 Q20 F0.005\nG75 X0.5 I0.005 F0.005\n"
+        "G00 X4.0\nM30\n%\n"
+    )
+    prog = nc.parse(text, dialect="fanuc-lathe", tools={1: 0.0})
+    assert prog.unsupported == ()
+    out = prog.correct(fields.Shift((0.0254, 0.0, 0.0508))).text.splitlines()
+    k = out.index("G75 X0.50200 I0.005 F0.005")
+    assert out[k - 1] == "G00 X3.00200 Z0.10200" and out[k - 2] == "G70 P10 Q20 F0.005"

@@ -86,7 +86,7 @@ fn records_dict<'py>(py: Python<'py>, it: &Interp) -> PyResult<Bound<'py, PyDict
                 | (r.incremental as u8) << 1
                 | (r.arc_absolute as u8) << 2
                 | (r.supported as u8) << 3
-                | ((r.cycle != 0) as u8) << 4
+                | (matches!(r.cycle, 1..=3) as u8) << 4
                 | ((r.comp != nc::interp::NO_COMP
                     || r.nose > 0.0
                     || r.cycle == nc::interp::CYCLE_LATHE) as u8)

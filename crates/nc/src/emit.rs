@@ -333,6 +333,8 @@ pub struct EmitState {
     nose_piece: f64,
     /// The last move under radius compensation in G18/G19 was an arc written in chords.
     nose_chords: bool,
+    /// Where the output stood at a Fanuc lathe's roughing cycle whose contour is being written.
+    contour_from: Option<[f64; NAXES]>,
     /// The output's modal X and Z (mm) of a lathe's G90/G94 box cycle, as last written.
     out_box: [f64; 2],
 }
@@ -352,6 +354,7 @@ impl EmitState {
             comp_piece: f64::INFINITY,
             nose_piece: f64::INFINITY,
             nose_chords: false,
+            contour_from: None,
             arc_tol: 0.0,
             cyc_level: f64::NAN,
             cyc_r: None,
@@ -487,6 +490,23 @@ impl<'a> Emitter<'a> {
                 }
                 let (f, c) = samples.of(ri);
                 self.off = self.it.frames[self.it.records[ri].frame as usize];
+                // a Fanuc lathe's roughing cycle: the output goes back after its contour to where
+                // it stood at the cycle's block (a record of the line, before its own move)
+                let line_no = self.it.records[ri].line;
+                let back = self.it.records[..=ri]
+                    .iter()
+                    .rev()
+                    .take_while(|r| r.line == line_no)
+                    .any(|r| r.cycle == crate::interp::CYCLE_CONTOUR_BACK);
+                if back {
+                    if let Some(p) = self.st.contour_from.take() {
+                        self.st.epos = p;
+                    }
+                }
+                let cycle = self.it.records[ri].cycle;
+                if cycle == crate::interp::CYCLE_CONTOUR_START {
+                    self.st.contour_from = Some(self.st.epos);
+                }
                 self.comp_inside_corner(ri)?;
                 self.nose_exit(ri)?;
                 let uvw = if uvw.is_empty() {
@@ -494,7 +514,12 @@ impl<'a> Emitter<'a> {
                 } else {
                     &uvw[3 * f..3 * (f + c)]
                 };
-                if self.it.records[ri].cycle == crate::interp::CYCLE_LATHE {
+                if matches!(
+                    cycle,
+                    crate::interp::CYCLE_CONTOUR_START | crate::interp::CYCLE_CONTOUR_BACK
+                ) {
+                    // (copied; where the output is was set above)
+                } else if self.it.records[ri].cycle == crate::interp::CYCLE_LATHE {
                     let line = self.it.records[ri].line;
                     let k = self.it.boxes.partition_point(|b| b.line < line);
                     match self.it.boxes.get(k) {

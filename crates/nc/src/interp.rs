@@ -189,6 +189,8 @@ struct Contour {
     first: bool,
     /// The block numbered Q has been read: the control is back at the cycle's start.
     done: bool,
+    /// The cycle's start (mm), where the control goes back to after it.
+    start: [f64; NAXES],
 }
 
 /// [`Record::comp`] of a move without cutter radius compensation.
@@ -238,6 +240,12 @@ pub const CYCLE_BOTTOM: u8 = 2;
 /// record, moved as a whole by the field there) and the return to its start (the last record of
 /// the block).
 pub const CYCLE_LATHE: u8 = 3;
+/// [`Record::cycle`] of a Fanuc lathe's roughing cycle block (G71/G72 with its contour after it):
+/// where the output stands there is where the control goes back to after the contour.
+pub const CYCLE_CONTOUR_START: u8 = 4;
+/// [`Record::cycle`] of the return to a roughing cycle's start after its contour (the block
+/// numbered Q): the output is back where it stood at the cycle's block.
+pub const CYCLE_CONTOUR_BACK: u8 = 5;
 
 /// A Fanuc lathe's turning (G90) or facing (G94) cycle block of G-code system A: from its start
 /// A (where the tool stands) a rapid to the cut, a feed along Z (G90) or X (G94) to the corner,
@@ -900,13 +908,14 @@ impl Interpreter {
             if let Some(c) = st.contour.as_mut() {
                 let numbered = |v: f64| words.iter().any(|w| w.letter == b'N' && w.value == v);
                 if c.done {
-                    // back at the cycle's start, the output's, which is not followed here: the
-                    // position is unknown until moves name X and Z again
+                    // back at the cycle's start (the output at its own, where it stood as the
+                    // cycle began: [`CYCLE_CONTOUR_BACK`])
+                    st.pos = c.start;
+                    st.pos[1] = 0.0; // (a lathe's Y)
                     st.contour = None;
                     st.contour_edge = false;
-                    st.pos = [f64::NAN; NAXES];
-                    st.pos[1] = 0.0; // (a lathe's Y)
                     push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                    out.records.last_mut().unwrap().cycle = CYCLE_CONTOUR_BACK;
                 } else {
                     let (cycle, p, q) = (c.code, c.p, c.q);
                     let named = |l: &[u8]| words.iter().any(|w| l.contains(&w.letter));
@@ -1313,6 +1322,7 @@ impl Interpreter {
                             q,
                             first: true,
                             done: false,
+                            start: st.pos,
                         });
                         st.contours.push((p, q));
                         cycle_line = true;
@@ -1668,6 +1678,11 @@ impl Interpreter {
                 st.inch = inch;
             }
             if cycle_line && untraced.is_none() {
+                if st.contour.as_ref().is_some_and(|c| c.first) {
+                    // where the output stands as the roughing cycle begins: it goes back there
+                    push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
+                    out.records.last_mut().unwrap().cycle = CYCLE_CONTOUR_START;
+                }
                 continue;
             }
             // a new tool offset (a Fanuc lathe's T, LinuxCNC's M6) under nose radius compensation:
