@@ -420,6 +420,19 @@ def test_g18_compensation_refused_where_the_field_changes_within_the_radius():
     assert u.line == 7 and "a reversal" in u.construct
 
 
+#: A V groove in the ZX plane (turns of 75° and 150°), compensated with G41.
+VEE = "G21 G18 G90\nF300\nG0 X-5 Y0 Z5\nG41 D3\nG1 X0 Z0\nG1 X20 Z0\nG1 X25 Z-18.66\nG1 X30 Z0\nG1 X50 Z0\nG40 G1 X55 Z5\nM2\n"
+
+
+def grow(p):
+    """A field that grows the part about the groove's bottom: 2 µm within the 1.27 mm radius."""
+    p = np.asarray(p, float)
+    d = np.zeros_like(p)
+    d[:, 0] = 0.0016 * (p[:, 0] - 25.0)
+    d[:, 2] = 0.0016 * (p[:, 2] + 18.66)
+    return d
+
+
 @needs_rs274
 def test_a_sharp_inside_corner_multiplies_the_bound(tmp_path):
     """Where the contour turns sharply into an inside corner, the control meets the two offset
@@ -428,23 +441,11 @@ def test_a_sharp_inside_corner_multiplies_the_bound(tmp_path):
     within the 1.27 mm radius): rs274 finds the tool centre off the displaced path by more than
     twice that at the bottom, within the corner's bound; so a tolerance under it is refused
     there, and the contour without the groove is taken."""
-    vee = "G21 G18 G90\nF300\nG0 X-5 Y0 Z5\nG42 D3\nG1 X0 Z0\nG1 X20 Z0\nG1 X25 Z-18.66\nG1 X30 Z0\nG1 X50 Z0\nG40 G1 X55 Z5\nM2\n"
+    vee = VEE.replace("G41", "G42")
     flat = vee.replace("G1 X25 Z-18.66\n", "")
 
-    def grow(p):
-        p = np.asarray(p, float)
-        d = np.zeros_like(p)
-        d[:, 0] = 0.0016 * (p[:, 0] - 25.0)
-        d[:, 2] = 0.0016 * (p[:, 2] + 18.66)
-        return d
-
-    table = tmp_path / "tool.tbl"
-    table.write_text(TABLE_INCH)
-    src = tmp_path / "in.ngc"
-    src.write_text(vee)
-    out = tmp_path / "out.ngc"
-    out.write_bytes(nc.parse(vee).correct(grow, tools=TOOLS_MM, chord_tol=0.016, rapids=True).data)
-    before, after = _motion(src, table), _motion(out, table)
+    corrected = nc.parse(vee).correct(grow, tools=TOOLS_MM, chord_tol=0.016, rapids=True).data
+    before, after = _before_after(tmp_path, vee, corrected)
     want = before + grow(before)
     d = max(cKDTree(want).query(after)[0].max(), cKDTree(after).query(want)[0].max())
     assert 2 * 0.00203 < d < 2 * 0.00203 * 3.86, d
@@ -491,6 +492,28 @@ def _both_ways(want, got):
     return max(cKDTree(want).query(got)[0].max(), cKDTree(got).query(want)[0].max())
 
 
+def _dz(of_x):
+    """A Z field of X alone."""
+
+    def field(p):
+        p = np.asarray(p, float)
+        d = np.zeros_like(p)
+        d[:, 2] = of_x(p[:, 0])
+        return d
+
+    return field
+
+
+def _before_after(tmp_path, text, corrected: bytes):
+    """rs274's compensated motion of the input and of its correction (TABLE_INCH's tools)."""
+    table = tmp_path / "tool.tbl"
+    table.write_text(TABLE_INCH)
+    src, out = tmp_path / "in.ngc", tmp_path / "out.ngc"
+    src.write_text(text)
+    out.write_bytes(corrected)
+    return _motion(src, table), _motion(out, table)
+
+
 @needs_rs274
 def test_g18_pieces_next_to_an_inside_corner_are_longer_than_the_trim(tmp_path):
     """At an inside corner the control stops the tool R·tan(turn/2) short of it on both moves: a
@@ -499,23 +522,13 @@ def test_g18_pieces_next_to_an_inside_corner_are_longer_than_the_trim(tmp_path):
     and follows the displaced path."""
     text = "G21 G18 G90 F100\nG0 X-5 Y0 Z-5\nG41 D3\nG1 X0 Z0\nG1 X20 Z0\nG1 X20 Z-10\nG40 G1 X25 Z-15\nM2\n"
 
-    def bowl(p):
-        p = np.asarray(p, float)
-        d = np.zeros_like(p)
-        d[:, 2] = 1e-5 * p[:, 0] ** 2
-        return d
-
+    bowl = _dz(lambda x: 1e-5 * x**2)
     with pytest.raises(
         InputError, match=r":6:1: an inside corner under radius compensation in G18/G19: the tool stops 1.2700 mm"
     ):
         nc.parse(text).correct(bowl, tools=TOOLS_MM, rapids=True)
-    table = tmp_path / "tool.tbl"
-    table.write_text(TABLE_INCH)
-    src = tmp_path / "in.ngc"
-    src.write_text(text)
-    out = tmp_path / "out.ngc"
-    out.write_bytes(nc.parse(text).correct(bowl, tools=TOOLS_MM, rapids=True, max_segment=4).data)
-    before, after = _motion(src, table), _motion(out, table)
+    corrected = nc.parse(text).correct(bowl, tools=TOOLS_MM, rapids=True, max_segment=4).data
+    before, after = _before_after(tmp_path, text, corrected)
     assert _both_ways(before + bowl(before), after) <= 0.002 + 0.0006
 
 
@@ -526,25 +539,15 @@ def test_g18_compensation_ends_after_a_straight_move_or_a_whole_arc(tmp_path):
     shift keeps whole ends it exactly."""
     text = "G21 G18 G90 F100\nG0 X-5 Y0 Z5\nG41 D3\nG1 X0 Z0\nG1 X20 Z0\nG3 X30 Z-10 I0 K-10\nG40 G1 X35 Z-20\nM2\n"
 
-    def lean(p):
-        p = np.asarray(p, float)
-        d = np.zeros_like(p)
-        d[:, 2] = 1e-5 * p[:, 0]
-        return d
-
+    lean = _dz(lambda x: 1e-5 * x)
     with pytest.raises(
         InputError, match=r":7:1: the move that ends radius compensation in G18/G19 comes right after an arc"
     ):
         nc.parse(text).correct(lean, tools=TOOLS_MM, rapids=True)
-    table = tmp_path / "tool.tbl"
-    table.write_text(TABLE_INCH)
-    src = tmp_path / "in.ngc"
-    src.write_text(text)
-    out = tmp_path / "out.ngc"
     shift = (0.01, 0.0, 0.02)
-    out.write_bytes(nc.parse(text).correct(fields.Shift(shift), tools=TOOLS_MM, rapids=True).data)
-    assert "G3 X30.01 Z-9.98" in out.read_text()
-    before, after = _motion(src, table), _motion(out, table)
+    corrected = nc.parse(text).correct(fields.Shift(shift), tools=TOOLS_MM, rapids=True).data
+    assert b"G3 X30.01 Z-9.98" in corrected
+    before, after = _before_after(tmp_path, text, corrected)
     assert _both_ways(before + shift, after) < 0.0012
     # a helical arc cut in chords: the control's corners between them hold Y still
     helix = text.replace("G3 X30 Z-10 I0 K-10", "G3 X30 Y5 Z-10 I0 K-10")
@@ -567,14 +570,7 @@ def test_g18_outside_corners_are_not_multiplied():
     """LinuxCNC goes round an outside corner on an arc about it: the offset paths do not meet, and
     the corner's factor is for inside corners only (G41 in G18's (Z, X) frame: the tool left of
     the path, so a turn to the right is an outside corner)."""
-    vee = "G21 G18 G90\nF300\nG0 X-5 Y0 Z5\nG41 D3\nG1 X0 Z0\nG1 X20 Z0\nG1 X25 Z-18.66\nG1 X30 Z0\nG1 X50 Z0\nG40 G1 X55 Z5\nM2\n"
-
-    def grow(p):
-        p = np.asarray(p, float)
-        d = np.zeros_like(p)
-        d[:, 0] = 0.0016 * (p[:, 0] - 25.0)
-        d[:, 2] = 0.0016 * (p[:, 2] + 18.66)
-        return d
+    vee = VEE
 
     # G42 makes the groove's bottom an inside corner (refused at 6 µm: test above); G41 an outside one
     nc.parse(vee).correct(grow, tools=TOOLS_MM, chord_tol=0.006, rapids=True)

@@ -251,6 +251,15 @@ fn inverse_feed(f: f64, share: f64, line: u32) -> Result<String, NcError> {
     Ok(t)
 }
 
+/// The error that refuses the correction at a block's line (the block of record `rec`).
+fn refused_at(rec: &Record, message: impl Into<String>) -> NcError {
+    NcError::Interpret {
+        line: rec.line as usize + 1,
+        col: 1,
+        message: message.into(),
+    }
+}
+
 fn motion_text(m: Motion, padded: bool) -> &'static str {
     match (m, padded) {
         (Motion::Rapid, false) => "G0",
@@ -814,14 +823,10 @@ impl<'a> Emitter<'a> {
             return Ok(()); // a move along Z: the tool stands
         }
         if c.trim > 0.0 && !(self.st.comp_piece > c.trim) {
-            return Err(NcError::Interpret {
-                line: rec.line as usize + 1,
-                col: 1,
-                message: format!(
+            return Err(refused_at(rec, format!(
                     "an inside corner under cutter compensation: the tool stops {:.4} mm short of the corner, but the corrected program's piece before it is {:.4} mm long (the controller would find the corner unreachable); raise --chord-tol so the move before stays whole",
                     c.trim, self.st.comp_piece
-                ),
-            });
+                )));
         }
         self.st.comp_piece = len;
         Ok(())
@@ -834,11 +839,7 @@ impl<'a> Emitter<'a> {
         let rec = &self.it.records[ri];
         if rec.whole == crate::interp::WHOLE_NOSE && rec.nose == 0.0 {
             if std::mem::take(&mut self.st.nose_chords) {
-                return Err(NcError::Interpret {
-                    line: rec.line as usize + 1,
-                    col: 1,
-                    message: "the move that ends radius compensation in G18/G19 comes right after an arc the field does not move alike along it, written in chords: the control starts it from its offset of the last chord, not of the arc; end the compensation after a straight move, or raise --chord-tol to keep the arc an arc".into(),
-                });
+                return Err(refused_at(rec, "the move that ends radius compensation in G18/G19 comes right after an arc the field does not move alike along it, written in chords: the control starts it from its offset of the last chord, not of the arc; end the compensation after a straight move, or raise --chord-tol to keep the arc an arc"));
             }
         } else if rec.nose > 0.0 && rec.motion != Motion::Other {
             self.st.nose_chords = false;
@@ -873,14 +874,10 @@ impl<'a> Emitter<'a> {
         if let Some(a) = (6..NAXES)
             .find(|&a| moved & (1 << a) != 0 && !(start[a].is_finite() && rec.end[a].is_finite()))
         {
-            return Err(NcError::Interpret {
-                line: rec.line as usize + 1,
-                col: 1,
-                message: format!(
+            return Err(refused_at(rec, format!(
                     "the field displaces {} here, but the program has not set {} before this block: set it (e.g. G0 {}0) before the first move",
                     AXES[a] as char, AXES[a] as char, AXES[a] as char
-                ),
-            });
+                )));
         }
         let words = lx.line_words(li);
         let epos0 = self.st.epos;
@@ -997,11 +994,7 @@ impl<'a> Emitter<'a> {
             _ => "the move that starts or ends radius compensation in G18/G19 must stay one move",
         };
         if rec.whole != 0 && rec.motion.is_arc() && !keep_arc {
-            return Err(NcError::Interpret {
-                line: rec.line as usize + 1,
-                col: 1,
-                message: format!("{whole_why}, and this arc is not moved alike along it (it would be cut in chords)"),
-            });
+            return Err(refused_at(rec, format!("{whole_why}, and this arc is not moved alike along it (it would be cut in chords)")));
         }
         // a synchronised move's thread is reckoned from where it starts: the output must stand at
         // its start moved by the field (the first sample's displacement, the move being straight
@@ -1012,22 +1005,14 @@ impl<'a> Emitter<'a> {
                 .sum::<f64>()
                 .sqrt();
             if off.is_nan() {
-                return Err(NcError::Interpret {
-                    line: rec.line as usize + 1,
-                    col: 1,
-                    message: "a spindle-synchronised move (G33) from a position the program does not tell: its thread is reckoned from where it starts; give X, Y and Z before it".into(),
-                });
+                return Err(refused_at(rec, "a spindle-synchronised move (G33) from a position the program does not tell: its thread is reckoned from where it starts; give X, Y and Z before it"));
             }
             if !(off <= self.st.arc_tol) {
-                return Err(NcError::Interpret {
-                    line: rec.line as usize + 1,
-                    col: 1,
-                    message: format!(
+                return Err(refused_at(rec, format!(
                         "a spindle-synchronised move (G33) starts where the tool stands, {:.1} µm from where the field moves its start (more than the chord tolerance {} mm): its thread is reckoned from there; correct the move before it (--rapids for a rapid)",
                         off * 1000.0,
                         self.st.arc_tol
-                    ),
-                });
+                    )));
             }
         }
         if comp_whole && !straight {
@@ -1048,15 +1033,11 @@ impl<'a> Emitter<'a> {
                 } else {
                     "plunge with G1 before turning compensation on, correct the rapid before it (--rapids), or raise --chord-tol"
                 };
-                return Err(NcError::Interpret {
-                    line: rec.line as usize + 1,
-                    col: 1,
-                    message: format!(
+                return Err(refused_at(rec, format!(
                         "{why}, but the corrected path along it is {:.1} µm off a straight line (more than the chord tolerance {} mm), or it moves another axis; {hint}",
                         worst * 1000.0,
                         self.st.arc_tol
-                    ),
-                });
+                    )));
             }
         }
         // radius compensation in G18/G19: an arc the field bends is not cut into chords (the
@@ -1074,21 +1055,16 @@ impl<'a> Emitter<'a> {
             0.0
         };
         if rec.nose > 0.0 {
-            let refuse = |message: String| NcError::Interpret {
-                line: rec.line as usize + 1,
-                col: 1,
-                message,
-            };
             let chords = rec.motion.is_arc() && !keep_arc && !straight;
             let an = PLANE_AXES[rec.plane as usize][2];
             if chords && (rec.end[an] - start[an]).abs() > 1e-9 {
-                return Err(refuse(
-                    "a helical arc under radius compensation in G18/G19 that the field does not move alike along it: cut into chords, the control's corners between them would hold the helix's axis still".into(),
+                return Err(refused_at(rec,
+                    "a helical arc under radius compensation in G18/G19 that the field does not move alike along it: cut into chords, the control's corners between them would hold the helix's axis still",
                 ));
             }
             self.st.nose_chords = chords;
             if trim > 0.0 && !(self.st.nose_piece > trim) {
-                return Err(refuse(format!(
+                return Err(refused_at(rec, format!(
                     "an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected program's piece before it is {:.4} mm long (the control would find the corner unreachable); raise --max-segment or --chord-tol so the move before stays whole",
                     self.st.nose_piece
                 )));
@@ -1100,22 +1076,14 @@ impl<'a> Emitter<'a> {
             if rec.nose > 0.0 {
                 let len = in_plane(&epos0, &target);
                 if trim > 0.0 && !(len > trim) {
-                    return Err(NcError::Interpret {
-                        line: rec.line as usize + 1,
-                        col: 1,
-                        message: format!("an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected move after it is {len:.4} mm long (the control would find the corner unreachable)"),
-                    });
+                    return Err(refused_at(rec, format!("an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected move after it is {len:.4} mm long (the control would find the corner unreachable)")));
                 }
                 if rec.whole == crate::interp::WHOLE_NOSE
                     && self.it.dialect.is_linuxcnc()
                     && !rec.motion.is_arc()
                     && !(len > rec.nose)
                 {
-                    return Err(NcError::Interpret {
-                        line: rec.line as usize + 1,
-                        col: 1,
-                        message: format!("the move that starts cutter compensation, corrected, is {len:.4} mm long in its plane, not longer than the tool radius {:.4} mm (LinuxCNC refuses it)", rec.nose),
-                    });
+                    return Err(refused_at(rec, format!("the move that starts cutter compensation, corrected, is {len:.4} mm long in its plane, not longer than the tool radius {:.4} mm (LinuxCNC refuses it)", rec.nose)));
                 }
                 self.st.nose_piece = len;
             }
@@ -1206,24 +1174,16 @@ impl<'a> Emitter<'a> {
                 .collect();
             if let (Some(&first), true) = (plens.first(), trim > 0.0) {
                 if !(first > trim) {
-                    return Err(NcError::Interpret {
-                        line: rec.line as usize + 1,
-                        col: 1,
-                        message: format!("an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected program's first piece after it is {first:.4} mm long (the control would find the corner unreachable); raise --max-segment or --chord-tol"),
-                    });
+                    return Err(refused_at(rec, format!("an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected program's first piece after it is {first:.4} mm long (the control would find the corner unreachable); raise --max-segment or --chord-tol")));
                 }
             }
             self.st.nose_piece = plens.last().copied().unwrap_or(f64::INFINITY);
             let shortest = rec.nose * 2.0 * std::f64::consts::SQRT_2 * half_mm / self.st.arc_tol;
             if let Some(&len) = lens.iter().find(|&&len| len < shortest) {
-                return Err(NcError::Interpret {
-                    line: rec.line as usize + 1,
-                    col: 1,
-                    message: format!(
+                return Err(refused_at(rec, format!(
                         "a piece {len:.4} mm long under radius compensation in G18/G19: the rounding of its numbers turns it enough to move the tool centre ({:.4} mm radius) by more than the chord tolerance {} mm (pieces under it must be at least {shortest:.4} mm); raise --max-segment or --chord-tol",
                         rec.nose, self.st.arc_tol
-                    ),
-                });
+                    )));
             }
         }
         // program stops move to the last piece (they stay where they are when there is none)
@@ -1388,14 +1348,14 @@ impl<'a> Emitter<'a> {
                 .collect();
             let chord = chords.iter().copied().fold(f64::INFINITY, f64::min);
             if chord < shortest {
-                return Err(refuse(format!(
+                return Err(refused_at(rec, format!(
                     "an arc under cutter compensation cut in chords as short as {chord:.4} mm: the rounding of the written numbers turns such a chord enough to move the tool centre (radius {:.4} mm) by more than the chord tolerance; raise --chord-tol so the arc stays an arc or its chords are longer",
                     c.radius
                 )));
             }
             let a = chords[0];
             if !(a > c.trim) {
-                return Err(refuse(format!(
+                return Err(refused_at(rec, format!(
                     "an inside corner under cutter compensation before an arc cut in chords: the tool stops {:.4} mm short of the corner, longer than the first chord ({a:.4} mm); raise --chord-tol so the arc stays an arc",
                     c.trim
                 )));

@@ -2931,32 +2931,7 @@ fn lathe_box(
         return Ok(());
     }
     st.box_xz = [corner[0], corner[2]];
-    if let Some(idx) = blocked {
-        out.unsupported[idx].blocks += 1;
-    }
-    st.pos = corner;
-    push_record(
-        out,
-        st,
-        li,
-        Motion::Feed,
-        blocked.is_none(),
-        named,
-        [0.0; 2],
-        1,
-    );
-    out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
-    st.pos = a;
-    push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-    out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
-    out.boxes.push(LatheBox {
-        line: li as u32,
-        code: c,
-        start: [a[0], a[1], a[2]],
-        margin: [0.0; 2],
-        before: st.before,
-    });
-    out.summary.counts[Motion::Feed as usize] += 2;
+    push_lathe_cycle(out, st, li, c, &corner, named, [0.0; 2], blocked);
     Ok(())
 }
 
@@ -2994,6 +2969,23 @@ fn lathe_cut_block(
     let blocked = why
         .map(|why| push_unsupported(out, li, col, &why))
         .or(blocked);
+    push_lathe_cycle(out, st, li, c, end, named, margin, blocked);
+}
+
+/// The records of a lathe cycle's block ([`LatheBox`]) from where the tool stands: the move to
+/// `end` (its corner, or the end of its cut) and the return to the start, where it ends.
+#[allow(clippy::too_many_arguments)]
+fn push_lathe_cycle(
+    out: &mut Interp,
+    st: &mut State,
+    li: usize,
+    c: i32,
+    end: &[f64; NAXES],
+    named: u16,
+    margin: [f64; 2],
+    blocked: Option<usize>,
+) {
+    let a = st.pos;
     if let Some(idx) = blocked {
         out.unsupported[idx].blocks += 1;
     }
@@ -3009,7 +3001,6 @@ fn lathe_cut_block(
         1,
     );
     out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
-    // (the cycle ends where it began)
     st.pos = a;
     push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
     out.records.last_mut().unwrap().cycle = CYCLE_LATHE;
