@@ -760,3 +760,24 @@ def test_after_a_roughing_contour_the_control_is_back_at_the_cycle_s_start():
     out = prog.correct(fields.Shift((0.0254, 0.0, 0.0508))).text.splitlines()
     k = out.index("G75 X0.50200 I0.005 F0.005")
     assert out[k - 1] == "G00 X3.00200 Z0.10200" and out[k - 2] == "G70 P10 Q20 F0.005"
+
+
+def test_after_a_contour_whose_start_is_not_traced_the_position_is_unknown():
+    """A roughing cycle's block with a code the engine does not trace (kept with
+    --keep-unsupported): where the control goes back to is not known, so the increments after the
+    contour are copied as written, not aimed from a place the output is not at."""
+    text = "O1\nG18 G21\nG01 X50. Z2. F0.3\nG71 P10 Q20 U0.4 W0.1 D1. F0.2 G66\nN10 G00 X20. Z2.\nG01 Z-20.\nN20 X40.\nU-4. W-3.\nM30\n"
+    out = nc.parse(text, dialect="fanuc-lathe").correct(fields.Shift((0.01, 0, 0.02)), keep_unsupported=True)
+    assert out.text.splitlines()[-2] == "U-4. W-3."
+
+
+def test_after_a_contour_the_nose_turns_from_the_return_to_its_start():
+    """After the contour the control goes back to the cycle's start: the next move turns from that
+    return, not from the contour's last block (no reversal there)."""
+    text = (
+        "O1\nG18 G21\nT0101\nG42 G01 X50. Z2. F0.3\nG71 P10 Q20 U0.4 W0.1 D1. F0.2\nN10 G01 X20. Z2.\n"
+        "G01 Z-20.\nX40.\nN20 Z-30.\nG01 W3.\nG40 U4.\nM30\n"
+    )
+    prog = nc.parse(text, dialect="fanuc-lathe", tools={1: 0.8})
+    assert prog.unsupported == ()
+    prog.correct(fields.Shift((0.01, 0, 0.02)))

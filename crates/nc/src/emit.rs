@@ -508,9 +508,8 @@ impl<'a> Emitter<'a> {
                     .take_while(|r| r.line == line_no)
                     .any(|r| r.cycle == crate::interp::CYCLE_CONTOUR_BACK);
                 if back {
-                    if let Some(p) = self.st.contour_from.take() {
-                        self.st.epos = p;
-                    }
+                    // (no cycle block seen: where the output is, is not known)
+                    self.st.epos = self.st.contour_from.take().unwrap_or([f64::NAN; NAXES]);
                 }
                 let cycle = self.it.records[ri].cycle;
                 if cycle == crate::interp::CYCLE_CONTOUR_START {
@@ -1064,9 +1063,13 @@ impl<'a> Emitter<'a> {
             }
             self.st.nose_chords = chords;
             if trim > 0.0 && !(self.st.nose_piece > trim) {
+                let before = if self.st.nose_piece.is_nan() {
+                    "its length is not known (where the output stood was not)".to_string()
+                } else {
+                    format!("it is {:.4} mm long", self.st.nose_piece)
+                };
                 return Err(refused_at(rec, format!(
-                    "an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but the corrected program's piece before it is {:.4} mm long (the control would find the corner unreachable); raise --max-segment or --chord-tol so the move before stays whole",
-                    self.st.nose_piece
+                    "an inside corner under radius compensation in G18/G19: the tool stops {trim:.4} mm short of it, but of the corrected program's piece before it {before} (the control would find the corner unreachable); raise --max-segment or --chord-tol so the move before stays whole"
                 )));
             }
         }

@@ -914,6 +914,8 @@ impl Interpreter {
                     st.pos[1] = 0.0; // (a lathe's Y)
                     st.contour = None;
                     st.contour_edge = false;
+                    // (the control comes back from the contour's end: no corner with it)
+                    st.nose_dir = None;
                     push_record(out, st, li, Motion::Other, false, 0, [0.0; 2], 1);
                     out.records.last_mut().unwrap().cycle = CYCLE_CONTOUR_BACK;
                 } else {
@@ -1676,6 +1678,13 @@ impl Interpreter {
             }
             if let Some(inch) = unit_change {
                 st.inch = inch;
+            }
+            if let (Some(c), Some(_)) = (st.contour.as_mut(), untraced) {
+                // a roughing cycle's block with a code the engine does not trace: where the
+                // control is as the cycle begins, and so after it, is not known
+                if c.first {
+                    c.start = [f64::NAN; NAXES];
+                }
             }
             if cycle_line && untraced.is_none() {
                 if st.contour.as_ref().is_some_and(|c| c.first) {
