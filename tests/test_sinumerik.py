@@ -1092,3 +1092,12 @@ def test_the_start_motion_is_for_sinumerik_programs(tmp_path):
 def test_bit_operators_take_whole_numbers():
     with pytest.raises(InputError, match="B_AND of 2.5: the bit operators are read for whole numbers"):
         sn.translate(b"R1 = 2.5 B_AND 1\nG1 X=R1 F100\n")
+
+
+def test_an_alarm_set_is_copied_as_a_message_is():
+    src = b'G1 X0 Y0 Z0 F100\nSETAL(65000)\nMSG("check")\nX10\nM30\n'
+    tr = sn.translate(src, "p")
+    assert [it.rs.split(" ;")[0] for it in tr.items if it.kind == "motion"] == ["G1 X0 Y0 Z0", "X10"]
+    out = nc.parse(tr.data).correct(fields.Shift((0, 0, 0.05))).data
+    text, _, _ = sn.assemble(tr, out)
+    assert text == b'G1 X0 Y0 Z0.05 F100\nSETAL(65000)\nMSG("check")\nX10\nM30\n'  # (X10 at Z0.05 already)

@@ -30,7 +30,7 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   TRUNC ROUND MINVAL MAXVAL LN EXP``), ``IF/ELSE/ENDIF``, ``WHILE/ENDWHILE``, ``FOR … TO …/ENDFOR``,
   ``REPEAT/UNTIL``, ``LOOP/ENDLOOP``, ``GOTOF/GOTOB/GOTO/GOTOC`` to a label or block number,
   ``IF … GOTOF``, ``CASE(…) OF … DEFAULT …``;
-- copied as written, without an effect on the path: ``MSG(…)``, ``T="name"``, ``G9 G60 G64 G641
+- copied as written, without an effect on the path: ``MSG(…)``, ``SETAL(…)`` (an alarm: the output stops where the input does), ``T="name"``, ``G9 G60 G64 G641
   G642 G643 G644 G645 G601 G602 G603``, ``SOFT BRISK DRIVE FFWON FFWOF CFC CFTCP CFIN STOPRE``,
   ``G340 G341 G450 G451 DIAMOF``, ``ADIS= ADISPOS= LIMS=``, ``TURN=0``;
 - ``M30 M2 M17 RET`` end the program.
@@ -83,6 +83,10 @@ _LINEAR = ("X", "Y", "Z")
 _PLANES = {17: ("X", "Y", "I", "J"), 18: ("Z", "X", "K", "I"), 19: ("Y", "Z", "J", "K")}
 #: G codes copied without an effect on the path (exact stop, continuous path, SAR plane, corners).
 _COPY_G = {9, 60, 64, 641, 642, 643, 644, 645, 601, 602, 603, 340, 341, 450, 451}
+#: Predefined procedures that move nothing, copied with their arguments: a message on the
+#: screen, an alarm set (which stops the program as the control's alarm reaction says: the
+#: output stops where the input does).
+_COPIED_CALLS = ("MSG", "SETAL")
 _COPY_WORDS = {"SOFT", "BRISK", "DRIVE", "FFWON", "FFWOF", "CFC", "CFTCP", "CFIN", "STOPRE", "DIAMOF"}
 _COPY_ASSIGN = {"ADIS", "ADISPOS", "LIMS"}
 #: The drilling cycles read (Siemens standard cycles).
@@ -782,7 +786,7 @@ class _Run:
             if nxt[1] == "(":
                 if text in _CYCLES:
                     return self.drill(text, t, i)
-                if text != "MSG":
+                if text not in _COPIED_CALLS:
                     return self.enter(text, t, i, col)
                 t.i += 2
                 depth = 1
@@ -790,7 +794,7 @@ class _Run:
                     depth += {"(": 1, ")": -1}.get(t.peek()[1], 0) if t.peek()[0] == "op" else 0
                     t.i += 1
                 if depth:
-                    raise _Error("MSG( without its )", col)
+                    raise _Error(f"{text}( without its )", col)
                 b.pre.append(("", ln.code[c0 : t.toks[t.i - 1][3]]))
                 continue
             t.i += 1
