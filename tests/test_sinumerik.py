@@ -1101,3 +1101,21 @@ def test_an_alarm_set_is_copied_as_a_message_is():
     out = nc.parse(tr.data).correct(fields.Shift((0, 0, 0.05))).data
     text, _, _ = sn.assemble(tr, out)
     assert text == b'G1 X0 Y0 Z0.05 F100\nSETAL(65000)\nMSG("check")\nX10\nM30\n'  # (X10 at Z0.05 already)
+
+
+def test_string_variables_are_kept_and_never_read_as_numbers():
+    """DEF STRING[n]: set to a text or another STRING, used by MSG and the like; read as a number
+    (its conversion is the control's), or built with << and the string functions: refused at
+    the line."""
+    src = b'DEF STRING[28] NAME = "baseline"\nDEF STRING[8] TAG = "A-7", NOTE = ""\nNOTE = TAG\nG1 X0 Y0 Z0 F100\nX10\nM30\n'
+    tr = sn.translate(src, "p")
+    assert [it.rs.split(" ;")[0] for it in tr.items if it.kind == "motion"] == ["G1 X0 Y0 Z0", "X10"]
+    for text, line, says in (
+        (b'DEF STRING[8] TAG = "x"\nG1 X=TAG F100\n', 2, "TAG is a STRING: read as a number"),
+        (b'DEF STRING[8] TAG\nTAG = "a" << "b"\n', 2, "string operations are not read"),
+        (b"DEF STRING[8] TAG\nTAG = 3\n", 2, "only a text in quotes or another STRING"),
+        (b"DEF STRING TAG\n", 1, "DEF STRING without its length"),
+    ):
+        with pytest.raises(InputError) as e:
+            sn.translate(text, "p")
+        assert (e.value.line, says in e.value.message) == (line, True), e.value

@@ -25,7 +25,8 @@ What is read (Siemens, *SINUMERIK 840D sl Programming Manual, Fundamentals* and 
   is written); ``ROT``, ``SCALE``, ``MIRROR`` without axes reset the frame; scaling and mirroring
   with axes are refused;
 - R parameters (``R1``, ``R[expr]``; one read before the program sets it is refused: its value is
-  the machine's), ``DEF INT|REAL|BOOL`` variables, assignments, expressions (``+ - * / DIV MOD``,
+  the machine's), ``DEF INT|REAL|BOOL`` variables, ``DEF STRING[n]`` ones (texts, never read as
+  numbers), assignments, expressions (``+ - * / DIV MOD``,
   comparisons, ``AND OR XOR NOT``, ``B_AND B_OR B_XOR B_NOT`` on whole numbers, ``SIN COS TAN ASIN ACOS ATAN2`` in degrees, ``SQRT ABS POT
   TRUNC ROUND MINVAL MAXVAL LN EXP``), ``IF/ELSE/ENDIF``, ``WHILE/ENDWHILE``, ``FOR … TO …/ENDFOR``,
   ``REPEAT/UNTIL``, ``LOOP/ENDLOOP``, ``GOTOF/GOTOB/GOTO/GOTOC`` to a label or block number,
@@ -291,6 +292,8 @@ class _Machine:
             if name.startswith("$"):
                 raise _Error(f"{name} is a system variable: its value is the machine's", col)
             raise _Error(f"'{name}' is not defined (DEF) in the program", col)
+        if v[0] == "STRING":
+            raise _Error(f"{name} is a STRING: read as a number, its value is the control's conversion", col)
         return v[1]
 
     def get_r(self, k: float, col: int) -> float:
@@ -701,9 +704,27 @@ class _Run:
     def define(self, t: _Tokens) -> None:
         tok = t.peek()
         kind = tok[1]
-        if kind not in ("INT", "REAL", "BOOL"):
-            raise _Error(f"DEF {kind}: only INT, REAL and BOOL variables are read", t.col())
+        if kind not in ("INT", "REAL", "BOOL", "STRING"):
+            raise _Error(f"DEF {kind}: only INT, REAL, BOOL and STRING variables are read", t.col())
         t.i += 1
+        if kind == "STRING":
+            # STRING[n]: its length; its values are kept, never read as numbers (MSG, names)
+            if not t.take("["):
+                raise _Error("DEF STRING without its length [n]", t.col())
+            _expr(t, self.m)
+            t.need("]")
+            while True:
+                name = t.peek()
+                if name[0] != "name":
+                    raise _Error("expected a variable name", t.col())
+                t.i += 1
+                self.m.vars[name[1]] = ["STRING", ""]
+                if t.take("="):
+                    self.string(name[1], t, name[2] + 1)
+                if not t.take(","):
+                    break
+            self.end(t)
+            return
         while True:
             name = t.peek()
             if name[0] != "name":
@@ -1144,11 +1165,29 @@ class _Run:
             what = "an arc by its angle" if name == "AR" else "polar coordinates"
             raise _Error(f"{name}= ({what}) is not followed", col)
         r = re.fullmatch(r"R(\d+)", name)
+        if not r and self.m.vars.get(name, [None])[0] == "STRING":
+            self.string(name, t, col)
+            return
         if not r and name not in self.m.vars:
             if name.startswith("$"):
                 raise _Error(f"{name} is a system variable: setting it is the machine's", col)
             raise _Error(f"'{name}' is not defined (DEF) in the program", col)
         self.m.set(("R", float(r.group(1))) if r else ("V", name), _expr(t, self.m), col)
+
+    def string(self, name: str, t: _Tokens, col: int) -> None:
+        """A STRING variable set to a literal or to another STRING's value (``<<`` and the string
+        functions are not read)."""
+        tok = t.peek()
+        if tok[0] == "str":
+            value = tok[1]
+        elif tok[0] == "name" and self.m.vars.get(tok[1], [None])[0] == "STRING":
+            value = self.m.vars[tok[1]][1]
+        else:
+            raise _Error(f"{name} is a STRING: only a text in quotes or another STRING is read as its value", col)
+        t.i += 1
+        if t.peek()[0] != "end" and t.peek()[1] != ",":
+            raise _Error(f"{name} = … {t.peek()[1]}: string operations are not read", t.col())
+        self.m.vars[name][1] = value
 
     def word(self, letter: str, v: float, text: str, col: int, span: tuple[int, int], b: _Block) -> None:
         if letter in _AXES or letter in "IJK":
