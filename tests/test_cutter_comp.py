@@ -182,7 +182,7 @@ def test_xy_displacement_refused():
         ("G41 D9\nG1 X10\nG40 G1 X20\n", "tool 9, which the tool table does not hold"),
         ("G41\nG1 X10\nG40 G1 X20\n", "no D word and no tool loaded"),
         ("G18 G41 D3\nG1 X10\nG40 G1 X20\n", None),  # in G18: by its bound (test_g18_...)
-        ("G41 D3\nG2 X10 R5\nG40 G1 X20\n", "an arc as the first move of cutter compensation"),
+        ("G41 D3\nG2 X10 R5\nG40 G1 X20\n", None),  # an arc starts it: LinuxCNC's entry arc
         ("G41 D3\nG1 X10\nG40\nG2 X20 R5\n", "an arc as the move after G40"),
         ("G41 D3\nG1 X1\nG40 G1 X20\n", "not longer than the tool radius"),
         ("G41 D3\nG1 X10\nG81 X20 Y0 Z-1 R1\nG80\nG40 G1 X20\n", "a canned cycle"),
@@ -574,3 +574,46 @@ def test_g18_outside_corners_are_not_multiplied():
 
     # G42 makes the groove's bottom an inside corner (refused at 6 µm: test above); G41 an outside one
     nc.parse(vee).correct(grow, tools=TOOLS_MM, chord_tol=0.006, rapids=True)
+
+
+#: LinuxCNC's comp311_2.ngc's compensated contour: compensation starts on an arc.
+ARC_ENTRY = """G20 G17 G90
+F10
+T3 M6
+G0 X1 Y4 Z0.1
+G1 Z0
+G41
+G3 X2 Y3 I1
+G2 X3 Y2 J-1
+G1 Y-1
+G2 X2 Y-2 I-1
+G1 X-2
+G2 X-2.6 Y-0.2 J1
+G1 X1.4 Y2.8
+G2 X2 Y3 I.6 J-.8
+G40
+G1 X1 Y4
+M2
+"""
+
+
+@needs_rs274
+def test_an_arc_that_starts_compensation_is_the_controller_s_entry_arc(tmp_path):
+    """LinuxCNC starts compensation on an arc with an arc of its own, from the programmed start
+    to the end's offset point (convert_arc_comp1): the field is read along it, and the corrected
+    program, run by rs274 -t, follows the input's tool path displaced within 5 µm (9 µm: inch);
+    the arc stays an arc (a helix), or is refused where the field bends it more."""
+    corrected = nc.parse(ARC_ENTRY).correct(z_wave, tools=TOOLS_MM, rapids=True).data
+    lines = corrected.decode().splitlines()
+    assert lines[lines.index("G41") + 1].startswith("G3 X2 Y3 ")  # one arc
+    before, after = _before_after(tmp_path, ARC_ENTRY, corrected)
+    assert _both_ways(before + z_wave(before), after) < 0.009
+
+    def bump(p):
+        p = np.asarray(p, float)
+        d = np.zeros_like(p)
+        d[:, 2] = 0.05 * np.exp(-(((p[:, 0] - 38.0) / 3.0) ** 2))
+        return d
+
+    with pytest.raises(InputError, match=r":7:1: an arc that starts cutter compensation"):
+        nc.parse(ARC_ENTRY).correct(bump, tools=TOOLS_MM, rapids=True)

@@ -992,6 +992,12 @@ impl<'a> Emitter<'a> {
             crate::interp::WHOLE_SYNC => "a spindle-synchronised move (G33) must stay one move: each block synchronises anew with the spindle, so its pieces would each start the thread again",
             _ => "the move that starts or ends radius compensation in G18/G19 must stay one move",
         };
+        if comp.is_some_and(|c| c.entry.is_some()) && !keep_arc {
+            return Err(refused_at(
+                rec,
+                "an arc that starts cutter compensation, which the field does not move alike along it (within the chord tolerance a helix): cut in chords, the controller would start compensation on the first of them, another path",
+            ));
+        }
         if rec.whole != 0 && rec.motion.is_arc() && !keep_arc {
             return Err(refused_at(rec, format!("{whole_why}, and this arc is not moved alike along it (it would be cut in chords)")));
         }

@@ -210,6 +210,12 @@ pub struct Comp {
     pub end: [f64; 2],
     /// An arc: the offset is this (mm) times the unit vector from the arc's centre to the point.
     pub radial: f64,
+    /// An arc that starts compensation (LinuxCNC's `convert_arc_comp1`): the tool goes from the
+    /// programmed start along another arc to the end's offset point: its centre (X, Y), its
+    /// radius, and the angles (rad) of its start and end about that centre, the sweep signed as
+    /// the arc turns. The tool centre at a fraction t of the programmed arc's sweep is at the same
+    /// fraction of this one's.
+    pub entry: Option<([f64; 2], f64, f64, f64)>,
     /// The tool centre around the corner before the move (X, Y offsets from the block's start
     /// point, mm): first where the move before ended, whose displacement the corner gets, then
     /// the arc the controller adds about an outside corner, or the point where the two offset
@@ -3717,12 +3723,8 @@ fn comp_move(
         let l = x.hypot(y);
         [x / l, y / l]
     };
+    let mut entry = None;
     let (o0, t0, o1, t1, radial) = if m.is_arc() {
-        if on.last.is_none() {
-            return Err(
-                "an arc as the first move of cutter compensation: lead in with a straight move",
-            );
-        }
         let ccw = m == Motion::ArcCcw;
         // the tool left of a counter-clockwise arc is inside it
         let k = if ccw { -r } else { r };
@@ -3734,6 +3736,37 @@ fn comp_move(
             return Err("an arc under cutter compensation whose radius is not larger than the tool's on the side it cuts");
         }
         let tan = |u: [f64; 2]| if ccw { [-u[1], u[0]] } else { [u[1], -u[0]] };
+        if on.last.is_none() {
+            // LinuxCNC's entry arc: from the programmed start (where the tool is) to the end's
+            // offset point, about the point of the radial line through it equally far from both
+            if dx.hypot(dy) <= r.abs() {
+                return Err("the arc that starts cutter compensation does not end further than the tool radius from where it starts (the controller refuses it)");
+            }
+            let q = [e[0] + k * u1[0], e[1] + k * u1[1]];
+            let b_len = (s[0] - q[0]).hypot(s[1] - q[1]) / 2.0;
+            let ab = (center[1] - q[1]).atan2(center[0] - q[0]);
+            let a = (s[1] - q[1]).atan2(s[0] - q[0]) - ab;
+            if a.cos().abs() < 1e-6 {
+                return Err("an arc that starts cutter compensation with a tool radius not less than its own (the controller refuses it)");
+            }
+            let c_len = b_len / a.cos();
+            let c = [q[0] + c_len * ab.cos(), q[1] + c_len * ab.sin()];
+            let rho = (s[0] - c[0]).hypot(s[1] - c[1]);
+            let a0 = (s[1] - c[1]).atan2(s[0] - c[0]);
+            let a1 = (q[1] - c[1]).atan2(q[0] - c[0]);
+            let full = std::f64::consts::TAU;
+            let mut sweep = a1 - a0;
+            if ccw {
+                while sweep <= 0.0 {
+                    sweep += full;
+                }
+            } else {
+                while sweep >= 0.0 {
+                    sweep -= full;
+                }
+            }
+            entry = Some((c, rho, a0, sweep));
+        }
         (
             [k * u0[0], k * u0[1]],
             tan(u0),
@@ -3754,6 +3787,7 @@ fn comp_move(
         return Err("a reversal (a turn of more than 175°) under cutter compensation: where the controller meets the offset paths is not followed");
     }
     let (start, corner) = match on.last {
+        None if m.is_arc() => ([0.0; 2], Vec::new()),
         None => {
             if dx.hypot(dy) <= r.abs() {
                 return Err("the move that starts cutter compensation is not longer than the tool radius (the controller refuses it)");
@@ -3789,6 +3823,7 @@ fn comp_move(
         start,
         end: o1,
         radial,
+        entry,
         corner,
         trim,
         kink,

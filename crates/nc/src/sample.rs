@@ -248,6 +248,14 @@ pub fn sample_range(
         let offset = |p: &[f64; 3], t: f64| -> [f64; 2] {
             match comp {
                 None => [0.0; 2],
+                // the arc that starts compensation: the tool at the same fraction of its own arc
+                Some(crate::interp::Comp {
+                    entry: Some((c, rho, a0, sweep)),
+                    ..
+                }) => {
+                    let a = a0 + t * sweep;
+                    [c[0] + rho * a.cos() - p[0], c[1] + rho * a.sin() - p[1]]
+                }
                 Some(c) if rec.motion.is_arc() => {
                     let (x, y) = (p[0] - rec.center[0], p[1] - rec.center[1]);
                     let l = x.hypot(y);
