@@ -617,3 +617,17 @@ def test_an_arc_that_starts_compensation_is_the_controller_s_entry_arc(tmp_path)
 
     with pytest.raises(InputError, match=r":7:1: an arc that starts cutter compensation"):
         nc.parse(ARC_ENTRY).correct(bump, tools=TOOLS_MM, rapids=True)
+
+
+@needs_rs274
+def test_compensation_ends_on_the_first_move_naming_x_or_y(tmp_path):
+    """After G40 LinuxCNC's current point is the tool's: the first move naming X or Y goes from the
+    offset point to the programmed one, even when the programmed point stays (gmoccapy's program
+    returns so to the centre); compensation may then start again."""
+    text = (
+        "G21 G17 G90\nF300\nG0 X20 Y50 Z1\nG1 Z-1\nG41 D3\nG1 X50 Y50\nG1 X50 Y20\nG40\nG0 Z5\nG0 X50 Y20\n"
+        "G1 Z-1\nG42 D3\nG1 X20 Y20\nG1 X20 Y40\nG40 G1 X15 Y45\nM2\n"
+    )
+    corrected = nc.parse(text).correct(z_wave, tools=TOOLS_MM, rapids=True).data
+    before, after = _before_after(tmp_path, text, corrected)
+    assert _both_ways(before + z_wave(before), after) < 0.005

@@ -2284,7 +2284,14 @@ impl Interpreter {
                         if let Some(idx) = e_construct {
                             out.unsupported[idx].blocks += 1;
                         }
-                        let comp = match comp_move(st, m, &st.pos.clone(), &end, center) {
+                        let comp = match comp_move(
+                            st,
+                            m,
+                            &st.pos.clone(),
+                            &end,
+                            center,
+                            named & 0b11 != 0,
+                        ) {
                             Ok(c) => c,
                             Err(why) => {
                                 let idx = push_unsupported(out, li, axis_col, why);
@@ -3682,6 +3689,7 @@ fn comp_move(
     s: &[f64; NAXES],
     e: &[f64; NAXES],
     center: [f64; 2],
+    names_xy: bool,
 ) -> Result<Option<Comp>, &'static str> {
     let (dx, dy) = (e[0] - s[0], e[1] - s[1]);
     let moves_xy = m.is_arc() || dx.hypot(dy) > 1e-9;
@@ -3693,7 +3701,9 @@ fn comp_move(
     };
     if let Some(off) = st.comp_exit {
         let radius = off[0].hypot(off[1]);
-        if !moves_xy {
+        // (the move that names X or Y goes from the offset to the programmed point, LinuxCNC's
+        // current point after G40 being the tool's, even where the programmed point stays)
+        if !moves_xy && !names_xy {
             return Ok(Some(fixed(off, radius)));
         }
         if m.is_arc() {
