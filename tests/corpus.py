@@ -893,7 +893,7 @@ def _run_translated(entry: Entry, work: Path, r: Result, dialect: str) -> None:
         r.motion_detail = "rs274 rejects the straight program: " + canon.error.replace("\n", " | ")
         return
     got = ncgi.distinct(canon.ends)
-    if got.shape != want.shape or np.abs(got - want).max() > ncgi.tolerance(want):
+    if got.shape != want.shape or (want.size and np.abs(got - want).max() > ncgi.tolerance(want)):
         detail = "the straight program does not move as nc-gcode-interpreter runs the source"
         r.motion = "mismatch"
         r.motion_detail = f"{detail} || {r.motion_detail}" if r.motion_detail else detail
