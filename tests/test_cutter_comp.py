@@ -631,3 +631,34 @@ def test_compensation_ends_on_the_first_move_naming_x_or_y(tmp_path):
     corrected = nc.parse(text).correct(z_wave, tools=TOOLS_MM, rapids=True).data
     before, after = _before_after(tmp_path, text, corrected)
     assert _both_ways(before + z_wave(before), after) < 0.005
+
+
+def test_entry_arcs_the_engine_does_not_follow_are_refused():
+    head = "G21 G17 G90 F100\nG0 X0 Y0 Z1\nG1 Z0\n"
+    # P turns: LinuxCNC's entry arc takes them all
+    (u,) = nc.parse(head + "G41 D3\nG3 X20 Y0 I10 P2\nG1 X20 Y20\nG40 G1 X30 Y30\nM2\n", tools=TOOLS_MM).unsupported
+    assert (u.line, "more than one turn (P)" in u.construct) == (5, True)
+    # an inside corner after it: LinuxCNC trims it from the entry arc's own centre
+    text = head + "G41 D1\nG3 X8 Y0 R20\nG1 X11.165 Y9.486\nG40 G1 X14.331 Y18.972\nM2\n"
+    (u,) = nc.parse(text, tools={1: 6.0}).unsupported
+    assert (u.line, "an inside corner right after the arc that starts" in u.construct) == (6, True)
+
+
+@needs_rs274
+def test_an_entry_arc_is_sampled_along_the_tool_s_own_arc(tmp_path):
+    """A 30° programmed arc whose entry arc is a 333° loop of 5.5 mm: a bump of the field on the
+    loop, between the programmed arc's samples, is seen (refused, or followed within 5 µm)."""
+    text = "G21 G17 G90 F100\nG0 X-5 Y0 Z1\nG1 Z0\nG41 D3\nG3 X-4.3301 Y-2.5 I5 J0\nG1 X0 Y-5\nG40 G1 X5 Y-10\nM2\n"
+
+    def bump(p):
+        p = np.asarray(p, float)
+        d = np.zeros_like(p)
+        d[:, 2] = 0.02 * np.exp(-((p[:, 0] + 9.610) ** 2 + (p[:, 1] - 0.648) ** 2) / (2 * 0.6**2))
+        return d
+
+    try:
+        corrected = nc.parse(text).correct(bump, tools=TOOLS_MM, rapids=True).data
+    except (RefusedError, InputError):
+        return
+    before, after = _before_after(tmp_path, text, corrected)
+    assert _both_ways(before + bump(before), after) < 0.005

@@ -812,7 +812,9 @@ impl<'a> Emitter<'a> {
         }
         let c = &self.it.comps[rec.comp as usize];
         let start = start_of(self.it, ri);
-        let len = if rec.motion.is_arc() {
+        let len = if let Some((_, rho, _, sweep)) = c.entry {
+            rho * sweep.abs() // (the tool's own arc, which starts compensation)
+        } else if rec.motion.is_arc() {
             let (_, d, r0, r1) = crate::sample::arc_sweep(rec, &start);
             d.abs() * 0.5 * (r0 + r1)
         } else {

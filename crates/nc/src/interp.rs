@@ -657,6 +657,8 @@ struct CompOn {
     /// The tool centre's offset and the contour's direction at the end of the last move in the
     /// plane; None before the first (the entry move).
     last: Option<([f64; 2], [f64; 2])>,
+    /// The last move in the plane was an arc that started compensation.
+    after_entry_arc: bool,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -2291,7 +2293,14 @@ impl Interpreter {
                             &end,
                             center,
                             named & 0b11 != 0,
-                        ) {
+                        )
+                        .and_then(|c| match c {
+                            // (LinuxCNC's entry arc takes all its P turns: not followed)
+                            Some(c) if c.entry.is_some() && turns > 1 => Err(
+                                "an arc of more than one turn (P) that starts cutter compensation: not followed",
+                            ),
+                            c => Ok(c),
+                        }) {
                             Ok(c) => c,
                             Err(why) => {
                                 let idx = push_unsupported(out, li, axis_col, why);
@@ -3603,6 +3612,7 @@ fn comp_on(
             // a negative diameter puts the tool on the other side, as LinuxCNC reads it
             let side = if matches!(c, 410 | 411) { 1.0 } else { -1.0 };
             st.comp = Some(CompOn {
+                after_entry_arc: false,
                 r: side * d / 2.0,
                 last: None,
             });
@@ -3796,6 +3806,12 @@ fn comp_move(
     if turn.abs() > COMP_REVERSAL {
         return Err("a reversal (a turn of more than 175°) under cutter compensation: where the controller meets the offset paths is not followed");
     }
+    // LinuxCNC trims an inside corner after an arc from that arc's centre, which for the arc
+    // that started compensation is its own, not the programmed one's
+    if on.after_entry_arc && r * turn > 0.0 && turn.abs() > COMP_SMALL_TURN {
+        return Err("an inside corner right after the arc that starts cutter compensation: the controller meets the offset paths from the entry arc's own centre, which is not followed");
+    }
+    on.after_entry_arc = entry.is_some();
     let (start, corner) = match on.last {
         None if m.is_arc() => ([0.0; 2], Vec::new()),
         None => {

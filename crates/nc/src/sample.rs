@@ -358,12 +358,25 @@ pub fn sample_range(
             } else {
                 opts.chord_tol
             };
-            let n = arc_pieces_within(
+            let mut n = arc_pieces_within(
                 (geom.0, geom.1, geom.2 + out, geom.3 + out),
                 rec.end[an] - start[an],
                 opts,
                 tol,
             );
+            // the arc that starts compensation: the tool's own arc may be far longer
+            if let Some(crate::interp::Comp {
+                entry: Some((_, rho, a0, sweep)),
+                ..
+            }) = comp
+            {
+                n = n.max(arc_pieces_within(
+                    (*a0, *sweep, *rho, *rho),
+                    rec.end[an] - start[an],
+                    opts,
+                    tol,
+                ));
+            }
             if !(n <= MAX_PIECES_PER_BLOCK) {
                 return Err(too_many(rec, n));
             }
