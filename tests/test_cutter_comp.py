@@ -662,3 +662,27 @@ def test_an_entry_arc_is_sampled_along_the_tool_s_own_arc(tmp_path):
         return
     before, after = _before_after(tmp_path, text, corrected)
     assert _both_ways(before + bump(before), after) < 0.005
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    "text",
+    [
+        # an arc, then an inside corner (the controller meets the arc's offset circle)
+        "G21 G17 G90 F100\nG0 X-5 Y0 Z1\nG1 Z0\nG42 D3\nG1 X0 Y0\nG2 X20 Y0 R-10\nG1 X0 Y15\nG40 G1 X-5 Y20\nM2\n",
+        # an arc, then the move after G40
+        "G21 G17 G90 F100\nG0 X-5 Y-5 Z1\nG1 Z0\nG41 D3\nG1 X0 Y0\nG1 X20 Y0\nG3 X30 Y10 I0 J10\nG40 G1 X35 Y20\nM2\n",
+    ],
+)
+def test_arcs_next_to_corners_and_exits_are_refused_or_followed(tmp_path, text):
+    """Where an arc is cut in chords before G40's move, or a move next to an inside corner with an
+    arc would be cut in pieces, the controller's path is another: refused at the line; else rs274
+    follows the input's displaced path within 5 µm."""
+    slope = _dz(lambda x: 0.0008 * x)
+    try:
+        corrected = nc.parse(text).correct(slope, tools=TOOLS_MM, rapids=True).data
+    except (RefusedError, InputError) as e:
+        assert re.search(r":\d+:1: ", str(e)), e
+        return
+    before, after = _before_after(tmp_path, text, corrected)
+    assert _both_ways(before + slope(before), after) < 0.005

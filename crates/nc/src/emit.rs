@@ -344,6 +344,8 @@ pub struct EmitState {
     nose_chords: bool,
     /// Where the output stood at a Fanuc lathe's roughing cycle whose contour is being written.
     contour_from: Option<[f64; NAXES]>,
+    /// The last move under cutter compensation (G17) was an arc written in chords.
+    comp_chords: bool,
     /// The output's modal X and Z (mm) of a lathe's G90/G94 box cycle, as last written.
     out_box: [f64; 2],
 }
@@ -364,6 +366,7 @@ impl EmitState {
             nose_piece: f64::INFINITY,
             nose_chords: false,
             contour_from: None,
+            comp_chords: false,
             arc_tol: 0.0,
             cyc_level: f64::NAN,
             cyc_r: None,
@@ -811,6 +814,19 @@ impl<'a> Emitter<'a> {
             return Ok(());
         }
         let c = &self.it.comps[rec.comp as usize];
+        // after an arc written in chords the controller is at the last chord's offset, and turns
+        // from its direction: the move after G40, and an inside corner the arc's offset circle
+        // makes, are not where the engine puts them
+        if std::mem::take(&mut self.st.comp_chords) && (c.exit || c.arc_corner) {
+            return Err(refused_at(
+                rec,
+                if c.exit {
+                    "the move after G40 comes right after an arc under cutter compensation that the field does not move alike along it, written in chords: the controller starts it from its offset of the last chord, not of the arc; end compensation after a straight move, or raise --chord-tol to keep the arc an arc"
+                } else {
+                    "an inside corner under cutter compensation right after an arc that the field does not move alike along it, written in chords: the controller meets the last chord's offset, not the arc's offset circle; raise --chord-tol to keep the arc an arc"
+                },
+            ));
+        }
         let start = start_of(self.it, ri);
         let len = if let Some((_, rho, _, sweep)) = c.entry {
             rho * sweep.abs() // (the tool's own arc, which starts compensation)
@@ -1118,6 +1134,15 @@ impl<'a> Emitter<'a> {
             self.polar_to_xy(li);
         }
         let linearise = rec.motion.is_arc();
+        if comp.is_some_and(|c| c.arc_corner) && linearise {
+            // an inside corner before an arc written in chords: the controller meets the first
+            // chord's offset, not the arc's offset circle
+            return Err(refused_at(
+                rec,
+                "an inside corner under cutter compensation before an arc that the field does not move alike along it, written in chords: the controller meets the first chord's offset, not the arc's offset circle; raise --chord-tol to keep the arc an arc",
+            ));
+        }
+        self.st.comp_chords = comp.is_some() && linearise;
         if linearise {
             self.st.stats.arcs_linearised += 1;
             let g1 = motion_text(Motion::Feed, self.lx.style.padded_g).as_bytes();

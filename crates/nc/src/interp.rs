@@ -216,6 +216,11 @@ pub struct Comp {
     /// the arc turns. The tool centre at a fraction t of the programmed arc's sweep is at the same
     /// fraction of this one's.
     pub entry: Option<([f64; 2], f64, f64, f64)>,
+    /// An inside corner before the move with an arc on either side: the controller meets the
+    /// offset circle there, which only the moves written whole keep.
+    pub arc_corner: bool,
+    /// The move after G40 that ends compensation, from the offset point.
+    pub exit: bool,
     /// The tool centre around the corner before the move (X, Y offsets from the block's start
     /// point, mm): first where the move before ended, whose displacement the corner gets, then
     /// the arc the controller adds about an outside corner, or the point where the two offset
@@ -659,6 +664,8 @@ struct CompOn {
     last: Option<([f64; 2], [f64; 2])>,
     /// The last move in the plane was an arc that started compensation.
     after_entry_arc: bool,
+    /// The last move in the plane was an arc: its centre and its offset circle's radius.
+    last_arc: Option<([f64; 2], f64)>,
 }
 
 /// What canned cycles keep from block to block, as LinuxCNC keeps it.
@@ -3613,6 +3620,7 @@ fn comp_on(
             let side = if matches!(c, 410 | 411) { 1.0 } else { -1.0 };
             st.comp = Some(CompOn {
                 after_entry_arc: false,
+                last_arc: None,
                 r: side * d / 2.0,
                 last: None,
             });
@@ -3723,6 +3731,7 @@ fn comp_move(
         return Ok(Some(Comp {
             radius,
             start: off,
+            exit: true,
             ..Default::default()
         }));
     }
@@ -3843,13 +3852,57 @@ fn comp_move(
     } else {
         f64::INFINITY // (a reversal: the offset paths meet far behind the corner, if at all)
     };
+    // at an inside corner with an arc on a side the controller meets the arc's offset circle,
+    // further from the corner than the tangents meet: the straight side's offset from the corner
+    // to that circle (the pieces next to the corner must be longer)
+    let circle = if m.is_arc() {
+        Some((
+            center,
+            (s[0] + o0[0] - center[0]).hypot(s[1] + o0[1] - center[1]),
+        ))
+    } else {
+        on.last_arc
+    };
+    let arc_corner = trim > 0.0 && circle.is_some();
+    let trim = match (circle, on.last) {
+        (Some((c, rho)), Some((a, ta))) if trim > 0.0 && trim.is_finite() => {
+            // the straight side's offset: the move before's (backwards from its end) after an
+            // arc... or this one's (from its start) before one
+            let (p0, dir) = if m.is_arc() {
+                ([s[0] + a[0], s[1] + a[1]], [-ta[0], -ta[1]])
+            } else {
+                ([s[0] + o0[0], s[1] + o0[1]], t0)
+            };
+            let w = [p0[0] - c[0], p0[1] - c[1]];
+            let b = dir[0] * w[0] + dir[1] * w[1];
+            let disc = b * b - (w[0] * w[0] + w[1] * w[1] - rho * rho);
+            if disc >= 0.0 {
+                let u = [-b - disc.sqrt(), -b + disc.sqrt()]
+                    .into_iter()
+                    .filter(|u| *u >= -1e-9)
+                    .fold(f64::INFINITY, f64::min);
+                trim.max(if u.is_finite() { u } else { 0.0 })
+            } else {
+                trim
+            }
+        }
+        _ => trim,
+    };
     on.last = Some((o1, t1));
+    on.last_arc = m.is_arc().then(|| {
+        (
+            center,
+            (e[0] + o1[0] - center[0]).hypot(e[1] + o1[1] - center[1]),
+        )
+    });
     Ok(Some(Comp {
         radius: r.abs(),
         start,
         end: o1,
         radial,
         entry,
+        arc_corner,
+        exit: false,
         corner,
         trim,
         kink,
