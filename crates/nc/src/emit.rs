@@ -251,6 +251,16 @@ fn inverse_feed(f: f64, share: f64, line: u32) -> Result<String, NcError> {
     Ok(t)
 }
 
+/// Millimetres (degrees) per unit of a word on axis k, in inches or not, a diameter X's halves.
+fn unit_in(k: usize, inch: bool, diameter: bool) -> f64 {
+    let u = axis_unit(k, if inch { MM_PER_INCH } else { 1.0 });
+    if k == 0 && diameter {
+        u / 2.0
+    } else {
+        u
+    }
+}
+
 /// The error that refuses the correction at a block's line (the block of record `rec`).
 fn refused_at(rec: &Record, message: impl Into<String>) -> NcError {
     NcError::Interpret {
@@ -676,12 +686,7 @@ impl<'a> Emitter<'a> {
 
     /// Millimetres (degrees) per unit of the block's words on axis k: a diameter X's are halves.
     fn unit(rec: &Record, k: usize) -> f64 {
-        let u = axis_unit(k, if rec.inch { MM_PER_INCH } else { 1.0 });
-        if k == 0 && rec.diameter {
-            u / 2.0
-        } else {
-            u
-        }
+        unit_in(k, rec.inch, rec.diameter)
     }
 
     /// The axis a word of block `rec` moves and whether its number is an increment: a Fanuc
@@ -2015,14 +2020,7 @@ impl<'a> Emitter<'a> {
         let start = [b.start[0] + d[0], b.start[1] + d[1], b.start[2] + d[2]];
         // the move to the moved start, in the state in force before the block
         let bf = b.before;
-        let unit_before = |a: usize| {
-            let u = axis_unit(a, if bf.inch { MM_PER_INCH } else { 1.0 });
-            if a == 0 && bf.diameter {
-                u / 2.0
-            } else {
-                u
-            }
-        };
+        let unit_before = |a: usize| unit_in(a, bf.inch, bf.diameter);
         let axes: &[usize] = if lathe { &[0, 2] } else { &[0, 1, 2] };
         let half_before = self.fmt.half(bf.inch);
         let away = axes

@@ -303,6 +303,15 @@ pub struct Before {
 /// cycles.
 pub const LATHE_CUTS: [i32; 3] = [740, 750, 760];
 
+/// What a grooving or threading cycle ([`LATHE_CUTS`]) is called in messages.
+pub fn lathe_cut_name(code: i32) -> &'static str {
+    match code {
+        740 => "face grooving cycle G74",
+        750 => "grooving cycle G75",
+        _ => "threading cycle G76",
+    }
+}
+
 /// The axis bits ([`Record::named`]) of a Fanuc lathe's X, Z, U and W.
 const LATHE_XZ: u16 = 1 | (1 << 2) | (1 << 6) | (1 << 8);
 
@@ -2990,11 +2999,7 @@ fn lathe_cut_block(
     blocked: Option<usize>,
 ) {
     let a = st.pos;
-    let name = match c {
-        740 => "face grooving cycle G74",
-        750 => "grooving cycle G75",
-        _ => "threading cycle G76",
-    };
+    let name = lathe_cut_name(c);
     let why = if !(a[0].is_finite() && a[2].is_finite()) {
         Some(format!("{name} from a position the program does not tell"))
     } else if st.nose.is_some() || st.active.cutter_comp.is_some() {

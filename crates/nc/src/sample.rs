@@ -674,11 +674,7 @@ pub fn comp_check(
                 .get(k)
                 .filter(|b| b.line == rec.line && LATHE_CUTS.contains(&b.code));
             if let (Some(b), false) = (cut, worst <= budget) {
-                let name = match b.code {
-                    740 => "face grooving cycle G74",
-                    750 => "grooving cycle G75",
-                    _ => "threading cycle G76",
-                };
+                let name = crate::interp::lathe_cut_name(b.code);
                 return Some((
                     rec.line + 1,
                     format!(
