@@ -18,7 +18,7 @@ import pytest
 from click.testing import CliRunner
 
 from helpers import refused_at
-from ncadapt import fields, nc, rewrite
+from ncadapt import dialects, fields, nc, rewrite
 from ncadapt import marlin as ml
 from ncadapt.cli import main
 from ncadapt.errors import InputError
@@ -151,8 +151,7 @@ def test_e_modes_follow_marlin(program, u):
     ("text", "line", "says"),
     [
         ("G1 X0 Y0 F100\nG5 I1 J1 P1 Q1 X5 Y5\n", 2, "Bézier"),
-        # FABtotum's head set-up (FABlin's setup_addon): it may change the tool's offsets
-        ("G1 X0 Y0 F100\nM793 S4\n", 2, "M793"),
+        ("G1 X0 Y0 F100\nM794\n", 2, "M794"),  # FABlin's I2C bus reset, not a program's
         ("G1 X0 Y0 F100\nM420 S1\n", 2, "M420"),  # bed levelling: the printer's own Z correction
         ("G1 X0 Y0 F100\nG29.2 S0\n", 2, "G29.2"),
         ("N1 G1 X0 Y0 F100*33\n", 1, "checksum"),
@@ -225,6 +224,28 @@ def test_fabtotum_s_alive_code_is_copied(tmp_path):
     out = _raised(tmp_path, "M728 ;FAB bep bep\nG90\nM82\nG1 X0 Y0 Z0.3 F1200\nM728\nG1 X5 E1\n")
     assert out[0] == "M728 ;FAB bep bep" and out[4] == "M728"
     assert out[3] == "G1 X0 Y0 Z0.35 F1200"
+
+
+def test_fabtotum_s_laser_program_is_read_as_marlin(tmp_path):
+    """FABtotum's laser programs (FABlin firmware) state no Marlin code a slicer writes: their
+    dwell in seconds (``G4 S``, which RS274NGC and grbl refuse) shows the dialect; the head
+    (M793), light (M728) and laser power (M61, M62) codes are copied, and a bare G5 too (a Bézier
+    to where the head is: no motion)."""
+    text = (
+        ";laser test\nG4 S1 ;pause\nM728\nM793 S4\nG90\nG1 F10000\nM61 S255\n"
+        "G1 X0 Y0 Z0 F10000.\nG1 X20 Y0 Z0 F800.\nG5\nM62\n"
+    )
+    p = tmp_path / "laser.gcode"
+    p.write_text(text)
+    d = dialects.resolve(p)
+    assert (d.name, d.line) == ("marlin", 2)
+    out = _raised(tmp_path, text)
+    lines = text.splitlines()
+    # every line but the moves as written; the moves raised by the shift
+    assert [out[i] for i in (1, 2, 3, 6, 9, 10)] == [lines[i] for i in (1, 2, 3, 6, 9, 10)]
+    assert out[7] == "G1 X0 Y0 Z0.05 F10000." and out[8] == "G1 X20 Y0 Z0.05 F800."
+    # a G5 with words is a Bézier, which only a firmware built with it moves along: refused
+    refused_at(ml.translate, "G1 X0 Y0 F100\nG5 X5 Y5\n", "p.gcode", 2, "Bézier")
 
 
 def test_cli(tmp_path):

@@ -13,7 +13,7 @@ at once) and looks, in this order, for: a Heidenhain ``BEGIN PGM`` line; Sinumer
 ``.mpf``/``.spf`` file, ``X=…`` assignments, ``DEF``/``EXTERN``/``PROC``, ``MSG(…)``,
 ``CYCLE81(…)``, frames ``TRANS``/``ROT``…, ``CIP``/``CT``/``CR=``, ``DIAMON``, ``LIMS=``); a 3D
 printer's Marlin G-code (``;FLAVOR:Marlin``, ``M82``/``M83``, heater and fan codes, E words on
-moves); grbl system commands (``$H``, ``$J=…``); a Fanuc program number (``O1234`` not followed by
+moves, a dwell in seconds ``G4 S…``, FABtotum's ``M728``/``M793``); grbl system commands (``$H``, ``$J=…``); a Fanuc program number (``O1234`` not followed by
 a LinuxCNC O-word keyword), ``M98 P``, ``G65 P``, ``M99``. Anything else is LinuxCNC RS274NGC.
 
 The machine, a mill or a lathe, is detected in the same head for the LinuxCNC and Fanuc dialects
@@ -117,6 +117,8 @@ _RULES: tuple[tuple[str, bool, tuple[str, ...], re.Pattern[str] | _Assignment], 
         re.compile(r"^[ \t]*(?:N\d+[ \t]+)?M(?:82|83|104|105|106|107|109|140|190|204|205)\b", re.M),
     ),
     ("marlin", False, ("E",), re.compile(r"^[ \t]*G0*1\b[^\n]*\bE[-+.\d]", re.M)),
+    # a dwell in seconds (RS274NGC's and grbl's G4 take P), FABtotum's (FABlin) head and light codes
+    ("marlin", False, ("G4", "G04", "M728", "M793"), re.compile(r"^[ \t]*(?:G0*4[ \t]+S[-+.\d]|M728\b|M793\b)", re.M)),
     ("grbl", False, ("$",), re.compile(r"^[ \t]*\$(?:[HXCIGN#$]|J=|\d+=)", re.M)),
     ("fanuc", False, ("O",), re.compile(rf"^[ \t]*%?[ \t]*O\d{{1,5}}\b(?![ \t]*{_O_KEYWORDS}\b)", re.M)),
     ("fanuc", False, ("M98", "G65", "M99"), re.compile(r"\bM98[ \t]*P|\bG65[ \t]*P|\bM99\b")),

@@ -20,11 +20,12 @@ Under G91 U is written as an increment, as the axes are. Every piece is written 
 code (stock Marlin reads no modal motion), and G0, which extrudes as G1 does in Marlin, is
 corrected as a feed and written as G0. A rewritten ``G92`` keeps its E.
 
-Copied as written (no X Y Z motion): ``G4``, ``G10``/``G11`` (firmware retract), ``T`` tool
-numbers, and the M codes of :data:`COPIED_M` (temperatures, fans, motors, limits, messages,
-progress). ``G28`` and ``G29`` (homing, bed probing) are copied, and the axes they move are
-unknown after them until a move names them (E stays known). Refused at their line: ``G5``
-(Bézier moves), any other G or M code (a printer's own codes may move the head), a second code
+Copied as written (no X Y Z motion): ``G4`` (``P`` milliseconds or ``S`` seconds), ``G10``/``G11``
+(firmware retract), ``T`` tool numbers, a ``G5`` without words (a Bézier to where the head is), and
+the M codes of :data:`COPIED_M` (temperatures, fans, motors, limits, messages, progress, FABtotum's
+head and laser). ``G28`` and ``G29`` (homing, bed probing) are copied, and the axes they move are
+unknown after them until a move names them (E stays known). Refused at their line: ``G5`` with
+words (Bézier moves), any other G or M code (a printer's own codes may move the head), a second code
 on a line, ``P`` on an arc, lower-case words, an E with more than 8 decimals, a U V W A B C word,
 a checksum (``*``).
 """
@@ -40,12 +41,15 @@ import numpy as np
 from . import rewrite
 from .errors import InputError
 
-#: M codes copied as written: they move no axis. M728 is FABtotum's (FABlin firmware, a Marlin
-#: derivative: "Raspberry Pi alive", which sets the ambient light and beeps; stock Marlin ignores it).
+#: M codes copied as written: they move no axis. Some are FABtotum's (FABlin firmware, a Marlin
+#: derivative; stock Marlin ignores them), read in FABlin's ``Marlin_main.cpp``: M728 "Raspberry Pi
+#: alive" (the ambient light and the beeper); M793 S… the installed head (``setup_addon``: its
+#: heaters, sensors and working mode, FFF, milling or laser; no axis moves and no offset changes);
+#: M60, M61 and M62 the laser's power (M60 at once, M61 once the moves before have finished, M62 off).
 COPIED_M = frozenset(
-    {0, 1, 3, 4, 5, 7, 8, 9, 17, 18, 73, 82, 83, 84, 104, 105, 106, 107, 109, 110, 114, 115, 117, 118}
-    | {140, 141, 149, 155, 190, 191, 201, 203, 204, 205, 207, 208, 209, 220, 221, 300, 302, 400, 728}
-    | {900}
+    {0, 1, 3, 4, 5, 7, 8, 9, 17, 18, 60, 61, 62, 73, 82, 83, 84, 104, 105, 106, 107, 109, 110, 114}
+    | {115, 117, 118, 140, 141, 149, 155, 190, 191, 201, 203, 204, 205, 207, 208, 209, 220, 221, 300}
+    | {302, 400, 728, 793, 900}
 )
 _WORD = re.compile(r"([A-Za-z])[ \t]*([-+]?(?:\d+\.?\d*|\.\d+))?")
 #: Most decimals an E word may have: the engine writes at most 8, and E must come back exact.
@@ -205,6 +209,10 @@ def translate(data: bytes, name: str = "<program>") -> Translation:
             named = [w for w, _, _ in rest if w in "XYZ"] if g == 28 else []
             out.append("G53 G0 " + " ".join(f"{a}0" for a in (named or ["X", "Y", "Z"])))
         elif g in (4, 10, 11):
+            out.append("")
+        elif g == 5 and not rest:
+            # a G5 without words moves nowhere: a Bézier from where the head is to where it is (a
+            # firmware built without BEZIER_CURVE_SUPPORT ignores it)
             out.append("")
         elif g == 5:
             raise InputError("G5 (a Bézier move) is not followed", name, n, at + 1)
