@@ -478,6 +478,27 @@ def test_compensation_planes_rs274_refuses_are_refused(tmp_path, text, line, say
     assert (e.value.line, says in e.value.message) == (line, True), e.value
 
 
+@needs_rs274
+@pytest.mark.parametrize("move", ["G1 Z-1", "G0 Z0.5", "G0 X0 Y0 Z0.5"])
+def test_an_entry_move_going_nowhere_in_the_plane_is_refused_as_rs274_refuses_it(tmp_path, move):
+    """LinuxCNC's entry is the next move after G41/G42, whatever axes it moves: one that stays
+    where it is in the plane is not longer than the radius (rs274: "Length of cutter compensation
+    entry move is not greater than the tool radius"). A Fanuc control starts the offset at the
+    first move in the plane, so there it is followed."""
+    prog = f"G21 G0 X0 Y0 Z1 F100\nG41 D3\n{move}\nG1 X10 Y0\nG1 Y10\nG40 G1 X0\nM2\n"
+    p = tmp_path / "p.ngc"
+    p.write_text(prog)
+    (tmp_path / "tool.tbl").write_text(TABLE_INCH)
+    assert "entry move" in rs274.canonical(p, tools=tmp_path / "tool.tbl").error
+    with pytest.raises(RefusedError) as e:
+        nc.parse(prog, tools=TOOLS_MM).correct(fields.Shift((0, 0, 0.1)))
+    [d] = e.value.details
+    assert d["line"] == 3 and "not longer than the tool radius" in d["construct"]
+    fanuc = "%\nO1\nG21 G90 G17\nG0 X0. Y0. Z1.\nG41 D3\nG1 Z-1. F100.\nG1 X10. Y0.\nG1 Y10.\nG40 G1 X0.\nM30\n%\n"
+    prog = nc.parse(fanuc, dialect="fanuc", tools=TOOLS_MM)
+    assert prog.unsupported == ()
+
+
 def test_fanuc_compensates_in_g19_by_the_bound():
     """A Fanuc mill compensates in G19 too (LinuxCNC does not): the contour in the YZ plane is
     corrected where it is, compensation kept; a shift moves its points by the shift."""

@@ -3745,6 +3745,12 @@ fn comp_move(
     };
     let r = on.r;
     if !moves_xy {
+        // LinuxCNC's next move after G41/G42 is the entry, whatever axes it moves: one that goes
+        // nowhere in the plane is not longer than the radius (rs274 refuses it; a Fanuc control
+        // starts the offset at the first move in the plane)
+        if on.last.is_none() && r != 0.0 && st.dialect.is_linuxcnc() {
+            return Err("the move that starts cutter compensation is not longer than the tool radius (the controller refuses it)");
+        }
         // the tool stands where the last move in the plane left it (before the entry: unmoved)
         return Ok(on.last.map(|(o, _)| fixed(o, r.abs())));
     }
