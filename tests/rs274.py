@@ -45,6 +45,9 @@ class Canon:
     #: per move: the feed rate rs274 set before it (SET_FEED_RATE, in the program's units per
     #: minute; under G93 the move's length times its F)
     rates: list = field(default_factory=list)
+    #: spline moves (G5, G5.1: ``NURBS_FEED``), of which rs274 prints no point: the moves after
+    #: one do not start where the move before it ended
+    splines: int = 0
 
 
 def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = None) -> Canon:
@@ -75,7 +78,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
         return np.array([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
 
     kinds, ends, arcs, comp, rates = [], [], [], [], []
-    res, rate = 0.0, 0.0
+    res, rate, splines = 0.0, 0.0, 0
     comp_on = leaving = False
     for line in text.splitlines():
         m = _CALL.match(line)
@@ -89,6 +92,8 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             comp.append(comp_on or leaving)
             rates.append(rate)
             leaving = False
+        if name == "NURBS_FEED":
+            splines += 1
         if name == "SET_FEED_RATE":
             rate = float(args)
         elif name == "USE_LENGTH_UNITS":
@@ -125,7 +130,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     ):
         tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
-    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp, rates)
+    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp, rates, splines)
 
 
 class Move:

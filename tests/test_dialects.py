@@ -229,7 +229,8 @@ def test_fanuc_look_ahead_and_smoothing_modes_are_copied():
     """Fanuc's AI contour control (G05.1 Q1/Q0), high-speed mode (G05 P10000/P0) and Haas's
     smoothness control (G187 P E, its E the corner tolerance) change how the control follows the
     programmed path, not the path: copied as written, the moves around them corrected. In
-    LinuxCNC's dialect G5/G5.1 are splines, refused."""
+    LinuxCNC's dialect G5/G5.1 are splines, which need axis words (rs274: "All axes missing
+    with motion code")."""
     from ncadapt import fields, nc
 
     src = "O1\nG21 G90 G0 X0. Y0. Z5.\nG05.1 Q1\nG05 P10000\nG187 P1 E0.01\nG1 Z-1. F100.\nX10.\nG187\nG05 P0\nG05.1 Q0\nM30\n"
@@ -238,7 +239,9 @@ def test_fanuc_look_ahead_and_smoothing_modes_are_copied():
     out = prog.correct(fields.Shift((0, 0, 0.1))).text.splitlines()
     assert out[2:5] == ["G05.1 Q1", "G05 P10000", "G187 P1 E0.01"] and out[7:10] == ["G187", "G05 P0", "G05.1 Q0"]
     assert out[5] == "G1 Z-0.9 F100." and out[6] == "X10."
-    assert {u.construct for u in nc.parse(src).unsupported} >= {"spline G5.1", "unknown G code G187"}
+    with pytest.raises(InputError, match="All axes missing") as e:
+        nc.parse(src)
+    assert e.value.line == 3
 
 
 def test_fanuc_g10_l20_sets_an_extended_offset_and_l2_p0_the_external_one():

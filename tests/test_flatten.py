@@ -221,7 +221,7 @@ def test_cli_expand(tmp_path):
 
 def test_errors_of_the_flat_program_name_the_original_line(tmp_path):
     src = tmp_path / "p.ngc"
-    src.write_text("G21 G0 X0 Y0 Z0\n#1 = 3\no1 repeat [2]\nG1 X#1 F100\nG5.1 X1 I1 J1 P1 Q1\no1 endrepeat\nM2\n")
+    src.write_text("G21 G0 X0 Y0 Z0\n#1 = 3\no1 repeat [2]\nG1 X#1 F100\nG5.2 X1 Y1 P1 L3\no1 endrepeat\nM2\n")
     with pytest.raises(RefusedError) as e:
         nc.correct_file(src, tmp_path / "o.ngc", lambda p: 0 * p, expand=True)
     assert e.value.details[0]["line"] == 5 and "flattened" in e.value.message

@@ -54,6 +54,8 @@ class Correction:
     line: np.ndarray | None = field(repr=False)
     unsupported_kept: tuple[Unsupported, ...] = ()
     warnings: tuple[str, ...] = ()
+    #: Splines (LinuxCNC's G5, G5.1) written as straight pieces (the field bends them).
+    splines_linearised: int = 0
     #: Remarks on blocks kept but not corrected (G53 moves, G28/G30 returns): (line, message).
     notes: tuple[tuple[int, str], ...] = ()
     #: The program was run into a straight program first (``expand``; a Sinumerik or Marlin
@@ -630,6 +632,7 @@ def _correction(
         blocks_changed=stats["blocks_changed"],
         lines_added=stats["lines_added"],
         arcs_linearised=stats["arcs_linearised"],
+        splines_linearised=stats["splines_linearised"],
         max_displacement=max_norm,
         mean_displacement=total / n_pts if n_pts else 0.0,
         n_points=n_pts,

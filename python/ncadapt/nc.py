@@ -60,7 +60,7 @@ __all__ = [
 ]
 
 #: Names of the motion codes in :attr:`Toolpath.motion`.
-MOTIONS = ("rapid", "feed", "arc_cw", "arc_ccw", "other")
+MOTIONS = ("rapid", "feed", "arc_cw", "arc_ccw", "other", "spline", "spline_quadratic")
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,8 @@ class Toolpath:
     line : (n,) int
         1-based source line of the block the piece belongs to.
     motion : (n,) uint8
-        Index into :data:`MOTIONS` (0 rapid, 1 feed, 2 clockwise arc, 3 counter-clockwise arc).
+        Index into :data:`MOTIONS` (0 rapid, 1 feed, 2 clockwise arc, 3 counter-clockwise arc, 5
+        cubic spline G5, 6 quadratic spline G5.1).
     block : (n,) int
         Index of the block among the program's position-changing blocks.
     """

@@ -70,6 +70,7 @@ fn stats_dict<'py>(py: Python<'py>, s: &EmitStats) -> PyResult<Bound<'py, PyDict
     d.set_item("blocks_changed", s.blocks_changed)?;
     d.set_item("lines_added", s.lines_added)?;
     d.set_item("arcs_linearised", s.arcs_linearised)?;
+    d.set_item("splines_linearised", s.splines_linearised)?;
     Ok(d)
 }
 

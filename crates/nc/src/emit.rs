@@ -21,6 +21,8 @@ pub struct EmitStats {
     pub blocks_changed: u64,
     pub lines_added: u64,
     pub arcs_linearised: u64,
+    /// Splines (G5, G5.1) written as straight pieces.
+    pub splines_linearised: u64,
 }
 
 /// Number formatting in a program's style.
@@ -280,6 +282,10 @@ fn motion_text(m: Motion, padded: bool) -> &'static str {
         (Motion::ArcCw, true) => "G02",
         (Motion::ArcCcw, false) => "G3",
         (Motion::ArcCcw, true) => "G03",
+        (Motion::Spline, false) => "G5",
+        (Motion::Spline, true) => "G05",
+        (Motion::QSpline, false) => "G5.1",
+        (Motion::QSpline, true) => "G05.1",
         (Motion::Other, _) => "",
     }
 }
@@ -358,6 +364,9 @@ pub struct EmitState {
     comp_chords: bool,
     /// The output's modal X and Z (mm) of a lathe's G90/G94 box cycle, as last written.
     out_box: [f64; 2],
+    /// The output's spline register (a G5 without I and J starts by the last G5's -P -Q) holds
+    /// the program's: no G5 since the start was written in pieces.
+    spline_reg: bool,
 }
 
 impl EmitState {
@@ -384,6 +393,7 @@ impl EmitState {
             cyc_expanded: false,
             steps: Vec::new(),
             out_box: [f64::NAN; 2],
+            spline_reg: true,
         }
     }
 }
@@ -581,6 +591,7 @@ impl<'a> Emitter<'a> {
                             .map(|k| samples.flat[k].1),
                     )?;
                 } else {
+                    self.spline_register(ri, true)?;
                     self.uncorrected(li, ri);
                 }
             } else if words.iter().any(|w| self.sets_motion(w)) {
@@ -809,6 +820,29 @@ impl<'a> Emitter<'a> {
         }
     }
 
+    /// The spline of record `ri`, if it is one.
+    fn spline(&self, ri: usize) -> Option<&crate::interp::Spline> {
+        let sp = &self.it.splines;
+        sp.binary_search_by_key(&(ri as u32), |s| s.rec)
+            .ok()
+            .map(|k| &sp[k])
+    }
+
+    /// The output's spline register after record `ri`, written as a G5 (`kept`) or in pieces: a
+    /// G5 without I and J whose register the output no longer holds is refused (written as a G5
+    /// it would start by another control point).
+    fn spline_register(&mut self, ri: usize, kept: bool) -> Result<(), NcError> {
+        let rec = &self.it.records[ri];
+        if rec.motion != Motion::Spline {
+            return Ok(());
+        }
+        if kept && !self.st.spline_reg && self.spline(ri).is_some_and(|s| s.continued) {
+            return Err(refused_at(rec, "a G5 without I and J after a G5 written in straight pieces: kept as written, it would start by another control point (LinuxCNC's register holds the last G5's P and Q); write its I and J"));
+        }
+        self.st.spline_reg = kept;
+        Ok(())
+    }
+
     /// Under cutter compensation: a move after an inside corner needs the output's piece before
     /// the corner longer than the tool stops short there (else the controller finds the corner
     /// unreachable); the move's whole length (in the plane) stands as the last piece until
@@ -987,7 +1021,14 @@ impl<'a> Emitter<'a> {
                 xyz[3 * k + 2] + disp[3 * k + 2],
             ]
         };
-        let straight = !rec.motion.is_arc()
+        // a spline moved as a whole and started where the field puts its start stays a spline
+        // (its I J P Q are offsets): when the output holds the register it may read
+        let keep_spline = rec.motion.is_spline()
+            && moved == 0
+            && uniform
+            && on_path
+            && (self.st.spline_reg || !self.spline(ri).is_some_and(|s| s.continued));
+        let straight = !rec.motion.is_curve()
             && (n == 1
                 || moved == 0 && {
                     let e = xyz_at(n - 1);
@@ -1102,7 +1143,8 @@ impl<'a> Emitter<'a> {
                 )));
             }
         }
-        if straight || keep_arc || comp_whole {
+        if straight || keep_arc || comp_whole || keep_spline {
+            self.spline_register(ri, true)?;
             self.restore_modal(li, rec, explicit);
             let target = target_at(n - 1, 1.0);
             if rec.nose > 0.0 {
@@ -1138,7 +1180,8 @@ impl<'a> Emitter<'a> {
         if polar_end.is_some() {
             self.polar_to_xy(li);
         }
-        let linearise = rec.motion.is_arc();
+        let linearise = rec.motion.is_curve();
+        self.spline_register(ri, false)?;
         if comp.is_some_and(|c| c.arc_corner) && linearise {
             // an inside corner before an arc written in chords: the controller meets the first
             // chord's offset, not the arc's offset circle
@@ -1149,17 +1192,21 @@ impl<'a> Emitter<'a> {
         }
         self.st.comp_chords = comp.is_some() && linearise;
         if linearise {
-            self.st.stats.arcs_linearised += 1;
+            if rec.motion.is_spline() {
+                self.st.stats.splines_linearised += 1;
+            } else {
+                self.st.stats.arcs_linearised += 1;
+            }
             let g1 = motion_text(Motion::Feed, self.lx.style.padded_g).as_bytes();
             if let Some(w) = words.iter().find(|w| is_motion_g(w)) {
                 self.edit_bytes(w.start, w.end, g1);
             } else {
                 self.insert_motion(li, Motion::Feed);
             }
-            for w in words
-                .iter()
-                .filter(|w| matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P'))
-            {
+            let spline = rec.motion.is_spline();
+            for w in words.iter().filter(|w| {
+                matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P') || spline && w.letter == b'Q'
+            }) {
                 self.remove_word(li, w);
             }
             self.st.out_motion = Some(Motion::Feed);

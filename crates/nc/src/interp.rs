@@ -106,12 +106,39 @@ pub enum Motion {
     ArcCcw = 3,
     /// Changes the position in a way the engine does not trace (G28, G53, canned cycle, ...).
     Other = 4,
+    /// LinuxCNC's cubic spline G5 (a Bézier from the start by I J, to the end by P Q).
+    Spline = 5,
+    /// LinuxCNC's quadratic spline G5.1 (a Bézier through the control point start + I J).
+    QSpline = 6,
 }
 
 impl Motion {
     pub fn is_arc(self) -> bool {
         matches!(self, Motion::ArcCw | Motion::ArcCcw)
     }
+
+    /// A spline, G5 or G5.1 ([`Interp::splines`] holds its control points).
+    pub fn is_spline(self) -> bool {
+        matches!(self, Motion::Spline | Motion::QSpline)
+    }
+
+    /// An arc or a spline: a curve (a straight move is neither).
+    pub fn is_curve(self) -> bool {
+        self.is_arc() || self.is_spline()
+    }
+}
+
+/// A spline block (LinuxCNC's G5 or G5.1) as the cubic Bézier it runs: the start, `ctrl[0]`,
+/// `ctrl[1]`, the end, in the XY plane (mm, the frame of [`Record::end`]). A G5.1's quadratic is
+/// raised to the cubic with the same path (control points 2/3 of the way to its own).
+#[derive(Clone, Copy, Debug)]
+pub struct Spline {
+    /// Index of its record in the run.
+    pub rec: u32,
+    pub ctrl: [[f64; 2]; 2],
+    /// A G5 without I and J: its first control point is the start plus LinuxCNC's register, the
+    /// last G5's -P -Q (the output must have set the same register).
+    pub continued: bool,
 }
 
 /// Plane index: 0 = G17 (XY), 1 = G18 (ZX), 2 = G19 (YZ).
@@ -494,7 +521,7 @@ pub struct Summary {
     pub inch_lines: u32,
     pub mm_lines: u32,
     pub planes: [u32; 3],
-    pub counts: [u32; 5],
+    pub counts: [u32; 7],
     pub work_offsets: Vec<u16>,
     pub tools: Vec<u32>,
     pub block_delete_lines: u32,
@@ -539,6 +566,8 @@ pub struct Interp {
     /// meets the two offset paths multiplies their error by; R·tan(turn/2), how far short of the
     /// corner the tool stops on both moves, which the pieces next to it must be longer than).
     pub nose_corners: Vec<(u32, f64, f64)>,
+    /// The splines of the run (G5, G5.1), in record order.
+    pub splines: Vec<Spline>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -653,6 +682,10 @@ struct State {
     box_taper: bool,
     /// After G40: the offset the tool centre stands at until the move that ends compensation.
     comp_exit: Option<[f64; 2]>,
+    /// LinuxCNC's register a G5 without I and J takes its first control point from (offsets as
+    /// written: the last G5's -P -Q); None where the program has not set it (a canned cycle
+    /// sets it too, from its I J).
+    spline_ij: Option<[f64; 2]>,
     /// After G40 ending compensation the engine did not follow: the move that ends it is not
     /// corrected either (the blocker stays until a move in the plane).
     comp_unfollowed_exit: bool,
@@ -819,6 +852,7 @@ impl Interpreter {
                 box_xz: [f64::NAN; 2],
                 box_taper: false,
                 comp_exit: None,
+                spline_ij: None,
                 comp_unfollowed_exit: false,
                 tool_next: None,
                 tool_loaded: None,
@@ -871,6 +905,7 @@ impl Interpreter {
             dialect: self.st.dialect,
             comps: Vec::new(),
             nose_corners: Vec::new(),
+            splines: Vec::new(),
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
@@ -1416,6 +1451,12 @@ impl Interpreter {
                     10 => motion_word = Some((Mode::Motion(Motion::Feed), gc)),
                     20 => motion_word = Some((Mode::Motion(Motion::ArcCw), gc)),
                     30 => motion_word = Some((Mode::Motion(Motion::ArcCcw), gc)),
+                    50 if st.dialect.is_linuxcnc() => {
+                        motion_word = Some((Mode::Motion(Motion::Spline), gc))
+                    }
+                    51 if st.dialect.is_linuxcnc() => {
+                        motion_word = Some((Mode::Motion(Motion::QSpline), gc))
+                    }
                     // (G80 is handled below; its group shares no conflict with the other motions)
                     // a dwell: on a Fanuc-family control its time is P, or X (U on a lathe),
                     // which then moves nothing; LinuxCNC and grbl want P, and move other axis
@@ -1960,6 +2001,14 @@ impl Interpreter {
                     motion_word,
                     Some((Mode::Motion(Motion::Rapid | Motion::Feed), _))
                 );
+            if named == 0 {
+                if let Some((Mode::Motion(m), gc)) = motion_word.filter(|_| st.dialect.is_linuxcnc()) {
+                    // (a spline's I J P Q go with its G5 or G5.1, on every block, as rs274 reads them)
+                    if m.is_spline() {
+                        return Err(ierr(li, gc, "All axes missing with motion code (as rs274)"));
+                    }
+                }
+            }
             if named == 0 && !full_circle && r.is_none() {
                 if let Some((Mode::Motion(m), gc)) = motion_word {
                     if m.is_arc() {
@@ -2117,6 +2166,8 @@ impl Interpreter {
                         push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                     }
                     Mode::Canned(c) => {
+                        // (LinuxCNC's cycles keep their I J in the register a G5 reads)
+                        st.spline_ij = None;
                         let words = CycleWords {
                             axis: &axis,
                             r,
@@ -2144,6 +2195,25 @@ impl Interpreter {
                     Mode::Motion(m) => {
                         let mut center = [0.0; 2];
                         let mut turns = 1u32;
+                        let gcol = motion_word.map_or(axis_col, |(_, c)| c);
+                        let spline = if m.is_spline() {
+                            spline_block(st, li, gcol, m, &end, named, ijk, p, q_word, unit, &wcol)?
+                        } else {
+                            None
+                        };
+                        let mut spline_blocker = None;
+                        if m.is_spline()
+                            && (st.comp_exit.is_some() || st.active.cutter_comp.is_some())
+                        {
+                            // after G40 LinuxCNC's current point is the tool's, which the spline
+                            // would start from
+                            let idx = push_unsupported(out, li, gcol, "a spline (G5, G5.1) right after cutter compensation, before the move that ends it: LinuxCNC starts it from the tool's offset point");
+                            spline_blocker = Some(idx);
+                        }
+                        if m.is_spline() && spline.is_none() && spline_blocker.is_none() {
+                            let idx = push_unsupported(out, li, gcol, "a G5 without I and J: its first control point comes from LinuxCNC's register (the last G5's P and Q, or a canned cycle's I and J), which the program has not set before it");
+                            spline_blocker = Some(idx);
+                        }
                         if m.is_arc() {
                             let [a1, a2, _] = PLANE_AXES[st.plane as usize];
                             let s = [st.pos[a1], st.pos[a2]];
@@ -2268,7 +2338,7 @@ impl Interpreter {
                         let known = finite(&end, 0b111 | named)
                             && center[0].is_finite()
                             && center[1].is_finite()
-                            && (!m.is_arc() || finite(&st.pos, 0b111))
+                            && (!m.is_curve() || finite(&st.pos, 0b111))
                             && finite(&st.pos, named & !0b111);
                         // LinuxCNC's absolute arc centre (G90.1) in diameter mode: not followed
                         let blocker = blocker.or_else(|| {
@@ -2295,6 +2365,7 @@ impl Interpreter {
                             push_unsupported(out, li, motion_word.map_or(axis_col, |(_, c)| c), why)
                         })
                     });
+                        let blocker = blocker.or(spline_blocker);
                         let mut supported = blocker.is_none() && e_construct.is_none();
                         if let Some(idx) = blocker {
                             out.unsupported[idx].blocks += 1;
@@ -2348,6 +2419,8 @@ impl Interpreter {
                                     let g = match m {
                                         Motion::ArcCw => "G2",
                                         Motion::ArcCcw => "G3",
+                                        Motion::Spline => "G5",
+                                        Motion::QSpline => "G5.1",
                                         _ => "G1",
                                     };
                                     return Err(ierr(
@@ -2411,6 +2484,13 @@ impl Interpreter {
                         if let Some(c) = comp {
                             out.records.last_mut().unwrap().comp = out.comps.len() as u32;
                             out.comps.push(c);
+                        }
+                        if let Some((ctrl, continued)) = spline {
+                            out.splines.push(Spline {
+                                rec: (out.records.len() - 1) as u32,
+                                ctrl,
+                                continued,
+                            });
                         }
                         if nose_corner.0 > 1.0 {
                             out.nose_corners.push((
@@ -3945,6 +4025,122 @@ fn comp_corner(a: [f64; 2], ta: [f64; 2], b: [f64; 2], tb: [f64; 2], r: f64) -> 
     }
     pts.push(b);
     pts
+}
+
+/// A spline's two inner control points (mm) and whether it continues the last G5 (no I J).
+type SplineCtrl = ([[f64; 2]; 2], bool);
+
+/// A spline block's control points (LinuxCNC's `convert_spline`): a G5's are the start plus I J
+/// (without both: plus the register, the last G5's -P -Q) and the end plus P Q; a G5.1's one is
+/// the start plus I J, raised to the cubic's two. I J P Q are offsets in program units whatever
+/// the distance mode. The errors are rs274's. None for a G5 without I and J whose register the
+/// program has not set.
+#[allow(clippy::too_many_arguments)]
+fn spline_block(
+    st: &mut State,
+    li: usize,
+    gcol: usize,
+    m: Motion,
+    end: &[f64; NAXES],
+    named: u16,
+    ijk: [Option<f64>; 3],
+    p: Option<f64>,
+    q: Option<f64>,
+    unit: f64,
+    wcol: &[usize; 26],
+) -> Result<Option<SplineCtrl>, NcError> {
+    if st.comp.is_some() || st.nose.is_some() {
+        return Err(ierr(
+            li,
+            gcol,
+            "Cannot convert spline with cutter radius compensation (as rs274)",
+        ));
+    }
+    if st.plane != 0 {
+        return Err(ierr(li, gcol, "Splines must be in the XY plane (as rs274)"));
+    }
+    if let Some(k) = [2usize, 3, 4, 5]
+        .into_iter()
+        .find(|&k| named & (1 << k) != 0)
+    {
+        return Err(ierr(
+            li,
+            wcol[(AXES[k] - b'A') as usize],
+            "Splines may not have motion in Z, A, B, or C (as rs274)",
+        ));
+    }
+    if let Some(k) = [6usize, 7, 8].into_iter().find(|&k| named & (1 << k) != 0) {
+        return Err(ierr(
+            li,
+            wcol[(AXES[k] - b'A') as usize],
+            "a U, V or W word on a spline: LinuxCNC's spline moves X and Y only",
+        ));
+    }
+    let s = [st.pos[0], st.pos[1]];
+    let e = [end[0], end[1]];
+    let ij = match (ijk[0], ijk[1]) {
+        (Some(i), Some(j)) => Some([i, j]),
+        (None, None) if m == Motion::Spline => None,
+        _ if m == Motion::QSpline => {
+            return Err(ierr(
+                li,
+                gcol,
+                "Must specify both I and J with G5.1 (as rs274)",
+            ))
+        }
+        _ => {
+            return Err(ierr(
+                li,
+                gcol,
+                "Must specify both I and J, or neither (as rs274)",
+            ))
+        }
+    };
+    if ijk[2].is_some() {
+        return Err(ierr(
+            li,
+            wcol[(b'K' - b'A') as usize],
+            "a K word on a spline: it has none",
+        ));
+    }
+    if m == Motion::QSpline {
+        if p.is_some() || q.is_some() {
+            return Err(ierr(
+                li,
+                gcol,
+                "P and Q on G5.1: a quadratic spline has one control point (I J)",
+            ));
+        }
+        let [i, j] = ij.unwrap();
+        let c = [s[0] + i * unit, s[1] + j * unit];
+        let two = 2.0 / 3.0;
+        return Ok(Some((
+            [
+                [s[0] + two * (c[0] - s[0]), s[1] + two * (c[1] - s[1])],
+                [e[0] + two * (c[0] - e[0]), e[1] + two * (c[1] - e[1])],
+            ],
+            false,
+        )));
+    }
+    let (Some(pv), Some(qv)) = (p, q) else {
+        return Err(ierr(
+            li,
+            gcol,
+            "Must specify both P and Q with G5 (as rs274)",
+        ));
+    };
+    let continued = ij.is_none();
+    let first = ij.or(st.spline_ij);
+    st.spline_ij = Some([-pv, -qv]);
+    Ok(first.map(|[i, j]| {
+        (
+            [
+                [s[0] + i * unit, s[1] + j * unit],
+                [e[0] + pv * unit, e[1] + qv * unit],
+            ],
+            continued,
+        )
+    }))
 }
 
 fn push_record(

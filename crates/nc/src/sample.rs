@@ -112,6 +112,38 @@ pub fn arc_sweep(rec: &Record, start: &[f64; NAXES]) -> (f64, f64, f64, f64) {
     (th0, d, r0, r1)
 }
 
+/// The point at `t` of the cubic Bézier with control points `p` (de Casteljau's steps, which
+/// stay within the control points' hull).
+pub fn bezier_at(p: &[[f64; 2]; 4], t: f64) -> [f64; 2] {
+    let lerp = |a: [f64; 2], b: [f64; 2]| [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+    let (a, b, c) = (lerp(p[0], p[1]), lerp(p[1], p[2]), lerp(p[2], p[3]));
+    let (d, e) = (lerp(a, b), lerp(b, c));
+    lerp(d, e)
+}
+
+/// Pieces of equal parameter a cubic Bézier is cut into so that each chord stays within `tol` of
+/// the curve and is at most `max` long. Between parameters h apart a chord is within
+/// h²/8·max|C''| of the curve (the linear interpolation's error, which holds for a vector
+/// function: the error is the integral of C'' against a non-negative kernel of weight
+/// (t−a)(b−t)/2); C'' = 6((1−t)(P2−2P1+P0) + t(P3−2P2+P1)) is largest at an end. The curve is
+/// no longer than its control polygon.
+pub fn bezier_pieces(p: &[[f64; 2]; 4], tol: f64, max: f64) -> f64 {
+    let second = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        (a[0] - 2.0 * b[0] + c[0]).hypot(a[1] - 2.0 * b[1] + c[1])
+    };
+    let m = 6.0 * second(p[0], p[1], p[2]).max(second(p[1], p[2], p[3]));
+    let sag = (m / (8.0 * tol)).sqrt().ceil();
+    let polygon: f64 = (0..3)
+        .map(|k| (p[k + 1][0] - p[k][0]).hypot(p[k + 1][1] - p[k][1]))
+        .sum();
+    let along = if max > 0.0 {
+        pieces_for(polygon, max)
+    } else {
+        1.0
+    };
+    sag.max(along).max(1.0)
+}
+
 /// Pieces of at most `max` for a length: a length a rounding error over a multiple of `max`
 /// (3.0000000000000004 for 3) does not get an extra piece.
 #[inline]
@@ -343,6 +375,39 @@ pub fn sample_range(
             }
             if let Some(range) = flat {
                 s.flat.push((i as u32, range));
+            }
+        } else if rec.motion.is_spline() {
+            let Some(sp) = it
+                .splines
+                .binary_search_by_key(&(i as u32), |s| s.rec)
+                .ok()
+                .map(|k| it.splines[k])
+            else {
+                return Err(NcError::Usage(format!(
+                    "line {}: a spline without its control points",
+                    rec.line + 1
+                )));
+            };
+            let cp = [
+                [start[0], start[1]],
+                sp.ctrl[0],
+                sp.ctrl[1],
+                [rec.end[0], rec.end[1]],
+            ];
+            let n = bezier_pieces(&cp, opts.chord_tol, opts.max_segment);
+            if !(n <= MAX_PIECES_PER_BLOCK) {
+                return Err(too_many(rec, n));
+            }
+            let n = n as usize;
+            for k in 1..=n {
+                let t = k as f64 / n as f64;
+                let p = if k == n {
+                    end
+                } else {
+                    let q = bezier_at(&cp, t);
+                    [q[0], q[1], start[2]]
+                };
+                push(s, p, t, &mut prev, &mut prev_t, &mut prev_o, &mut cuts);
             }
         } else if rec.motion.is_arc() {
             let geom = arc_sweep(rec, &start);

@@ -226,6 +226,7 @@ def correct(
     summary(
         f"  lines read {c.lines_in:,}, written {c.lines_out:,}; blocks changed {c.blocks_changed:,}, "
         f"lines added {c.lines_added:,}, arcs linearised {c.arcs_linearised:,}"
+        + (f", splines linearised {c.splines_linearised:,}" if c.splines_linearised else "")
     )
     summary(
         f"  displacement max {c.max_displacement:.4f} mm, mean {c.mean_displacement:.4f} mm over {c.n_points:,} points"

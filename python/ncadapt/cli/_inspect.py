@@ -51,7 +51,11 @@ def inspect(program, dialect, machine, expand, subprograms, start_motion, json_p
         summary(f"  machine: {d.describe_machine()}")
     if expand and d.name != "sinumerik":
         summary(f"  flattened (--expand): {info['lines']:,} lines ran {info['blocks_run']:,} blocks")
-    summary(f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3")
+    splines = m["spline"] + m["spline_quadratic"]
+    summary(
+        f"  motions: {m['rapid']:,} rapid, {m['feed']:,} feed, {m['arc_cw']:,} G2, {m['arc_ccw']:,} G3"
+        + (f", {m['spline']:,} G5, {m['spline_quadratic']:,} G5.1" if splines else "")
+    )
     p = info["planes"]
     summary(f"  arc planes: G17 {p['G17']:,}, G18 {p['G18']:,}, G19 {p['G19']:,}")
     e = info["extents"]["all"]

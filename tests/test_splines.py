@@ -1,0 +1,164 @@
+"""LinuxCNC's splines G5 (cubic) and G5.1 (quadratic), followed and corrected.
+
+The truth is LinuxCNC's definition (the G-code reference, and ``convert_spline`` in its
+interpreter): a G5 runs the cubic Bézier from the start through the control points start + (I, J)
+and end + (P, Q) to the end; without I and J the first control point is the start minus the last
+G5's (P, Q); a G5.1 runs the quadratic Bézier through start + (I, J). The expected paths here are
+scipy's Bernstein polynomials (:class:`scipy.interpolate.BPoly`) of those control points, worked
+out from the numbers the test writes; rs274 runs every output (its spline moves, ``NURBS_FEED``,
+print no points, so an output written in pieces is compared through its straight moves) and
+refuses what the engine refuses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.interpolate import BPoly
+from scipy.spatial import cKDTree
+
+import rs274
+from ncadapt import RefusedError, fields, nc
+from ncadapt.errors import InputError
+
+needs_rs274 = pytest.mark.skipif(rs274.RS274 is None, reason="LinuxCNC rs274 not installed")
+
+#: The blocks after ``G21 G17 G90 F100 / G0 X0 Y0 Z1 / G1 Z0``: (text, control points in mm).
+#: The second G5 has no I J (its first control point: its start minus the first's P Q).
+BLOCKS = [
+    ("G5 X10 Y0 I3 J4 P-3 Q4", [(0, 0), (3, 4), (7, 4), (10, 0)]),
+    ("G5 X20 Y0 P-3 Q-4", [(10, 0), (13, -4), (17, -4), (20, 0)]),
+    ("G5.1 X30 Y5 I5 J8", [(20, 0), (25, 8), (30, 5)]),
+    ("G1 X31", [(30, 5), (31, 5)]),
+    ("G91 G5.1 X4 Y-5 I2 J0", [(31, 5), (33, 5), (35, 0)]),
+    ("G5 X5 Y0 I1 J-1 P-1 Q-1", [(35, 0), (36, -1), (39, -1), (40, 0)]),
+    ("G90 G1 X41", [(40, 0), (41, 0)]),
+]
+HEAD = "G21 G17 G90 F100\nG0 X0 Y0 Z1\nG1 Z0\n"
+
+
+def program(blocks=BLOCKS, units="G21") -> str:
+    return HEAD.replace("G21", units) + "".join(t + "\n" for t, _ in blocks) + "M2\n"
+
+
+def expected(blocks, field, step=0.002, scale=1.0) -> np.ndarray:
+    """Points along the displaced path of `blocks` (XYZ, mm; the numbers times `scale`), no more
+    than about `step` apart."""
+    out = []
+    for _, cp in blocks:
+        cp = np.asarray(cp, float) * scale
+        n = int(np.ceil(np.abs(np.diff(cp, axis=0)).sum() / step)) + 1
+        t = np.linspace(0, 1, n)
+        xy = BPoly(cp[:, None, :], [0, 1])(t)
+        p = np.c_[xy, np.zeros(n)]
+        out.append(p + field(p))
+    return np.vstack(out)
+
+
+def output_path(path) -> np.ndarray:
+    """rs274's straight moves of the output from where Z reaches the part: dense XYZ (mm)."""
+    canon = rs274.canonical(path)
+    assert canon.error is None, canon.error
+    assert "traverse" not in canon.kinds[2:]
+    pts = [m.dense(step=0.002) for m in rs274.moves(canon)[2:]]
+    return np.vstack(pts)
+
+
+def wave(p):
+    """A field of its own: 30 µm of waviness in Z over 8 mm, a shear of X by Y."""
+    p = np.asarray(p, float)
+    d = np.zeros_like(p)
+    d[:, 2] = 0.03 * np.sin(p[:, 0] / 8.0) * np.cos(p[:, 1] / 6.0)
+    d[:, 0] = 0.002 * p[:, 1]
+    return d
+
+
+@needs_rs274
+@pytest.mark.parametrize(("units", "scale"), [("G21", 1.0), ("G20", 25.4)])
+def test_splines_bent_by_the_field_are_written_as_pieces_along_the_displaced_curve(tmp_path, units, scale):
+    src = tmp_path / "in.ngc"
+    src.write_text(program(units=units))
+    assert rs274.canonical(src).error is None
+    out = nc.parse(program(units=units)).correct(wave, max_segment=2.0)
+    assert "G5" not in out.text and out.correction.splines_linearised == 5
+    dst = tmp_path / "out.ngc"
+    dst.write_text(out.text)
+    got, want = output_path(dst), expected(BLOCKS, wave, scale=scale)
+    # both ways: every point of the displaced curve near the output's path, and back (the chord
+    # tolerance, 2 µm, the written digits, and rs274's 4 decimals: of an inch, 1.3 µm)
+    tol = 0.003 if units == "G21" else 0.005
+    assert cKDTree(got).query(want)[0].max() < tol
+    assert cKDTree(want).query(got)[0].max() < tol
+
+
+def test_a_shift_keeps_the_splines():
+    text = program()
+    assert nc.parse(text).correct(fields.Shift((0, 0, 0))).text == text
+    # a Z shift moves the plunge; the splines, in the plane, stay as written
+    out = nc.parse(text).correct(fields.Shift((0, 0, 0.05))).text.splitlines()
+    assert out[2] == "G1 Z0.05" and out[3:] == text.splitlines()[3:]
+    # a shift in X moves their ends; I J P Q are offsets, the same
+    out = nc.parse(text).correct(fields.Shift((0.1, 0, 0))).text.splitlines()
+    assert out[3:6] == ["G5 X10.1 Y0 I3 J4 P-3 Q4", "G5 X20.1 Y0 P-3 Q-4", "G5.1 X30.1 Y5 I5 J8"]
+
+
+@needs_rs274
+def test_a_g5_without_i_and_j_after_one_written_in_pieces_is_written_in_pieces(tmp_path):
+    """The field bends the first G5 and is still (zero) over the second, which has no I J: kept
+    as written it would read LinuxCNC's register, which the output's pieces did not set."""
+
+    def left(p):
+        d = np.zeros_like(p)
+        d[:, 2] = 0.04 * np.clip(1.0 - p[:, 0] / 9.0, 0.0, None) ** 2
+        return d
+
+    blocks = BLOCKS[:2]
+    out = nc.parse(program(blocks)).correct(left)
+    assert "G5" not in out.text
+    dst = tmp_path / "out.ngc"
+    dst.write_text(out.text)
+    got, want = output_path(dst), expected(blocks, left)
+    assert cKDTree(got).query(want)[0].max() < 0.003
+    assert cKDTree(want).query(got)[0].max() < 0.003
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    ("block", "says"),
+    [
+        ("G18 G5 X10 Z0 I1 J1 P-1 Q1", "XY plane"),
+        ("G5 X10 Y0 Z-1 I1 J1 P-1 Q1", "motion in Z"),
+        ("G5 X10 Y0 I1 P-1 Q1", "both I and J, or neither"),
+        ("G5 X10 Y0 I1 J1", "both P and Q"),
+        ("G5.1 X10 Y0 I1", "both I and J with G5.1"),
+        ("G41.1 D1\nG1 X5 Y0\nG5 X10 Y0 I1 J1 P-1 Q1", "cutter radius compensation"),
+        ("G5.1 Q1", "All axes missing"),
+        ("G5.1 X1 I1 J1 P1 Q1", "P and Q on G5.1"),
+        ("G5 X1 Y1 I1 J1 P1 Q1 K1", "K word"),
+        # its P Q (I J) go with a G5 (G5.1) in the block: a modal spline block is refused
+        ("G5 X1 Y1 I1 J1 P1 Q1\nX2 Y2 P1 Q1", "P word"),
+        ("G5.1 X1 Y1 I1 J1\nX2 Y2 I1 J1", "I word"),
+    ],
+)
+def test_what_rs274_refuses_is_refused_at_its_line(tmp_path, block, says):
+    text = HEAD + block + "\nM2\n"
+    p = tmp_path / "p.ngc"
+    p.write_text(text)
+    assert rs274.canonical(p).error is not None
+    with pytest.raises(InputError) as e:
+        nc.parse(text)
+    assert says in e.value.message and e.value.line == text.count("\n") - 1
+
+
+def test_a_g5_without_i_and_j_the_program_has_not_set_is_refused():
+    """rs274 starts its register at 0, a machine holds what the last program left: the first
+    control point is not known."""
+    with pytest.raises(RefusedError) as e:
+        nc.parse(HEAD + "G5 X10 Y0 P-3 Q4\nM2\n").correct(fields.Shift((0, 0, 0.05)))
+    [d] = e.value.details
+    assert d["line"] == 4 and "register" in d["construct"]
+
+
+def test_inspect_counts_them():
+    info = nc.parse(program()).inspect()
+    assert (info["motions"]["spline"], info["motions"]["spline_quadratic"]) == (3, 2)
