@@ -206,6 +206,17 @@ def adjust(data: bytes, used: list[str]) -> bytes:
 
 
 # ------------------------------------------------------------------------------------------ geometry
+def rebase(canon: Canon, base: np.ndarray) -> Canon:
+    """``canon`` with every end (and arc centre) less ``base``: rs274's motion in the program's
+    coordinates where its first move is, those the engine keeps positions (and a field) in, when
+    the program sets offsets before it moves (``G10 L2 P0 X450`` first)."""
+    arcs = [
+        None if a is None else (a[0], a[1] - base[_PLANES[a[3]][0]], a[2] - base[_PLANES[a[3]][1]], a[3])
+        for a in canon.arcs
+    ]
+    return dataclasses.replace(canon, ends=canon.ends - base[None, :], arcs=arcs)
+
+
 def densify(canon: Canon, sel: np.ndarray, step: float = _STEP, chord: float = _CHORD):
     """Points along the moves ``sel`` (indices into ``canon``), each from its start (the previous
     move's end; rs274 starts at 0) to its end: straight moves in pieces of at most ``step``, arcs in
@@ -594,7 +605,7 @@ def displaced_moves(prog: nc.Program, canon: Canon):
     ours = b.end[:m, :6]
     known = np.isfinite(ours)
     bad = (known & (np.abs(np.where(known, ours, 0.0) - canon.ends[:m]) > tol)).any(axis=1)
-    kinds = np.array(["traverse", "feed", "arc", "arc", ""])[b.motion[:m]]
+    kinds = np.array(["traverse", "feed", "arc", "arc", "", "spline", "spline"])[b.motion[:m]]
     bad |= (kinds != "") & (kinds != np.array(canon.kinds[:m], dtype="<U8"))
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
@@ -794,6 +805,9 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
         r.motion_detail = "rs274 prints no point of a spline (NURBS_FEED); LinuxCNC's G5 and G5.1 are checked in tests/test_splines.py"
         return
     tol = TOL_MM if r.units == "mm" else TOL_INCH
+    # (offsets the program sets before it moves are the frame of the engine's coordinates)
+    base = np.asarray(canon_in.offsets[0], dtype=float) if canon_in.offsets else np.zeros(6)
+    canon_in = rebase(canon_in, base)
     displaced, lines, start_known, why = displaced_moves(prog, canon_in)
     details = []
     if why is not None:
@@ -819,6 +833,7 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
                 why = canon_out.error.replace("\n", " | ")
                 details.append(f"{name}: rs274 rejects the corrected program: {why}")
                 continue
+            canon_out = rebase(canon_out, base)
             problems = compare_motion(
                 canon_in, canon_out, displaced, fieldof[name], tol, lines, MAX_SEGMENT, start_known, prog.blocks.cycle
             )

@@ -48,6 +48,8 @@ class Canon:
     #: spline moves (G5, G5.1: ``NURBS_FEED``), of which rs274 prints no point: the moves after
     #: one do not start where the move before it ended
     splines: int = 0
+    #: per move: the offsets in force (G5x plus G92/G52, mm and degrees), which its end includes
+    offsets: list = field(default_factory=list)
 
 
 def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = None) -> Canon:
@@ -77,7 +79,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     def lengths(v):
         return np.array([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
 
-    kinds, ends, arcs, comp, rates = [], [], [], [], []
+    kinds, ends, arcs, comp, rates, offsets = [], [], [], [], [], []
     res, rate, splines = 0.0, 0.0, 0
     comp_on = leaving = False
     for line in text.splitlines():
@@ -91,6 +93,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
         if name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "STRAIGHT_PROBE", "ARC_FEED"):
             comp.append(comp_on or leaving)
             rates.append(rate)
+            offsets.append(g5x + g92)
             leaving = False
         if name == "NURBS_FEED":
             splines += 1
@@ -130,7 +133,7 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     ):
         tail = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         err = "\n".join(tail[-3:]) or f"exit {proc.returncode}"
-    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp, rates, splines)
+    return Canon(kinds, np.asarray(ends, dtype=float).reshape(-1, 6), arcs, res, err, comp, rates, splines, offsets)
 
 
 class Move:

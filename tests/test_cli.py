@@ -93,7 +93,15 @@ def test_inspect_json(tmp_path, plate):
     assert r.exit_code == 0
     d = json.loads((tmp_path / "i.json").read_text())
     assert d["units"] == "mm" and d["lines"] == 34
-    assert d["motions"] == {"rapid": 4, "feed": 15, "arc_cw": 0, "arc_ccw": 4, "other": 0, "spline": 0, "spline_quadratic": 0}
+    assert d["motions"] == {
+        "rapid": 4,
+        "feed": 15,
+        "arc_cw": 0,
+        "arc_ccw": 4,
+        "other": 0,
+        "spline": 0,
+        "spline_quadratic": 0,
+    }
     assert d["extents"]["feed"]["x"] == [-6.0, 66.0]
     assert d["unsupported"] == []
     assert d["notes"][0]["line"] == 32

@@ -177,3 +177,15 @@ def test_comparison_lets_a_rapid_keep_the_corrected_depth_of_an_axis_it_does_not
     # ... but not to anywhere else, nor elsewhere in an axis it moves
     assert compare(_off(stays, 2, 0.02))
     assert compare([m if i != 2 else ("traverse", (9.02, 0, -0.95)) for i, m in enumerate(stays)])
+
+
+@pytest.mark.skipif(RS274 is None, reason="LinuxCNC rs274 not installed")
+def test_offsets_set_before_the_first_move_are_the_frame(tmp_path):
+    """A program that sets its work offsets before it moves (LinuxCNC's puma_cube.ngc: G10 L2 P0
+    first) is read in its own coordinates, as the field is: rs274's motion (offsets added) is
+    compared in them, and a field that varies is evaluated there."""
+    (tmp_path / "p.ngc").write_text(
+        "G21 G10 L2 P0 X450 Y100 Z-495\nF1000\nG0 X-100 Y-100 Z-10\nG1 Z-20\nG1 X100\nG2 X100 Y100 R100\nG1 X-100\nG0 Z0\nM2\n"
+    )
+    r = corpus.run(corpus.Entry("p.ngc", "LinuxCNC/RS274NGC", "test", 9, root=tmp_path), tmp_path)
+    assert r.outcome == "accepted" and r.motion == "matched", (r.outcome, r.motion_detail)
