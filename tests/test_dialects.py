@@ -35,6 +35,14 @@ CASES = [
     ("#<x> = 5\nG0 X#<x>\nM2\n", "linuxcnc", None),
     ("G0 X0 (X=5 is a comment)\nG70 ; G70=inch on a Siemens control\nM2\n", "linuxcnc", None),
     ("G21 G90\nG1 X10 F100\nM2\n", "linuxcnc", None),
+    # LinuxCNC's names are no other dialect's words (ngcgui's #<scale>, a kinematics' x-rot-point)
+    ("#<scale> = 1.0\n#<_hal[kins.x-rot-point]> = 2\no<rot> call\nG0 X#<scale>\nM2\n", "linuxcnc", None),
+    # plasmac's user M code M190 takes P (Marlin's bed heater M190 takes S); M67/M68 take E
+    ("G21\nM190 P1 (material #1)\nM66 P3 L3 Q1\nG1 X10 F100\nM2\n", "linuxcnc", None),
+    ("G21\nM68 E0 Q0\nG1 X5 M67 E2 Q25 F100\nM2\n", "linuxcnc", None),
+    ("G21\nM190 S60\nG1 X1 F100\n", "marlin", 2),
+    # FABtotum's laser programs: a dwell in seconds
+    (";laser\nG4 S1\nM728\nG1 X1 F100\n", "marlin", 2),
 ]
 
 

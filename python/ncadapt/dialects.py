@@ -110,13 +110,17 @@ _RULES: tuple[tuple[str, bool, tuple[str, ...], re.Pattern[str] | _Assignment], 
     ),
     ("sinumerik", False, ("=",), re.compile(r"\b(?:CR|LIMS|AR|TURN)[ \t]*=")),
     ("marlin", True, ("FLAVOR",), re.compile(r"^;[ \t]*FLAVOR:", re.M)),
+    # (M100-M199 are LinuxCNC's user M codes, which take P and Q: a Marlin heater or fan code takes S)
     (
         "marlin",
         False,
         _MARLIN_M,
-        re.compile(r"^[ \t]*(?:N\d+[ \t]+)?M(?:82|83|104|105|106|107|109|140|190|204|205)\b", re.M),
+        re.compile(
+            r"^[ \t]*(?:N\d+[ \t]+)?M(?:82|83|104|105|106|107|109|140|190|204|205)\b(?![^\n]*\b[PQ][-+.\d])", re.M
+        ),
     ),
-    ("marlin", False, ("E",), re.compile(r"^[ \t]*G0*1\b[^\n]*\bE[-+.\d]", re.M)),
+    # (LinuxCNC's analog outputs M67/M68 and inputs M66 take E, on a move too)
+    ("marlin", False, ("E",), re.compile(r"^[ \t]*G0*1\b(?![^\n]*\bM6[678]\b)[^\n]*\bE[-+.\d]", re.M)),
     # a dwell in seconds (RS274NGC's and grbl's G4 take P), FABtotum's (FABlin) head and light codes
     ("marlin", False, ("G4", "G04", "M728", "M793"), re.compile(r"^[ \t]*(?:G0*4[ \t]+S[-+.\d]|M728\b|M793\b)", re.M)),
     ("grbl", False, ("$",), re.compile(r"^[ \t]*\$(?:[HXCIGN#$]|J=|\d+=)", re.M)),
@@ -204,6 +208,16 @@ def _blank_comments(text: str) -> str:
     return "\n".join(out)
 
 
+#: LinuxCNC's names: a named parameter ``#<scale>``, ``#<_hal[x-rot-point]>``, a subroutine
+#: ``o<rotate>``, whose text is no dialect's word.
+_NAME = re.compile(r"(?<=[#oO])<[^>\n]*>")
+
+
+def _blank_names(text: str) -> str:
+    """``text`` with LinuxCNC's ``<…>`` names after ``#`` or ``o`` blanked to the same length."""
+    return _NAME.sub(lambda m: " " * len(m.group()), text) if "<" in text else text
+
+
 @dataclass(frozen=True)
 class _Head:
     """A program's first bytes as detection reads them: the text (its last line left out when it
@@ -219,7 +233,7 @@ def _read_head(head: bytes) -> _Head:
     text = head.decode("utf-8", "replace").replace("\r\n", "\n").removeprefix("\ufeff")
     if len(head) >= HEAD_BYTES:
         text = text[: text.rfind("\n") + 1]  # the last line may be cut
-    return _Head(text, text.translate(_UPPER), _blank_comments(text).translate(_UPPER))
+    return _Head(text, text.translate(_UPPER), _blank_names(_blank_comments(text)).translate(_UPPER))
 
 
 def detect(head: bytes, name: str | None = None) -> Dialect:
