@@ -75,6 +75,15 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
     scale = 25.4  # rs274 without an ini file works in inches until the program says otherwise
     plane = "CANON_PLANE_XY"
     g5x, g92 = np.zeros(6), np.zeros(6)
+    # the XY rotation of the work system (G10 L2 R): LinuxCNC adds the G92 offset to a
+    # programmed point, turns it about the work system's origin, then adds that origin
+    # (emccanon's rotate_and_offset_pos)
+    cos, sin = 1.0, 0.0
+
+    def place(p):
+        p = p + g92
+        p[0], p[1] = cos * p[0] - sin * p[1], sin * p[0] + cos * p[1]
+        return p + g5x
 
     def lengths(v):
         return np.array([v[0] * scale, v[1] * scale, v[2] * scale, v[3], v[4], v[5]])
@@ -107,9 +116,12 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             g5x = lengths([float(a) for a in args.split(",")[1:7]])
         elif name == "SET_G92_OFFSET":
             g92 = lengths([float(a) for a in args.split(",")[:6]])
+        elif name == "SET_XY_ROTATION":
+            th = math.radians(float(args))
+            cos, sin = math.cos(th), math.sin(th)
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "STRAIGHT_PROBE"):
             v = [float(a) for a in args.split(",")]
-            ends.append(list(lengths(v) + g5x + g92))
+            ends.append(list(place(lengths(v))))
             kinds.append({"STRAIGHT_TRAVERSE": "traverse", "STRAIGHT_FEED": "feed"}.get(name, "probe"))
             arcs.append(None)
             res = max(res, 0.00005 * scale)
@@ -119,10 +131,14 @@ def canonical(path: str | Path, timeout: float = 60, tools: str | Path | None = 
             e = np.zeros(6)
             e[a1], e[a2], e[an] = v[0] * scale, v[1] * scale, v[5] * scale
             e[3:6] = v[6:9]
-            off = g5x + g92
-            ends.append(list(e + off))
+            if sin != 0.0 and plane != "CANON_PLANE_XY":
+                raise ValueError("an arc outside the XY plane under an XY rotation")
+            c = np.zeros(6)
+            c[a1], c[a2] = v[2] * scale, v[3] * scale
+            ends.append(list(place(e)))
             kinds.append("arc")
-            arcs.append((int(v[4]), v[2] * scale + off[a1], v[3] * scale + off[a2], plane))
+            c = place(c)
+            arcs.append((int(v[4]), c[a1], c[a2], plane))
             res = max(res, 0.00005 * scale)
     err = None
     if (

@@ -8,7 +8,8 @@
 use crate::error::NcError;
 use crate::interp::{
     axis_index, axis_unit, cycle_steps, peck_clearance, polar_xy, CycleStep, Dialect, Hole, Interp,
-    Motion, Record, AXES, CYCLE_BOTTOM, LATHE_CUTS, MM_PER_INCH, NAXES, PLANE_AXES,
+    Motion, Record, Rotation, AXES, CYCLE_BOTTOM, LATHE_CUTS, MM_PER_INCH, NAXES, NO_ROT,
+    PLANE_AXES,
 };
 use crate::lex::{round, Lexed, NumberStyle, Word};
 use crate::sample::{start_of, Samples};
@@ -760,9 +761,26 @@ impl<'a> Emitter<'a> {
     /// A block that is not corrected: kept, except that in G91 a supported move is re-aimed at
     /// its programmed target (the output position before it may differ from the program's).
     fn uncorrected(&mut self, li: usize, ri: usize) {
-        let (it, lx) = (self.it, self.lx);
+        let it = self.it;
         let rec = &it.records[ri];
-        let start = start_of(it, ri);
+        let rot = self.rotation(rec);
+        if let Some(r) = rot {
+            // (as programmed: the block's numbers and where the output is, turned back)
+            let mut rec = rec.clone();
+            to_prog(&r, &mut rec.end);
+            let mut start = start_of(it, ri);
+            to_prog(&r, &mut start);
+            to_prog(&r, &mut self.st.epos);
+            self.uncorrected_from(li, &rec, start);
+            from_prog(&r, &mut self.st.epos);
+        } else {
+            self.uncorrected_from(li, rec, start_of(it, ri));
+        }
+    }
+
+    /// [`Emitter::uncorrected`] of the block of `rec`, which starts at `start`.
+    fn uncorrected_from(&mut self, li: usize, rec: &Record, start: [f64; NAXES]) {
+        let lx = self.lx;
         let words = lx.line_words(li);
         let explicit = words.iter().any(|w| self.sets_motion(w));
         if rec.motion != Motion::Other {
@@ -785,7 +803,7 @@ impl<'a> Emitter<'a> {
                         *t = rec.end[k];
                     }
                 }
-                self.set_axes(li, rec, &target, 0);
+                self.set_axes_as_programmed(li, rec, &target, 0);
                 return;
             }
         }
@@ -818,6 +836,11 @@ impl<'a> Emitter<'a> {
                 None => self.st.epos[k] + (rec.end[k] - start[k]),
             };
         }
+    }
+
+    /// The coordinate rotation record `rec`'s X and Y are written under, if any.
+    fn rotation(&self, rec: &Record) -> Option<Rotation> {
+        (rec.rot != NO_ROT).then(|| self.it.rotations[rec.rot as usize])
     }
 
     /// The spline of record `ri`, if it is one.
@@ -1319,16 +1342,26 @@ impl<'a> Emitter<'a> {
         // XYZ and the other axes the block names, in the order of AXES
         let axes = 0b111 | rec.named | moved;
         let half = self.fmt.half(rec.inch);
+        // under a coordinate rotation the pieces' X and Y are written as programmed, turned back
+        let rot = self.rotation(rec);
+        if let Some(r) = rot {
+            to_prog(&r, &mut self.st.epos);
+        }
         for (i, &k) in pieces.iter().enumerate() {
             let t0 = self.st.tail.len();
             let body = t0 + prefix.len();
             self.st.tail.extend_from_slice(prefix);
+            let piece_xy = rot.map_or([0.0; 2], |r| {
+                r.to_prog([xyz[3 * k] + disp[3 * k], xyz[3 * k + 1] + disp[3 * k + 1]])
+            });
             let mut bits = axes;
             while bits != 0 {
                 let a = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                // (the axis of `target_at(k, ts[k])`)
-                let pa = if a < 3 {
+                // (the axis of `target_at(k, ts[k])`; X and Y as programmed under a rotation)
+                let pa = if a < 2 && rot.is_some() {
+                    piece_xy[a]
+                } else if a < 3 {
                     xyz[3 * k + a] + disp[3 * k + a]
                 } else {
                     (if ts[k] == 1.0 {
@@ -1389,6 +1422,9 @@ impl<'a> Emitter<'a> {
             } else {
                 self.st.tail.truncate(t0);
             }
+        }
+        if let Some(r) = rot {
+            from_prog(&r, &mut self.st.epos);
         }
         Ok(())
     }
@@ -2162,6 +2198,29 @@ impl<'a> Emitter<'a> {
     /// axis words it lacks; axes of `also` (bits of AXES) are written where they differ even when
     /// the block does not name them.
     fn set_axes(&mut self, li: usize, rec: &Record, target: &[f64; NAXES], also: u16) {
+        // under a coordinate rotation X and Y are written as programmed: the target and the
+        // output's position turned back, and the position turned again after
+        let rot = self.rotation(rec);
+        let mut turned = *target;
+        if let Some(r) = rot {
+            to_prog(&r, &mut turned);
+            to_prog(&r, &mut self.st.epos);
+        }
+        self.set_axes_as_programmed(li, rec, &turned, also);
+        if let Some(r) = rot {
+            from_prog(&r, &mut self.st.epos);
+        }
+    }
+
+    /// [`Emitter::set_axes`] with `target` and the output's position as the block's numbers
+    /// read them.
+    fn set_axes_as_programmed(
+        &mut self,
+        li: usize,
+        rec: &Record,
+        target: &[f64; NAXES],
+        also: u16,
+    ) {
         let lx = self.lx;
         let words = lx.line_words(li);
         let half = self.fmt.half(rec.inch);
@@ -2305,6 +2364,18 @@ impl<'a> Emitter<'a> {
 /// G99, or when the retract level is the R plane, both ways travel at the R plane.)
 fn approach_changes(cy: &crate::interp::Cycle, choices: (bool, bool), level: f64, r: f64) -> bool {
     cy.g98 && choices.1 != cy.choices.1 && !choices.0 && level > r
+}
+
+/// `p`'s X and Y turned back by rotation `r`: the programmed point there.
+fn to_prog(r: &Rotation, p: &mut [f64; NAXES]) {
+    let q = r.to_prog([p[0], p[1]]);
+    (p[0], p[1]) = (q[0], q[1]);
+}
+
+/// `p`'s X and Y, programmed, where rotation `r` puts them.
+fn from_prog(r: &Rotation, p: &mut [f64; NAXES]) {
+    let q = r.to_frame([p[0], p[1]]);
+    (p[0], p[1]) = (q[0], q[1]);
 }
 
 /// Squared distance from p to the segment a-b (XYZ).

@@ -128,6 +128,41 @@ impl Motion {
     }
 }
 
+/// A coordinate rotation in force (Fanuc's G68 in G17): the programmed X Y (mm, with the
+/// offsets, as an unrotated move's end) turned by the angle about the centre `c`, given the
+/// same way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rotation {
+    pub cos: f64,
+    pub sin: f64,
+    pub c: [f64; 2],
+}
+
+impl Rotation {
+    /// Where a programmed point `p` is (the frame's coordinates).
+    #[inline]
+    pub fn to_frame(&self, p: [f64; 2]) -> [f64; 2] {
+        let (x, y) = (p[0] - self.c[0], p[1] - self.c[1]);
+        [
+            self.c[0] + self.cos * x - self.sin * y,
+            self.c[1] + self.sin * x + self.cos * y,
+        ]
+    }
+
+    /// The programmed point that is at `f`.
+    #[inline]
+    pub fn to_prog(&self, f: [f64; 2]) -> [f64; 2] {
+        let (x, y) = (f[0] - self.c[0], f[1] - self.c[1]);
+        [
+            self.c[0] + self.cos * x + self.sin * y,
+            self.c[1] - self.sin * x + self.cos * y,
+        ]
+    }
+}
+
+/// [`Record::rot`] of a move under no rotation.
+pub const NO_ROT: u32 = u32::MAX;
+
 /// A spline block (LinuxCNC's G5 or G5.1) as the cubic Bézier it runs: the start, `ctrl[0]`,
 /// `ctrl[1]`, the end, in the XY plane (mm, the frame of [`Record::end`]). A G5.1's quadratic is
 /// raised to the cubic with the same path (control points 2/3 of the way to its own).
@@ -190,6 +225,9 @@ pub struct Record {
     pub nose: f64,
     /// Why the move must stay one move (0: it need not): [`WHOLE_NOSE`], [`WHOLE_CONTOUR`].
     pub whole: u8,
+    /// Index into [`Interp::rotations`] of the coordinate rotation its X and Y are written
+    /// under ([`NO_ROT`]: none): its end and centre are where the rotation puts them.
+    pub rot: u32,
 }
 
 /// [`Record::whole`] of the move that starts or ends radius compensation in G18/G19 (the first
@@ -568,6 +606,8 @@ pub struct Interp {
     pub nose_corners: Vec<(u32, f64, f64)>,
     /// The splines of the run (G5, G5.1), in record order.
     pub splines: Vec<Spline>,
+    /// The coordinate rotations of the run's moves ([`Record::rot`]).
+    pub rotations: Vec<Rotation>,
 }
 
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
@@ -686,6 +726,14 @@ struct State {
     /// written: the last G5's -P -Q); None where the program has not set it (a canned cycle
     /// sets it too, from its I J).
     spline_ij: Option<[f64; 2]>,
+    /// The coordinate rotation in force (Fanuc's G68), and its index in the run's rotations.
+    rot: Option<Rotation>,
+    rot_idx: Option<u32>,
+    /// Under a rotation: the programmed X Y of where the tool is (mm, with the offsets), which
+    /// a move that leaves one out keeps; and whether a move since G68 or G69 gave both (before
+    /// one does, how the control takes the one left out is its setting: refused).
+    prog_xy: [f64; 2],
+    rot_first: bool,
     /// After G40 ending compensation the engine did not follow: the move that ends it is not
     /// corrected either (the blocker stays until a move in the plane).
     comp_unfollowed_exit: bool,
@@ -853,6 +901,10 @@ impl Interpreter {
                 box_taper: false,
                 comp_exit: None,
                 spline_ij: None,
+                rot: None,
+                rot_idx: None,
+                prog_xy: [f64::NAN; 2],
+                rot_first: false,
                 comp_unfollowed_exit: false,
                 tool_next: None,
                 tool_loaded: None,
@@ -906,11 +958,13 @@ impl Interpreter {
             comps: Vec::new(),
             nose_corners: Vec::new(),
             splines: Vec::new(),
+            rotations: Vec::new(),
             unsupported: std::mem::take(&mut self.unsupported),
             notes: std::mem::take(&mut self.notes),
             summary: std::mem::take(&mut self.summary),
         };
         self.st.frame = 0;
+        self.st.rot_idx = None;
         let r = if out.summary.end_line.is_some() {
             Ok(())
         } else {
@@ -1344,6 +1398,8 @@ impl Interpreter {
             let mut tool_length: Option<i32> = None;
             // G41, G41.1, G42 or G42.1 turning compensation on
             let mut comp_code: Option<(i32, usize)> = None;
+            // Fanuc's G68 (its X Y the centre, R the angle)
+            let mut rot_word: Option<usize> = None;
             if ms[..nm].iter().any(|&(m, _)| m == 6) {
                 st.tool_loaded = st.tool_next;
             }
@@ -1680,11 +1736,23 @@ impl Interpreter {
                         nonmodal_axis_user = Some((c, idx));
                     }
                     281 | 301 => {}
+                    680 if st.dialect == Dialect::Fanuc => rot_word = Some(gc),
                     680 => {
                         let idx = push_unsupported(out, li, gc, "coordinate rotation G68");
                         st.active.rotation = Some((li as u32, idx));
                     }
-                    690 => st.active.rotation = None,
+                    690 => {
+                        if st.active.rotation.take().is_some() {
+                            // the moves under a rotation not followed were read unrotated: where
+                            // the tool is, is not known
+                            st.pos[0] = f64::NAN;
+                            st.pos[1] = f64::NAN;
+                        }
+                        if st.rot.take().is_some() {
+                            st.rot_idx = None;
+                            st.rot_first = true;
+                        }
+                    }
                     510 => {
                         let idx = push_unsupported(out, li, gc, "scaling G51");
                         st.active.scaling = Some((li as u32, idx));
@@ -2002,7 +2070,9 @@ impl Interpreter {
                     Some((Mode::Motion(Motion::Rapid | Motion::Feed), _))
                 );
             if named == 0 {
-                if let Some((Mode::Motion(m), gc)) = motion_word.filter(|_| st.dialect.is_linuxcnc()) {
+                if let Some((Mode::Motion(m), gc)) =
+                    motion_word.filter(|_| st.dialect.is_linuxcnc())
+                {
                     // (a spline's I J P Q go with its G5 or G5.1, on every block, as rs274 reads them)
                     if m.is_spline() {
                         return Err(ierr(li, gc, "All axes missing with motion code (as rs274)"));
@@ -2044,6 +2114,80 @@ impl Interpreter {
                 st.nose = None;
                 st.nose_edge = false;
                 st.active.cutter_comp = Some((li as u32, idx));
+            }
+
+            // Fanuc's coordinate rotation: its X Y the centre (the tool's position where left
+            // out), R the angle; moves after it are turned about the centre
+            if let Some(gc) = rot_word {
+                let why = if st.rot.is_some() || st.active.rotation.is_some() {
+                    Some("G68 while a rotation is in force")
+                } else if st.plane != 0 {
+                    Some("coordinate rotation G68 outside the XY plane (G17)")
+                } else if r.is_none() {
+                    Some("G68 without R: the angle is then the control's setting (parameter 5410)")
+                } else if st.incremental {
+                    Some("G68 under G91: whether its R and centre are increments is the control's setting (parameter 5400 RIN)")
+                } else if named & !0b11 != 0
+                    || motion_word.is_some()
+                    || frame_code.is_some()
+                    || home.is_some()
+                    || nonmodal_axis_user.is_some()
+                    || comp_code.is_some()
+                    || st.comp.is_some()
+                    || st.active.cutter_comp.is_some()
+                    || st.active.polar.is_some()
+                    || st.active.scaling.is_some()
+                {
+                    Some("G68 with other axis words, a motion, offsets or compensation in the block or in force")
+                } else {
+                    None
+                };
+                // (without X Y the centre is where the tool stands, which the correction moves:
+                // the output would turn about another point)
+                let why = why.or_else(|| {
+                    (named & 0b11 != 0b11).then_some("G68 without X and Y turns about where the tool stands, which the correction moves (the output would turn about another point); give the centre, X and Y")
+                });
+                let c = [0, 1].map(|k| axis[k].map_or(f64::NAN, |v| v * unit + st.off[k]));
+                if let Some(why) = why {
+                    let idx = push_unsupported(out, li, gc, why);
+                    st.active.rotation = Some((li as u32, idx));
+                } else {
+                    let (sin, cos) = r.unwrap().0.to_radians().sin_cos();
+                    st.rot = Some(Rotation { cos, sin, c });
+                    st.rot_idx = None;
+                    st.rot_first = true;
+                    st.prog_xy = [f64::NAN; 2];
+                }
+                if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                    out.summary.end_line = Some(li as u32);
+                    break;
+                }
+                continue;
+            }
+            // under a rotation the engine follows moves (G0-G3 in G17) alone
+            if st.rot.is_some()
+                && st.active.rotation.is_none()
+                && (frame_code.is_some()
+                    || nonmodal_axis_user.is_some()
+                    || home.is_some()
+                    || g53
+                    || polar_used
+                    || comp_code.is_some()
+                    || st.comp.is_some()
+                    || st.nose.is_some()
+                    || st.arc_absolute
+                    || (any_axis && !matches!(st.mode, Mode::Motion(_)))
+                    || (any_axis
+                        && st.plane != 0
+                        && matches!(st.mode, Mode::Motion(m) if m.is_arc())))
+            {
+                let idx = push_unsupported(
+                    out,
+                    li,
+                    axis_col.max(1),
+                    "under a coordinate rotation (G68) only moves G0-G3 are followed (arcs in G17): offsets, G28, G30, G53, canned cycles, probing, cutter compensation, absolute arc centres and arcs in G18/G19 are not",
+                );
+                st.active.rotation = Some((li as u32, idx));
             }
 
             // offsets: the program's coordinates move, the machine does not
@@ -2119,6 +2263,38 @@ impl Interpreter {
 
             // the target of the axis words
             let mut end = target(&st.pos, &axis, st.incremental && !g53, unit, &st.off);
+            // after G68 or G69 the first move naming X or Y must give both, absolute; under a
+            // rotation its programmed X Y are turned about the centre
+            if named & 0b11 != 0 && !g53 && st.rot_first {
+                if named & 0b11 != 0b11 || st.incremental {
+                    if st.active.rotation.is_none() {
+                        let idx = push_unsupported(out, li, axis_col, "the first move after G68 or G69 that names X or Y leaves one out or is incremental: which programmed coordinate the control takes across the change is its setting; give X and Y, absolute (G90)");
+                        st.active.rotation = Some((li as u32, idx));
+                    }
+                    end[0] = f64::NAN;
+                    end[1] = f64::NAN;
+                } else {
+                    st.rot_first = false;
+                }
+            }
+            if let (Some(rot), false, true) = (st.rot, g53, named & 0b11 != 0) {
+                let mut p = st.prog_xy;
+                for (k, pk) in p.iter_mut().enumerate() {
+                    if let Some(v) = axis[k] {
+                        *pk = if st.incremental {
+                            st.prog_xy[k] + v * unit
+                        } else {
+                            v * unit + st.off[k]
+                        };
+                    }
+                }
+                if end[0].is_finite() || end[1].is_finite() {
+                    let f = rot.to_frame(p);
+                    end[0] = f[0];
+                    end[1] = f[1];
+                }
+                st.prog_xy = p;
+            }
 
             if g53 {
                 let what = "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards";
@@ -2287,10 +2463,15 @@ impl Interpreter {
                                         o2.unwrap_or(0.0) * scale + st.off[a2],
                                     ];
                                 } else {
-                                    center = [
-                                        s[0] + o1.unwrap_or(0.0) * scale,
-                                        s[1] + o2.unwrap_or(0.0) * scale,
-                                    ];
+                                    let mut o = [o1.unwrap_or(0.0), o2.unwrap_or(0.0)];
+                                    if let (Some(rot), 0) = (st.rot, st.plane) {
+                                        // (offsets in the programmed frame, turned with it)
+                                        o = [
+                                            rot.cos * o[0] - rot.sin * o[1],
+                                            rot.sin * o[0] + rot.cos * o[1],
+                                        ];
+                                    }
+                                    center = [s[0] + o[0] * scale, s[1] + o[1] * scale];
                                 }
                                 let r1 = ((s[0] - center[0]).powi(2) + (s[1] - center[1]).powi(2))
                                     .sqrt();
@@ -4145,7 +4326,7 @@ fn spline_block(
 
 fn push_record(
     out: &mut Interp,
-    st: &State,
+    st: &mut State,
     li: usize,
     motion: Motion,
     supported: bool,
@@ -4154,6 +4335,10 @@ fn push_record(
     turns: u32,
 ) {
     out.line_record[li - out.line_base] = out.records.len() as u32;
+    if let (Some(r), None) = (st.rot, st.rot_idx) {
+        st.rot_idx = Some(out.rotations.len() as u32);
+        out.rotations.push(r);
+    }
     let mut end = st.pos;
     if st.dialect.lathe() {
         end[1] = 0.0;
@@ -4177,6 +4362,7 @@ fn push_record(
         diameter: st.diameter,
         nose: st.nose.unwrap_or(0.0),
         whole: 0,
+        rot: st.rot_idx.unwrap_or(NO_ROT),
     });
 }
 
