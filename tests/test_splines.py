@@ -12,6 +12,8 @@ refuses what the engine refuses.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from scipy.interpolate import BPoly
@@ -162,3 +164,64 @@ def test_a_g5_without_i_and_j_the_program_has_not_set_is_refused():
 def test_inspect_counts_them():
     info = nc.parse(program()).inspect()
     assert (info["motions"]["spline"], info["motions"]["spline_quadratic"]) == (3, 2)
+
+
+@needs_rs274
+def test_a_g5_without_i_and_j_after_a_canned_cycle_continues_the_last_g5(tmp_path):
+    """In LinuxCNC only G87 writes the register a G5 without I J reads (its I J): after G81 it
+    still holds the last G5's P Q, and written in pieces after that one, the second G5 is too."""
+
+    def left(p):
+        d = np.zeros_like(p)
+        d[:, 2] = 0.04 * np.clip(1.0 - p[:, 0] / 9.0, 0.0, None) ** 2
+        return d
+
+    text = HEAD + "G5 X10 Y0 I3 J4 P-3 Q4\nG81 X12 Y0 Z-1 R1\nG80\nG1 X10 Y0 Z0\nG5 X20 Y0 P-3 Q-4\nM2\n"
+    src = tmp_path / "in.ngc"
+    src.write_text(text)
+    assert rs274.canonical(src).error is None
+    out = nc.parse(text).correct(left, rapids=True)
+    assert "G5" not in out.text
+    dst = tmp_path / "out.ngc"
+    dst.write_text(out.text)
+    got = np.vstack([m.dense(step=0.002) for m in rs274.moves(rs274.canonical(dst))])
+    want = expected(BLOCKS[1:2], left)
+    assert cKDTree(got).query(want)[0].max() < 0.003
+
+
+@pytest.mark.parametrize("codes", ["G64 P0.5 Q0.2", "M19 R90", "M53 P0", "G4 P1", "M66 P1 L0"])
+def test_a_spline_written_in_pieces_keeps_the_words_of_the_other_codes_of_its_block(codes):
+    """Its P Q go with it: a code of the block that reads P, Q or R would lose its own (G64's
+    tolerances, M19's angle): refused; kept a spline (a shift), the block stays as written."""
+    text = HEAD + f"{codes.split()[0]} G5 X10 Y0 I3 J4 P-3 Q4\nM2\n"
+    with pytest.raises(InputError, match="put that code on a line of its own"):
+        nc.parse(text).correct(wave)
+    assert nc.parse(text).correct(fields.Shift((0, 0, 0))).text == text
+
+
+def test_pieces_are_no_longer_than_the_max_segment():
+    """Equal steps of the parameter are not equal lengths: a G5 whose control points crowd at its
+    ends runs fast in its middle."""
+    out = nc.parse(HEAD + "G5 X400 Y0 I0 J0 P-400 Q0\nM2\n").correct(wave, max_segment=1.0)
+    xy = [(0.0, 0.0)]
+    for line in out.text.splitlines()[3:-1]:
+        x = float(re.search(r"X(-?[\d.]+)", line).group(1)) if "X" in line else xy[-1][0]
+        y = float(re.search(r"Y(-?[\d.]+)", line).group(1)) if "Y" in line else xy[-1][1]
+        xy.append((x, y))
+    step = np.hypot(*np.diff(np.array(xy), axis=0).T)
+    assert step.max() <= 1.0 + 1e-4 and len(step) > 400
+
+
+@pytest.mark.parametrize(
+    "block",
+    [
+        "G5 X10 Y0 I1 J1 P1 Q1 R1",
+        "G5.1 X10 Y0 I1 J1 L1",
+        "G5 X10 Y0 I1 J1 P1 Q1 H1",
+        "G53 G5 X10 Y0 I1 J1 P1 Q1",
+        "G5.09 X10 Y0 I1 J1",
+    ],
+)
+def test_words_and_codes_rs274_refuses_on_a_spline(block):
+    with pytest.raises(InputError):
+        nc.parse(HEAD + block + "\nM2\n")

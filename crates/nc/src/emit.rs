@@ -1227,6 +1227,14 @@ impl<'a> Emitter<'a> {
                 self.insert_motion(li, Motion::Feed);
             }
             let spline = rec.motion.is_spline();
+            // (the spline's P Q go: another code of the block that reads P, Q or R would lose
+            // its own)
+            if let Some(w) = words.iter().find(|w| spline && !spline_piece_keeps(w)) {
+                return Err(refused_at(rec, format!(
+                    "a spline written in pieces loses its I J P Q words, which {}{} in its block may also read (G4, G10, G64, M19, M50-M53, M61-M68, M98, a user M code): put that code on a line of its own",
+                    w.letter as char, w.value
+                )));
+            }
             for w in words.iter().filter(|w| {
                 matches!(w.letter, b'I' | b'J' | b'K' | b'R' | b'P') || spline && w.letter == b'Q'
             }) {
@@ -2364,6 +2372,19 @@ impl<'a> Emitter<'a> {
 /// G99, or when the retract level is the R plane, both ways travel at the R plane.)
 fn approach_changes(cy: &crate::interp::Cycle, choices: (bool, bool), level: f64, r: f64) -> bool {
     cy.g98 && choices.1 != cy.choices.1 && !choices.0 && level > r
+}
+
+/// A word a spline block written in pieces keeps as it is: its own spline code and the modal
+/// codes that read no P, Q or R (plane, distance, feed mode, units; spindle, coolant, stops).
+fn spline_piece_keeps(w: &Word) -> bool {
+    match w.letter {
+        b'G' => matches!(
+            round(w.value * 10.0) as i32,
+            50 | 51 | 170 | 200 | 210 | 900 | 910 | 930 | 940 | 950
+        ),
+        b'M' => matches!(round(w.value) as i32, 0..=5 | 7..=9 | 30 | 48 | 49 | 60),
+        _ => true,
+    }
 }
 
 /// `p`'s X and Y turned back by rotation `r`: the programmed point there.

@@ -1162,6 +1162,15 @@ impl Interpreter {
                 }
                 match w.letter {
                     b'G' if ng < gs.len() => {
+                        // (a G code has one decimal at most: G5.09 is no G5.1)
+                        let tenths = w.value * 10.0;
+                        if (tenths - crate::lex::round(tenths)).abs() > 1e-6 {
+                            return Err(ierr(
+                                li,
+                                col(w),
+                                format!("G-code out of range: G{} (as rs274)", w.value),
+                            ));
+                        }
                         gs[ng] = (code(w), col(w));
                         ng += 1;
                     }
@@ -2297,6 +2306,11 @@ impl Interpreter {
             }
 
             if g53 {
+                if st.dialect.is_linuxcnc()
+                    && !matches!(st.mode, Mode::Motion(Motion::Rapid | Motion::Feed))
+                {
+                    return Err(ierr(li, axis_col, "Must use G0 or G1 with G53 (as rs274)"));
+                }
                 let what = "G53 machine-coordinate move: kept as written, not corrected; the axes it moves are unknown afterwards";
                 untraced_move(out, st, li, &axis, &mut end, named, what);
                 continue;
@@ -2342,8 +2356,10 @@ impl Interpreter {
                         push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
                     }
                     Mode::Canned(c) => {
-                        // (LinuxCNC's cycles keep their I J in the register a G5 reads)
-                        st.spline_ij = None;
+                        // (LinuxCNC's G87 keeps its I J in the register a G5 reads)
+                        if c == 870 {
+                            st.spline_ij = None;
+                        }
                         let words = CycleWords {
                             axis: &axis,
                             r,
@@ -2666,7 +2682,10 @@ impl Interpreter {
                             out.records.last_mut().unwrap().comp = out.comps.len() as u32;
                             out.comps.push(c);
                         }
-                        if let Some((ctrl, continued)) = spline {
+                        if m.is_spline() {
+                            // (a G5 without I J whose register is not known: control points
+                            // unknown, continued all the same)
+                            let (ctrl, continued) = spline.unwrap_or(([[f64::NAN; 2]; 2], true));
                             out.splines.push(Spline {
                                 rec: (out.records.len() - 1) as u32,
                                 ctrl,
@@ -2773,19 +2792,21 @@ fn unused_word(
     let any_cycle = matches!(to_be, Some(Mode::Canned(_)));
     // codes the engine refuses anyway (splines, threading, G10, rotation G68, scaling G51) use
     // these words too
-    let other = [50, 51, 52, 330, 331, 760, 100, 680, 510, 1870, 541, 1540]
+    // (a spline's I J P Q with its G5 or G5.1 in the block, as rs274 reads them)
+    let spline = g(50) || g(51);
+    let other = [52, 330, 331, 760, 100, 680, 510, 1870, 541, 1540]
         .iter()
         .any(|&c| g(c));
     let user_m = m(|c| (100..=199).contains(&c));
     let rules: [(u8, bool, &'static str); 9] = [
         (
             b'I',
-            arc || cycle(&[760, 870]) || other,
+            arc || spline || cycle(&[760, 870]) || other,
             "G2, G3, G76 or G87",
         ),
         (
             b'J',
-            arc || cycle(&[760, 870]) || other,
+            arc || spline || cycle(&[760, 870]) || other,
             "G2, G3, G76 or G87",
         ),
         (
@@ -2801,7 +2822,8 @@ fn unused_word(
         (
             b'P',
             // (a P on any canned cycle is kept: Fanuc controls ignore it where the cycle has no dwell)
-            arc || any_cycle
+            arc || spline
+                || any_cycle
                 || g(40)
                 || g(640)
                 || other
@@ -2812,6 +2834,7 @@ fn unused_word(
         (
             b'Q',
             cycle(&[730, 760, 830])
+                || spline
                 || g(640)
                 || other
                 || user_m

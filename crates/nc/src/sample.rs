@@ -125,19 +125,21 @@ pub fn bezier_at(p: &[[f64; 2]; 4], t: f64) -> [f64; 2] {
 /// the curve and is at most `max` long. Between parameters h apart a chord is within
 /// h²/8·max|C''| of the curve (the linear interpolation's error, which holds for a vector
 /// function: the error is the integral of C'' against a non-negative kernel of weight
-/// (t−a)(b−t)/2); C'' = 6((1−t)(P2−2P1+P0) + t(P3−2P2+P1)) is largest at an end. The curve is
-/// no longer than its control polygon.
+/// (t−a)(b−t)/2); C'' = 6((1−t)(P2−2P1+P0) + t(P3−2P2+P1)) is largest at an end. A chord over
+/// h is no longer than h·max|C'|, and C' is the quadratic Bézier of 3(P1−P0), 3(P2−P1),
+/// 3(P3−P2), no longer than the longest of them.
 pub fn bezier_pieces(p: &[[f64; 2]; 4], tol: f64, max: f64) -> f64 {
     let second = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
         (a[0] - 2.0 * b[0] + c[0]).hypot(a[1] - 2.0 * b[1] + c[1])
     };
     let m = 6.0 * second(p[0], p[1], p[2]).max(second(p[1], p[2], p[3]));
     let sag = (m / (8.0 * tol)).sqrt().ceil();
-    let polygon: f64 = (0..3)
-        .map(|k| (p[k + 1][0] - p[k][0]).hypot(p[k + 1][1] - p[k][1]))
-        .sum();
+    let speed = 3.0
+        * (0..3)
+            .map(|k| (p[k + 1][0] - p[k][0]).hypot(p[k + 1][1] - p[k][1]))
+            .fold(0.0f64, f64::max);
     let along = if max > 0.0 {
-        pieces_for(polygon, max)
+        pieces_for(speed, max)
     } else {
         1.0
     };
@@ -354,7 +356,16 @@ pub fn sample_range(
             *prev_o = o;
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
+        // (a G5 whose first control point is not known: its end alone)
+        let spline_unknown = rec.motion.is_spline()
+            && it
+                .splines
+                .binary_search_by_key(&(i as u32), |s| s.rec)
+                .map_or(true, |k| {
+                    !it.splines[k].ctrl.iter().flatten().all(|v| v.is_finite())
+                });
         let end_only = !prev.iter().all(|v| v.is_finite())
+            || spline_unknown
             || rec.cycle == crate::interp::CYCLE_BOTTOM
             || rec.cycle == crate::interp::CYCLE_LATHE;
         // an arc over whose circle the field varies by no more than the chord tolerance, the block
