@@ -49,24 +49,54 @@ M30
 
 def as_linuxcnc(text: str) -> str:
     """The Fanuc program as LinuxCNC runs it: G68 X a Y b R r as the work system's rotation about
-    its origin moved to (a, b) with a G52 offset of (-a, -b); a G68 without X Y about the tool's
-    position (here: where the block before it left it, which the test states); G69 both undone."""
-    out, pos = [], (0.0, 0.0)
+    its origin moved to (a, b) with a G52 offset of (-a, -b); G69 both undone. A Fanuc control
+    leaves the tool where it is in X and Y across G68 and G69 until a move names them, where
+    LinuxCNC reads the old programmed X Y in the new system: a block naming neither gets the
+    tool's X Y, as programmed in the new system (absolute programs only)."""
+    out: list[str] = []
+    rot = None  # (a, b, cos, sin)
+    tool = (0.0, 0.0)  # where the tool is in X Y (machine)
+    changed = False
     for line in text.splitlines():
         s = line.strip()
         if s in ("%", "") or re.fullmatch(r"O\d+", s):
             continue
-        m = re.match(r"G68(?: X(\S+) Y(\S+))? R(\S+)$", s)
+        m = re.match(r"G68 X(\S+) Y(\S+) R(\S+)$", s)
         if m:
-            a, b = (float(m.group(1)), float(m.group(2))) if m.group(1) else pos
-            out += [f"G10 L2 P1 X{a} Y{b} R{float(m.group(3))}", f"G52 X{-a} Y{-b}"]
-        elif s == "G69":
+            a, b, r = (float(m.group(k)) for k in (1, 2, 3))
+            rot = (a, b, np.cos(np.radians(r)), np.sin(np.radians(r)))
+            out += [f"G10 L2 P1 X{a} Y{b} R{r}", f"G52 X{-a} Y{-b}"]
+            changed = True
+            continue
+        if s == "G69":
+            rot = None
             out += ["G10 L2 P1 X0 Y0 R0", "G52 X0 Y0"]
-        else:
-            out.append(s)
-        xy = re.search(r"X(-?[\d.]+) Y(-?[\d.]+)", s)
-        if xy and "G68" not in s:
-            pos = (float(xy.group(1)), float(xy.group(2)))
+            changed = True
+            continue
+        x, y = (re.search(rf"{k}(-?[\d.]+)", s) for k in "XY")
+        if x or y:
+            if rot is None:
+                px, py = tool
+            else:
+                a, b, c, n = rot
+                dx, dy = tool[0] - a, tool[1] - b
+                px, py = a + c * dx + n * dy, b - n * dx + c * dy
+            px, py = float(x.group(1)) if x else px, float(y.group(1)) if y else py
+            if rot is None:
+                tool = (px, py)
+            else:
+                a, b, c, n = rot
+                tool = (a + c * (px - a) - n * (py - b), b + n * (px - a) + c * (py - b))
+            changed = False
+        elif changed and re.search(r"\bZ", s):
+            if rot is None:
+                px, py = tool
+            else:
+                a, b, c, n = rot
+                dx, dy = tool[0] - a, tool[1] - b
+                px, py = a + c * dx + n * dy, b - n * dx + c * dy
+            s += f" X{px:.6f} Y{py:.6f}"
+        out.append(s)
     return "\n".join(out) + "\n"
 
 
@@ -125,6 +155,12 @@ def test_a_zero_field_gives_the_program_back():
         ("G18 G68 X0. Y0. R30.\n", 5, "XY plane"),
         # about where the tool stands, which the correction moves
         ("G68 R30.\nG1 X5. Y1.\n", 5, "without X and Y"),
+        # a three-dimensional conversion; a plane code under a rotation (Fanuc: not to be given)
+        ("G68 X0. Y0. I1. J0. K0. R30.\nG1 X5. Y1.\n", 5, "I, J or K"),
+        ("G68 X0. Y0. R30.\nG1 X5. Y1.\nG17 G1 X6. Y1.\n", 7, "plane code"),
+        # whether a block-delete line runs is the machine's switch
+        ("/G68 X0. Y0. R30.\nG1 X5. Y1.\n", 5, "block-delete"),
+        ("G68 X0. Y0. R30.\nG1 X5. Y1.\n/G69\nG1 X6. Y1.\n", 7, "block-delete"),
     ],
 )
 def test_what_is_not_followed_is_refused_at_its_line(text, line, says):
@@ -155,3 +191,36 @@ def test_after_a_rotation_not_followed_the_position_is_unknown():
     # at its end (20, 5)
     assert lines[8] == "G1 X20." and lines[9] == "Y5. Z0.09"
     assert any("not corrected" in w for w in out.correction.warnings)
+
+
+@needs_rs274
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G0 X5. Y5. Z1.\nG68 X10. Y5. R90.\nG1 Z-1. F100.\nG1 X20. Y5.\nG69\nG0 Z5.\n",
+        "G0 X0. Y0. Z1.\nG68 X10. Y5. R90.\nG0 X20. Y5.\nG69\nG1 Z-1. F100.\nG1 X0. Y15.\nG0 Z5.\n",
+    ],
+)
+def test_a_move_before_the_first_giving_x_and_y_gets_both(tmp_path, text):
+    """A plunge between G68 (or G69) and the first move giving X and Y that the field moves in X
+    is written with X and Y, absolute: with one alone, the control would take the other by its
+    setting, the construct the engine refuses in a program."""
+    src = "%\nO1\nG21 G90 G17\n" + text + "M30\n%\n"
+    shift = fields.Shift((0.05, 0.0, 0.0))
+    out = nc.parse(src, dialect="fanuc").correct(shift).text
+    plunge = next(ln for ln in out.splitlines() if ln.startswith("G1 Z"))
+    assert " X" in plunge and " Y" in plunge, plunge
+    assert nc.parse(out, dialect="fanuc").unsupported == ()
+    canon_in = motion(tmp_path, src, "in.ngc")
+    canon_out = motion(tmp_path, out, "out.ngc")
+    prog = nc.parse(src, dialect="fanuc")
+    displaced = np.array([k != "traverse" for k in canon_in.kinds])
+    assert corpus.compare_motion(canon_in, canon_out, displaced, shift, 0.005, prog.blocks.line) == []
+
+
+def test_an_incremental_move_before_the_first_giving_x_and_y_is_refused_when_moved_in_x_or_y():
+    src = "%\nO1\nG21 G90 G17\nG0 X5. Y5. Z1.\nG68 X10. Y5. R90.\nG91 G1 Z-2. F100.\nG90 G1 X20. Y5.\nM30\n%\n"
+    with pytest.raises(InputError, match="before the first move giving X and Y"):
+        nc.parse(src, dialect="fanuc").correct(fields.Shift((0.05, 0.0, 0.0)))
+    # a field along Z alone moves no X or Y: followed
+    nc.parse(src, dialect="fanuc").correct(fields.Shift((0.0, 0.0, 0.05)))

@@ -838,6 +838,13 @@ impl<'a> Emitter<'a> {
         }
     }
 
+    /// Whether the output's X or Y (as the block's numbers read them) must change to reach
+    /// `target`.
+    fn xy_moves(&self, rec: &Record, target: &[f64; NAXES]) -> bool {
+        let half = self.fmt.half(rec.inch);
+        (0..2).any(|a| !((target[a] - self.st.epos[a]).abs() / Self::unit(rec, a) < half))
+    }
+
     /// The coordinate rotation record `rec`'s X and Y are written under, if any.
     fn rotation(&self, rec: &Record) -> Option<Rotation> {
         (rec.rot != NO_ROT).then(|| self.it.rotations[rec.rot as usize])
@@ -1166,6 +1173,19 @@ impl<'a> Emitter<'a> {
                 )));
             }
         }
+        // before the first move giving X and Y after G68/G69, a corrected X or Y is written with
+        // the other, absolute: not in G91
+        if rec.xy_both
+            && rec.incremental
+            && (0..n).any(|k| {
+                // (the distance from where the output stands, which a rotation does not change)
+                let e = target_at(k, ts[k]);
+                let half = self.fmt.half(rec.inch);
+                (0..2).any(|a| !((e[a] - self.st.epos[a]).abs() / Self::unit(rec, a) < half * 0.5))
+            })
+        {
+            return Err(refused_at(rec, "an incremental move before the first move giving X and Y after G68 or G69, which the field moves in X or Y: written, its X or Y would be read by the control's setting; give X and Y (absolute) on it"));
+        }
         if straight || keep_arc || comp_whole || keep_spline {
             self.spline_register(ri, true)?;
             self.restore_modal(li, rec, explicit);
@@ -1362,6 +1382,14 @@ impl<'a> Emitter<'a> {
             let piece_xy = rot.map_or([0.0; 2], |r| {
                 r.to_prog([xyz[3 * k] + disp[3 * k], xyz[3 * k + 1] + disp[3 * k + 1]])
             });
+            let both = rec.xy_both && {
+                let mut t = target_at(k, ts[k]);
+                if rot.is_some() {
+                    t[0] = piece_xy[0];
+                    t[1] = piece_xy[1];
+                }
+                self.xy_moves(rec, &t)
+            };
             let mut bits = axes;
             while bits != 0 {
                 let a = bits.trailing_zeros() as usize;
@@ -1393,7 +1421,7 @@ impl<'a> Emitter<'a> {
                 } else {
                     (pa - self.st.epos[a]).abs() / u >= half
                 };
-                if differs {
+                if differs || (both && a < 2) {
                     if self.st.tail.len() > body {
                         let sep = self.sep();
                         self.st.tail.extend_from_slice(sep);
@@ -2267,13 +2295,14 @@ impl<'a> Emitter<'a> {
         }
         let at = self.insert_point(li);
         let t0 = self.st.arena.len();
+        let both = rec.xy_both && self.xy_moves(rec, target);
         for a in 0..NAXES {
             if seen[a] || (a >= 3 && (rec.named | also) & (1 << a) == 0) {
                 continue;
             }
             let u = Self::unit(rec, a);
             let delta = (target[a] - self.st.epos[a]) / u;
-            if delta.abs() >= half {
+            if delta.abs() >= half || (both && a < 2) {
                 let sep = self.sep();
                 self.st.arena.extend_from_slice(sep);
                 self.st.arena.push(AXES[a]);

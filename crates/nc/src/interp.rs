@@ -228,6 +228,10 @@ pub struct Record {
     /// Index into [`Interp::rotations`] of the coordinate rotation its X and Y are written
     /// under ([`NO_ROT`]: none): its end and centre are where the rotation puts them.
     pub rot: u32,
+    /// Before the first move that gives X and Y after G68 or G69 (a move naming neither): a
+    /// corrected X or Y is written with the other, absolute (how a control takes a coordinate
+    /// left out across the change is its setting).
+    pub xy_both: bool,
 }
 
 /// [`Record::whole`] of the move that starts or ends radius compensation in G18/G19 (the first
@@ -1409,6 +1413,7 @@ impl Interpreter {
             let mut comp_code: Option<(i32, usize)> = None;
             // Fanuc's G68 (its X Y the centre, R the angle)
             let mut rot_word: Option<usize> = None;
+            let mut plane_word = false;
             if ms[..nm].iter().any(|&(m, _)| m == 6) {
                 st.tool_loaded = st.tool_next;
             }
@@ -1545,6 +1550,7 @@ impl Interpreter {
                     }
                     40 => {}
                     170 | 180 | 190 => {
+                        plane_word = true;
                         let plane = ((c - 170) / 10) as u8;
                         // (after G40 compensation is off, before the move that ends it)
                         if plane != st.plane && comp_at_start {
@@ -1749,6 +1755,15 @@ impl Interpreter {
                     680 => {
                         let idx = push_unsupported(out, li, gc, "coordinate rotation G68");
                         st.active.rotation = Some((li as u32, idx));
+                    }
+                    690 if line.block_delete
+                        && (st.rot.is_some() || st.active.rotation.is_some()) =>
+                    {
+                        let idx = push_unsupported(out, li, gc, "G69 on a block-delete line (/): whether it runs is the machine's switch");
+                        st.rot = None;
+                        st.active.rotation = Some((li as u32, idx));
+                        st.pos[0] = f64::NAN;
+                        st.pos[1] = f64::NAN;
                     }
                     690 => {
                         if st.active.rotation.take().is_some() {
@@ -2130,6 +2145,10 @@ impl Interpreter {
             if let Some(gc) = rot_word {
                 let why = if st.rot.is_some() || st.active.rotation.is_some() {
                     Some("G68 while a rotation is in force")
+                } else if ijk.iter().any(|v| v.is_some()) {
+                    Some("G68 with I, J or K: a three-dimensional coordinate conversion (the axis I J K gives), not followed")
+                } else if line.block_delete {
+                    Some("G68 on a block-delete line (/): whether it runs is the machine's switch")
                 } else if st.plane != 0 {
                     Some("coordinate rotation G68 outside the XY plane (G17)")
                 } else if r.is_none() {
@@ -2185,6 +2204,7 @@ impl Interpreter {
                     || st.comp.is_some()
                     || st.nose.is_some()
                     || st.arc_absolute
+                    || plane_word
                     || (any_axis && !matches!(st.mode, Mode::Motion(_)))
                     || (any_axis
                         && st.plane != 0
@@ -2194,7 +2214,7 @@ impl Interpreter {
                     out,
                     li,
                     axis_col.max(1),
-                    "under a coordinate rotation (G68) only moves G0-G3 are followed (arcs in G17): offsets, G28, G30, G53, canned cycles, probing, cutter compensation, absolute arc centres and arcs in G18/G19 are not",
+                    "under a coordinate rotation (G68) only moves G0-G3 are followed (arcs in G17): offsets, G28, G30, G53, canned cycles, probing, cutter compensation, absolute arc centres, a plane code (Fanuc: not to be given under G68) and arcs in G18/G19 are not",
                 );
                 st.active.rotation = Some((li as u32, idx));
             }
@@ -4386,6 +4406,7 @@ fn push_record(
         nose: st.nose.unwrap_or(0.0),
         whole: 0,
         rot: st.rot_idx.unwrap_or(NO_ROT),
+        xy_both: st.rot_first,
     });
 }
 
