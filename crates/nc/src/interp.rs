@@ -163,9 +163,9 @@ impl Rotation {
 /// [`Record::rot`] of a move under no rotation.
 pub const NO_ROT: u32 = u32::MAX;
 
-/// A spline block (LinuxCNC's G5 or G5.1) as the cubic Bézier it runs: the start, `ctrl[0]`,
-/// `ctrl[1]`, the end, in the XY plane (mm, the frame of [`Record::end`]). A G5.1's quadratic is
-/// raised to the cubic with the same path (control points 2/3 of the way to its own).
+/// A spline block (LinuxCNC's G5 or G5.1): the control points between its start and its end, in
+/// the XY plane (mm, the frame of [`Record::end`]): a G5's two, a G5.1's one (twice). Its motion
+/// is LinuxCNC's arcs of the curve ([`crate::spline`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Spline {
     /// Index of its record in the run.
@@ -4337,14 +4337,7 @@ fn spline_block(
         }
         let [i, j] = ij.unwrap();
         let c = [s[0] + i * unit, s[1] + j * unit];
-        let two = 2.0 / 3.0;
-        return Ok(Some((
-            [
-                [s[0] + two * (c[0] - s[0]), s[1] + two * (c[1] - s[1])],
-                [e[0] + two * (c[0] - e[0]), e[1] + two * (c[1] - e[1])],
-            ],
-            false,
-        )));
+        return Ok(Some(([c, c], false)));
     }
     let (Some(pv), Some(qv)) = (p, q) else {
         return Err(ierr(

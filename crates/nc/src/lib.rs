@@ -15,6 +15,7 @@ pub mod interp;
 pub mod lex;
 pub mod pipeline;
 pub mod sample;
+pub mod spline;
 pub mod stream;
 
 pub use error::NcError;

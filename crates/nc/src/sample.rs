@@ -112,40 +112,6 @@ pub fn arc_sweep(rec: &Record, start: &[f64; NAXES]) -> (f64, f64, f64, f64) {
     (th0, d, r0, r1)
 }
 
-/// The point at `t` of the cubic Bézier with control points `p` (de Casteljau's steps, which
-/// stay within the control points' hull).
-pub fn bezier_at(p: &[[f64; 2]; 4], t: f64) -> [f64; 2] {
-    let lerp = |a: [f64; 2], b: [f64; 2]| [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
-    let (a, b, c) = (lerp(p[0], p[1]), lerp(p[1], p[2]), lerp(p[2], p[3]));
-    let (d, e) = (lerp(a, b), lerp(b, c));
-    lerp(d, e)
-}
-
-/// Pieces of equal parameter a cubic Bézier is cut into so that each chord stays within `tol` of
-/// the curve and is at most `max` long. Between parameters h apart a chord is within
-/// h²/8·max|C''| of the curve (the linear interpolation's error, which holds for a vector
-/// function: the error is the integral of C'' against a non-negative kernel of weight
-/// (t−a)(b−t)/2); C'' = 6((1−t)(P2−2P1+P0) + t(P3−2P2+P1)) is largest at an end. A chord over
-/// h is no longer than h·max|C'|, and C' is the quadratic Bézier of 3(P1−P0), 3(P2−P1),
-/// 3(P3−P2), no longer than the longest of them.
-pub fn bezier_pieces(p: &[[f64; 2]; 4], tol: f64, max: f64) -> f64 {
-    let second = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        (a[0] - 2.0 * b[0] + c[0]).hypot(a[1] - 2.0 * b[1] + c[1])
-    };
-    let m = 6.0 * second(p[0], p[1], p[2]).max(second(p[1], p[2], p[3]));
-    let sag = (m / (8.0 * tol)).sqrt().ceil();
-    let speed = 3.0
-        * (0..3)
-            .map(|k| (p[k + 1][0] - p[k][0]).hypot(p[k + 1][1] - p[k][1]))
-            .fold(0.0f64, f64::max);
-    let along = if max > 0.0 {
-        pieces_for(speed, max)
-    } else {
-        1.0
-    };
-    sag.max(along).max(1.0)
-}
-
 /// Pieces of at most `max` for a length: a length a rounding error over a multiple of `max`
 /// (3.0000000000000004 for 3) does not get an extra piece.
 #[inline]
@@ -399,26 +365,100 @@ pub fn sample_range(
                     rec.line + 1
                 )));
             };
-            let cp = [
-                [start[0], start[1]],
-                sp.ctrl[0],
-                sp.ctrl[1],
-                [rec.end[0], rec.end[1]],
+            // LinuxCNC's arcs of the curve, each cut in chords within the tolerance
+            let mut cp = vec![
+                [start[0], start[1], 1.0],
+                [sp.ctrl[0][0], sp.ctrl[0][1], 1.0],
             ];
-            let n = bezier_pieces(&cp, opts.chord_tol, opts.max_segment);
-            if !(n <= MAX_PIECES_PER_BLOCK) {
-                return Err(too_many(rec, n));
+            if rec.motion == Motion::Spline {
+                cp.push([sp.ctrl[1][0], sp.ctrl[1][1], 1.0]);
             }
-            let n = n as usize;
-            for k in 1..=n {
-                let t = k as f64 / n as f64;
-                let p = if k == n {
-                    end
+            cp.push([rec.end[0], rec.end[1], 1.0]);
+            let small = 1e-6
+                * if rec.inch {
+                    crate::interp::MM_PER_INCH
                 } else {
-                    let q = bezier_at(&cp, t);
-                    [q[0], q[1], start[2]]
+                    1.0
                 };
-                push(s, p, t, &mut prev, &mut prev_t, &mut prev_o, &mut cuts);
+            let pieces = crate::spline::linuxcnc_pieces(&cp, cp.len(), small).map_err(|why| {
+                NcError::Interpret {
+                    line: rec.line as usize + 1,
+                    col: 1,
+                    message: why.into(),
+                }
+            })?;
+            // the chords of each piece: (start, centre or none, sweep, radius, count)
+            let mut plan = Vec::with_capacity(pieces.len());
+            let (mut from, mut total, mut count) = ([start[0], start[1]], 0.0, 0.0);
+            for pc in &pieces {
+                let (len, n) = match pc.centre {
+                    Some(c) => {
+                        let r = (from[0] - c[0]).hypot(from[1] - c[1]);
+                        let a0 = (from[1] - c[1]).atan2(from[0] - c[0]);
+                        let a1 = (pc.end[1] - c[1]).atan2(pc.end[0] - c[0]);
+                        let mut d = a1 - a0;
+                        if pc.ccw {
+                            while d <= 0.0 {
+                                d += 2.0 * PI;
+                            }
+                        } else {
+                            while d >= 0.0 {
+                                d -= 2.0 * PI;
+                            }
+                        }
+                        let n = arc_pieces_within((a0, d, r, r), 0.0, opts, opts.chord_tol);
+                        plan.push((from, Some((c, a0, d, r)), n));
+                        (r * d.abs(), n)
+                    }
+                    None => {
+                        let len = (pc.end[0] - from[0]).hypot(pc.end[1] - from[1]);
+                        let n = if opts.max_segment > 0.0 {
+                            pieces_for(len, opts.max_segment).max(1.0)
+                        } else {
+                            1.0
+                        };
+                        plan.push((from, None, n));
+                        (len, n)
+                    }
+                };
+                total += len;
+                count += n;
+                from = pc.end;
+            }
+            if !(count <= MAX_PIECES_PER_BLOCK) {
+                return Err(too_many(rec, count));
+            }
+            let mut done = 0.0;
+            for (q, (from, arc, n)) in plan.into_iter().enumerate() {
+                let to = pieces[q].end;
+                let n = n as usize;
+                let len = match arc {
+                    Some((_, _, d, r)) => r * d.abs(),
+                    None => (to[0] - from[0]).hypot(to[1] - from[1]),
+                };
+                for m in 1..=n {
+                    let f = m as f64 / n as f64;
+                    let last = q + 1 == pieces.len() && m == n;
+                    let xy = match arc {
+                        _ if m == n => to,
+                        Some((c, a0, d, r)) => {
+                            let (sn, cs) = (a0 + f * d).sin_cos();
+                            [c[0] + r * cs, c[1] + r * sn]
+                        }
+                        None => [
+                            from[0] + f * (to[0] - from[0]),
+                            from[1] + f * (to[1] - from[1]),
+                        ],
+                    };
+                    let t = if last || total <= 0.0 {
+                        1.0
+                    } else {
+                        ((done + f * len) / total).min(1.0)
+                    };
+                    let p = if last { end } else { [xy[0], xy[1], start[2]] };
+                    push(s, p, t, &mut prev, &mut prev_t, &mut prev_o, &mut cuts);
+                }
+                done += len;
             }
         } else if rec.motion.is_arc() {
             let geom = arc_sweep(rec, &start);
