@@ -74,30 +74,27 @@ def as_linuxcnc(text: str) -> str:
             changed = True
             continue
         x, y = (re.search(rf"{k}(-?[\d.]+)", s) for k in "XY")
+        # the tool's X Y as programmed under the rotation in force
+        px, py = turn(rot, tool, -1)
         if x or y:
-            if rot is None:
-                px, py = tool
-            else:
-                a, b, c, n = rot
-                dx, dy = tool[0] - a, tool[1] - b
-                px, py = a + c * dx + n * dy, b - n * dx + c * dy
             px, py = float(x.group(1)) if x else px, float(y.group(1)) if y else py
-            if rot is None:
-                tool = (px, py)
-            else:
-                a, b, c, n = rot
-                tool = (a + c * (px - a) - n * (py - b), b + n * (px - a) + c * (py - b))
+            tool = turn(rot, (px, py), 1)
             changed = False
         elif changed and re.search(r"\bZ", s):
-            if rot is None:
-                px, py = tool
-            else:
-                a, b, c, n = rot
-                dx, dy = tool[0] - a, tool[1] - b
-                px, py = a + c * dx + n * dy, b - n * dx + c * dy
             s += f" X{px:.6f} Y{py:.6f}"
         out.append(s)
     return "\n".join(out) + "\n"
+
+
+def turn(rot, p, sign):
+    """Point ``p`` turned by the rotation ``rot`` (a, b, cos, sin) about (a, b), or back when
+    ``sign`` is -1; as it is without one."""
+    if rot is None:
+        return p
+    a, b, c, n = rot
+    n *= sign
+    dx, dy = p[0] - a, p[1] - b
+    return a + c * dx - n * dy, b + n * dx + c * dy
 
 
 def field(p):
