@@ -319,3 +319,16 @@ def test_a_byte_order_mark_is_read_as_nothing_and_kept(tmp_path, name, text, dia
     assert b.blocks_changed > 0  # the shift did change the program
     r = CliRunner().invoke(main, ["correct", str(bom), "--shift", "0,0,0", "-o", str(tmp_path / ("z" + name))])
     assert r.exit_code == 0 and (tmp_path / ("z" + name)).read_bytes() == bom.read_bytes(), r.output
+
+
+def test_axis_words_after_g80_name_the_fanuc_dialect():
+    """A Fusion 360 Mach3 post moves on after G80 with axis words alone, as a Fanuc-family
+    control reads them (its G0 kept across the cycle): RS274NGC has no motion mode there, and the
+    refusal says which dialect reads the program so; read as Fanuc it is corrected."""
+    from ncadapt import fields, nc
+
+    src = "G21 G90\nG0 X0. Y0. Z10.\nG98 G81 X0. Y0. Z-1. R5. F100.\nG80\nZ5.\nM30\n"
+    [u] = nc.parse(src).unsupported
+    assert u.line == 5 and "--dialect fanuc" in u.construct
+    out = nc.parse(src, dialect="fanuc").correct(fields.Shift((0, 0, 0.05))).text.splitlines()
+    assert out[2] == "G98 G81 X0. Y0. Z-0.95 R5.05 F100." and out[4] == "Z5."

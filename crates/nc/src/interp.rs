@@ -2365,12 +2365,13 @@ impl Interpreter {
                         untraced_move(out, st, li, &axis, &mut end, named, what);
                     }
                     Mode::None => {
-                        let idx = push_unsupported(
-                            out,
-                            li,
-                            axis_col,
-                            "axis words with no motion mode (G80 or none yet)",
-                        );
+                        // (a Fanuc-family control keeps group 01 across a canned cycle and G80)
+                        let why = if st.g01.is_some() && st.dialect.is_linuxcnc() {
+                            "axis words with no motion mode after G80 (RS274NGC); a Fanuc-family control keeps the G0 or G1 in force before the cycle: if the program was written for one, --dialect fanuc reads it so"
+                        } else {
+                            "axis words with no motion mode (G80 or none yet)"
+                        };
+                        let idx = push_unsupported(out, li, axis_col, why);
                         out.unsupported[idx].blocks += 1;
                         st.pos = [f64::NAN; NAXES];
                         push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
