@@ -735,12 +735,12 @@ def _run(entry: Entry, work: Path, r: Result) -> None:
     if (
         uns
         and entry.root is None
-        and dialect in ("linuxcnc", "fanuc")
+        and dialect in ("linuxcnc", "linuxcnc-lathe", "fanuc")
         and any(u.construct.startswith(flow) for u in uns)
     ):
         # as `ncadapt correct --expand`: the flattened program is what is corrected and checked
         try:
-            flat = flatten(entry.path.read_bytes(), entry.file, dialect)
+            flat = flatten(entry.path.read_bytes(), entry.file, dialect.removesuffix("-lathe"))
         except InputError as e:
             r.outcome = f"refused: line {e.line}: {e.message} (--expand)"
             r.reason, r.refusal_line = _generic(e.message) + " (--expand)", e.line

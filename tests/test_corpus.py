@@ -189,3 +189,17 @@ def test_offsets_set_before_the_first_move_are_the_frame(tmp_path):
     )
     r = corpus.run(corpus.Entry("p.ngc", "LinuxCNC/RS274NGC", "test", 9, root=tmp_path), tmp_path)
     assert r.outcome == "accepted" and r.motion == "matched", (r.outcome, r.motion_detail)
+
+
+@pytest.mark.skipif(RS274 is None, reason="LinuxCNC rs274 not installed")
+def test_a_lathe_program_with_a_loop_is_flattened_and_corrected(tmp_path, monkeypatch):
+    """A LinuxCNC lathe's program (G7: X a diameter) with parameters and an O-word loop, read as
+    `ncadapt correct --expand` reads it: flattened, corrected, and its motion matched by rs274."""
+    (tmp_path / "p.ngc").write_text(
+        "G7 G18 G21 G90\nF100\nG0 X30 Z2\n#1 = 28\no100 while [#1 GT 22]\n"
+        "G1 X#1\nG1 Z-20\nG0 X[#1 + 2]\nG0 Z2\n#1 = [#1 - 2]\no100 endwhile\nG0 X40\nM2\n"
+    )
+    monkeypatch.setattr(corpus, "CORPUS", tmp_path)
+    (tmp_path / "work").mkdir()
+    r = corpus.run(corpus.Entry("p.ngc", "LinuxCNC/RS274NGC", "test", 13), tmp_path / "work")
+    assert r.outcome == "accepted (--expand)" and r.motion == "matched", (r.outcome, r.motion_detail)

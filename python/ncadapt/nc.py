@@ -275,9 +275,12 @@ _TRANSLATED = {
 
 
 def _check_expand(expand: bool, dialect: str) -> None:
-    """``expand`` flattens or runs LinuxCNC's, Fanuc's and Sinumerik's programs only."""
-    if expand and dialect not in ("linuxcnc", "fanuc", "sinumerik"):
-        raise ValueError(f"expand reads the programs of LinuxCNC, Fanuc and Sinumerik mills; the dialect is {dialect}")
+    """``expand`` flattens or runs LinuxCNC's (mills and lathes), Fanuc's and Sinumerik's (mills)
+    programs only."""
+    if expand and dialect not in ("linuxcnc", "linuxcnc-lathe", "fanuc", "sinumerik"):
+        raise ValueError(
+            f"expand reads the programs of LinuxCNC (mills and lathes), Fanuc and Sinumerik mills; the dialect is {dialect}"
+        )
 
 
 def _program_note(message: str, of: str | None) -> str:
@@ -331,7 +334,8 @@ def _correct_flat(p: Path, out: Path, field, dialect: str, options: dict) -> Cor
     from .flatten import flatten
 
     data = _read_program(p)
-    flat = flatten(data, str(p), dialect)
+    # (a LinuxCNC lathe's parameters and flow are read as a mill's: its X words are numbers)
+    flat = flatten(data, str(p), dialect.removesuffix("-lathe"))
     straight = rewrite.split_lines(flat.data.decode("utf-8", "surrogateescape"))
     c, corrected = _correct_straight(
         rewrite.mark(straight), flat, p, field, dialect, "flattened with --expand", options
@@ -472,7 +476,7 @@ def inspect_file(
     elif dialect == "marlin":
         tr = marlin.translate(data, str(path))
     else:
-        tr = flatten(data, str(path), dialect)
+        tr = flatten(data, str(path), dialect.removesuffix("-lathe"))
     engine, how = _TRANSLATED.get(dialect, (dialect, "flattened with --expand"))
     try:
         info = _inspect(tr.data, str(path), engine)

@@ -402,11 +402,13 @@ def sinumerik_only(d, subprograms, start_motion) -> None:
 
 
 def expand_read(expand: bool, d) -> None:
-    """``--expand`` flattens or runs the programs of LinuxCNC, Fanuc and Sinumerik mills only."""
-    if expand and (d.name not in ("linuxcnc", "fanuc", "sinumerik") or d.lathe):
+    """``--expand`` flattens or runs the programs of LinuxCNC (mills and lathes), Fanuc and
+    Sinumerik mills only."""
+    if expand and (d.name not in ("linuxcnc", "fanuc", "sinumerik") or (d.lathe and d.name != "linuxcnc")):
         what = f"a lathe's ({d.describe_machine()})" if d.lathe else d.describe()
         raise click.UsageError(
-            f"--expand flattens the programs of LinuxCNC, Fanuc and Sinumerik mills; this program is read as {what}"
+            "--expand flattens the programs of LinuxCNC (mills and lathes), Fanuc and Sinumerik mills; "
+            f"this program is read as {what}"
         )
 
 
