@@ -45,12 +45,13 @@ def program(blocks=BLOCKS, units="G21") -> str:
     return HEAD.replace("G21", units) + "".join(t + "\n" for t, _ in blocks) + "M2\n"
 
 
-def linuxcnc_motion(cp: np.ndarray, step: float = 0.002) -> np.ndarray:
+def linuxcnc_motion(cp: np.ndarray, step: float = 0.002, small: float = 1e-6) -> np.ndarray:
     """Points along LinuxCNC's motion of the spline of control points ``cp`` (mm), as its canon
     layer makes it (``emccanon.cc`` NURBS_FEED of LinuxCNC 2.9, written out here from its
     source): the NURBS (weights 1, order the number of points, clamped uniform knots) at 4
     parameters per point, its tangents by a difference of 1e-5, and a biarc (``biarc``, ``arc``)
-    over each span."""
+    over each span; ``small`` is its straightness threshold, 1e-6 program units, in mm. Written
+    for well-conditioned splines (LinuxCNC skips a span where its construction fails)."""
     k = n1 = len(cp)
     n = n1 - 1
     kv = [0.0 if i < k else float(i - k + 1) if i <= n else float(n - k + 2) for i in range(n + k + 1)]
@@ -77,7 +78,7 @@ def linuxcnc_motion(cp: np.ndarray, step: float = 0.002) -> np.ndarray:
     def arc(p0, p1, d):
         x, y = p1 - p0
         den = 2 * (y * d[0] - x * d[1])
-        if abs(den) <= 1e-6:
+        if abs(den) <= small:
             return np.linspace(p0, p1, max(2, int(np.hypot(x, y) / step) + 2))
         r = -(x * x + y * y) / den
         c = p0 + np.array([d[1] * r, -d[0] * r])
@@ -114,7 +115,7 @@ def expected(blocks, field, step=0.002, scale=1.0) -> np.ndarray:
             n = int(np.ceil(np.hypot(*(cp[1] - cp[0])) / step)) + 1
             xy = cp[0] + np.linspace(0, 1, n)[:, None] * (cp[1] - cp[0])
         else:
-            xy = linuxcnc_motion(cp, step)
+            xy = linuxcnc_motion(cp, step, 1e-6 * scale)
         p = np.c_[xy, np.zeros(len(xy))]
         out.append(p + field(p))
     return np.vstack(out)

@@ -104,9 +104,26 @@ fn arc(p0: [f64; 2], p1: [f64; 2], d: [f64; 2], small: f64) -> Piece {
     }
 }
 
+/// Why a span's biarc is not followed, where LinuxCNC's construction is ill-conditioned: its
+/// arcs would then hang on the rounding of the arithmetic (LinuxCNC computes in the program's
+/// units, ncadapt in mm, and a build may fuse multiplications), and they can run metres away
+/// from the curve. A biarc is followed when its two roots are well apart (the discriminant
+/// above 1e-6 of b²), the one taken is positive and at most twice the chord (a proper biarc's
+/// is about a quarter to a half of it), and the joint lies within a chord of the curve's span
+/// (on loops and cusps LinuxCNC's joints stray up to a sixth of the chord from the curve; a
+/// construction gone wrong puts them hundreds of chords away).
+const ILL_CONDITIONED: &str = "LinuxCNC's arcs for a span of this spline are ill-conditioned (tangents nearly parallel or opposed: its biarc construction then depends on the rounding of its arithmetic and can run far from the curve): the machine's motion is not predictable; split the spline or write it as lines";
+
 /// `biarc` (with r = 1): the two arcs from `p0` leaving along `ts` to `p4` arriving along `te`;
-/// None where LinuxCNC makes none (it then moves nothing for the span).
-fn biarc(p0: [f64; 2], ts: [f64; 2], p4: [f64; 2], te: [f64; 2], small: f64) -> Option<[Piece; 2]> {
+/// None where LinuxCNC makes none (it then moves nothing for the span). Also the root it takes
+/// and the discriminant's share of b² (for [`ILL_CONDITIONED`]).
+fn biarc(
+    p0: [f64; 2],
+    ts: [f64; 2],
+    p4: [f64; 2],
+    te: [f64; 2],
+    small: f64,
+) -> Option<([Piece; 2], f64, f64)> {
     let (ts, te) = (unit(ts), unit(te));
     let (vx, vy) = (p0[0] - p4[0], p0[1] - p4[1]);
     let c = vx * vx + vy * vy;
@@ -132,7 +149,11 @@ fn biarc(p0: [f64; 2], ts: [f64; 2], p4: [f64; 2], te: [f64; 2], small: f64) -> 
         (p1[1] * beta + p3[1] * alpha) / ab,
     ];
     let tm = unit([p3[0] - p2[0], p3[1] - p2[1]]);
-    Some([arc(p0, p2, ts, small), arc(p2, p4, tm, small)])
+    Some((
+        [arc(p0, p2, ts, small), arc(p2, p4, tm, small)],
+        beta,
+        discr / (b * b),
+    ))
 }
 
 /// The pieces LinuxCNC moves along for the NURBS of control points `cp` (X, Y, weight; mm) and
@@ -152,9 +173,40 @@ pub fn linuxcnc_pieces(cp: &[[f64; 3]], k: usize, small: f64) -> Result<Vec<Piec
         let u = umax * i as f64 / div as f64;
         let p1 = point(u, k, cp, &kv);
         let t1 = tangent(u, k, cp, &kv);
-        let Some(two) = biarc(p0, t0, p1, t1, small) else {
+        let Some((two, beta, separation)) = biarc(p0, t0, p1, t1, small) else {
             return Err("LinuxCNC makes no arcs for a span of this spline (its biarc construction fails there): the machine's motion is not the program's");
         };
+        let chord = (p1[0] - p0[0]).hypot(p1[1] - p0[1]);
+        if !(separation > 1e-6 && beta > 0.0 && beta <= 2.0 * chord) {
+            return Err(ILL_CONDITIONED);
+        }
+        // the joint near the curve's span (its distance to the polyline of 16 pieces of it)
+        let joint = two[0].end;
+        let at = |j: usize| {
+            point(
+                umax * (i as f64 - 1.0 + j as f64 / 16.0) / div as f64,
+                k,
+                cp,
+                &kv,
+            )
+        };
+        let mut near = f64::INFINITY;
+        let mut a = at(0);
+        for j in 1..=16 {
+            let b = at(j);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let l2 = dx * dx + dy * dy;
+            let t = if l2 > 0.0 {
+                (((joint[0] - a[0]) * dx + (joint[1] - a[1]) * dy) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            near = near.min((a[0] + t * dx - joint[0]).hypot(a[1] + t * dy - joint[1]));
+            a = b;
+        }
+        if !(near <= chord) {
+            return Err(ILL_CONDITIONED);
+        }
         for pc in two {
             let finite = pc.end.iter().all(|v| v.is_finite())
                 && pc.centre.is_none_or(|c| c.iter().all(|v| v.is_finite()));
@@ -187,6 +239,18 @@ mod tests {
         // the arcs' ends are on the curve at u = i/16 or between (biarc joints)
         let mid = pieces[15].end; // the span's second arc ends at u = 8/16
         assert!((mid[0] - 5.0).abs() < 1e-9 && (mid[1] - 3.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn an_ill_conditioned_biarc_is_refused() {
+        // G5 X1 Y20 I0 J2 P-2 Q2 from X0 Y0: LinuxCNC's fourth arc ends 17 m away
+        let cp = [
+            [0.0, 0.0, 1.0],
+            [0.0, 2.0, 1.0],
+            [-1.0, 22.0, 1.0],
+            [1.0, 20.0, 1.0],
+        ];
+        assert_eq!(linuxcnc_pieces(&cp, 4, 1e-6), Err(ILL_CONDITIONED));
     }
 
     #[test]
