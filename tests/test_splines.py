@@ -320,3 +320,11 @@ def test_a_large_spline_follows_linuxcnc_s_arcs_not_the_curve(tmp_path):
     got, want = output_path(dst), expected(blocks, slow_wave)
     assert cKDTree(got).query(want)[0].max() < 0.003
     assert cKDTree(want).query(got)[0].max() < 0.003
+
+
+def test_an_ill_conditioned_spline_is_refused():
+    """Tangents nearly parallel across a span: LinuxCNC's biarc there runs 17 m away (its
+    arithmetic's rounding decides where): refused at its line, not followed."""
+    with pytest.raises(InputError, match="ill-conditioned") as e:
+        nc.parse(HEAD + "G5 X1 Y20 I0 J2 P-2 Q2\nM2\n").correct(wave)
+    assert e.value.line == 4
