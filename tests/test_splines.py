@@ -328,3 +328,18 @@ def test_an_ill_conditioned_spline_is_refused():
     with pytest.raises(InputError, match="ill-conditioned") as e:
         nc.parse(HEAD + "G5 X1 Y20 I0 J2 P-2 Q2\nM2\n").correct(wave)
     assert e.value.line == 4
+
+
+def test_a_nurbs_is_refused_as_one_construct():
+    """LinuxCNC's NURBS (G5.2 with its control points on the lines after it, to G5.3) is not
+    followed: one construct at its first line, its control points (X Y P) part of it, not words
+    with no code to use them; with --keep-unsupported it is copied and the position after it is
+    unknown until a move gives it."""
+    text = HEAD + "G5.2 X3.53 Y-1.5 P2 L3\nX5.33 Y-11.01 P1\nX3.52 Y-24 P1\nG5.3\nG1 X0 Y0\nM2\n"
+    [u] = nc.parse(text).unsupported
+    assert (u.line, u.construct, u.blocks) == (4, "spline G5.2", 4)
+    out = nc.parse(text).correct(fields.Shift((0, 0, 0.05)), keep_unsupported=True)
+    lines = out.text.splitlines()
+    # (Z not given again: the move after it is left as written, and the correction says so)
+    assert lines[3:8] == text.splitlines()[3:8]
+    assert any("not corrected" in w for w in out.correction.warnings)

@@ -730,6 +730,8 @@ struct State {
     /// written: the last G5's -P -Q); None where the program has not set it (a canned cycle
     /// sets it too, from its I J).
     spline_ij: Option<[f64; 2]>,
+    /// Inside LinuxCNC's NURBS (after G5.2, before G5.3): its unsupported construct.
+    nurbs_open: Option<usize>,
     /// The coordinate rotation in force (Fanuc's G68), and its index in the run's rotations.
     rot: Option<Rotation>,
     rot_idx: Option<u32>,
@@ -905,6 +907,7 @@ impl Interpreter {
                 box_taper: false,
                 comp_exit: None,
                 spline_ij: None,
+                nurbs_open: None,
                 rot: None,
                 rot_idx: None,
                 prog_xy: [f64::NAN; 2],
@@ -1816,9 +1819,17 @@ impl Interpreter {
                             700 | 710 | 720 | 711 | 721 => "lathe cycle",
                             _ => "unknown G code",
                         };
-                        let idx = push_unsupported(out, li, gc, &format!("{what} {}", g_name(c)));
+                        // (LinuxCNC's NURBS: its control points on the lines up to G5.3, which
+                        // ends the one construct)
+                        let idx = match st.nurbs_open.take().filter(|_| c == 53) {
+                            Some(idx) => idx,
+                            None => push_unsupported(out, li, gc, &format!("{what} {}", g_name(c))),
+                        };
                         // these may move the machine somewhere the engine does not trace
                         untraced = Some(idx);
+                        if c == 52 && st.dialect.is_linuxcnc() {
+                            st.nurbs_open = Some(idx);
+                        }
                     }
                 }
             }
@@ -1958,6 +1969,18 @@ impl Interpreter {
             if lathe_cut.is_some() {
                 // (their depths, increments, taper, clearance and angles)
                 seen &= !CHECKED_WORDS;
+            }
+            // a control point of LinuxCNC's NURBS (G5.2 … G5.3, not followed): its X Y P are the
+            // NURBS's, the motion the control's
+            if let (Some(idx), 0) = (st.nurbs_open, ng) {
+                st.pos = [f64::NAN; NAXES];
+                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
+                out.unsupported[idx].blocks += 1;
+                if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
+                    out.summary.end_line = Some(li as u32);
+                    break;
+                }
+                continue;
             }
             let sync_block = motion_word.map_or(st.sync, |_| sync_word);
             if sync_block && motion_word.is_none() {
