@@ -1973,14 +1973,7 @@ impl Interpreter {
             // a control point of LinuxCNC's NURBS (G5.2 … G5.3, not followed): its X Y P are the
             // NURBS's, the motion the control's
             if let (Some(idx), 0) = (st.nurbs_open, ng) {
-                st.pos = [f64::NAN; NAXES];
-                push_record(out, st, li, Motion::Other, false, named, [0.0; 2], 1);
-                out.unsupported[idx].blocks += 1;
-                if ms[..nm].iter().any(|&(m, _)| m == 2 || m == 30) {
-                    out.summary.end_line = Some(li as u32);
-                    break;
-                }
-                continue;
+                untraced = Some(idx);
             }
             let sync_block = motion_word.map_or(st.sync, |_| sync_word);
             if sync_block && motion_word.is_none() {
