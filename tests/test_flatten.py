@@ -543,3 +543,33 @@ def test_inspect_expand_reports_the_flattened_program(tmp_path):
     g.write_text("$H\nG0 X0\n")
     r = CliRunner().invoke(main, ["inspect", str(g), "--expand"])
     assert r.exit_code == 2 and "--expand flattens" in r.output
+
+
+def test_exists_of_a_global_the_program_has_not_set_is_refused(tmp_path):
+    """EXISTS[#<_lathe_diameter_mode>] is 1 in LinuxCNC (it predefines it, on a mill too), and a
+    global parameter may come from an earlier program: the branch it takes is the machine's. A
+    local name the program has not set does not exist."""
+    src = tmp_path / "p.ngc"
+    src.write_text(
+        "G21 G0 X0 Y0 Z1\no1 if [EXISTS[#<_lathe_diameter_mode>]]\nG1 X20 F100\no1 else\nG1 X10 F100\no1 endif\nM2\n"
+    )
+    with pytest.raises(InputError, match="EXISTS") as e:
+        nc.correct_file(src, tmp_path / "o.ngc", lambda p: 0 * p, expand=True)
+    assert e.value.line == 2
+    src.write_text("G21 G0 X0 Y0 Z1\no1 if [EXISTS[#<depth>]]\nG1 X20 F100\no1 else\nG1 X10 F100\no1 endif\nM2\n")
+    nc.correct_file(src, tmp_path / "o.ngc", lambda p: 0 * p, expand=True)
+    assert "X10" in (tmp_path / "o.ngc").read_text().splitlines()[4]
+
+
+@pytest.mark.parametrize("code", ["G71.2", "G72.2"])
+def test_the_lathe_cycles_whose_contour_is_a_subroutine_are_refused(tmp_path, code):
+    """G71.2 and G72.2 (LinuxCNC's roughing cycles of type II) take their contour from a
+    subroutine too: flattened, the output would keep the cycle and lose the subroutine."""
+    src = tmp_path / "p.ngc"
+    src.write_text(f"G7 G18 G21\nG0 X30 Z2\no100 sub\nG1 X20 Z0\nG1 Z-10\no100 endsub\n{code} Q100 D1\nM2\n")
+    with pytest.raises(InputError, match="lathe cycles G70-G72") as e:
+        nc.correct_file(src, tmp_path / "o.ngc", lambda p: 0 * p, expand=True, dialect="linuxcnc-lathe")
+    assert e.value.line == 7
+    assert any(
+        u.construct == f"lathe cycle {code}" for u in nc.parse(src.read_text(), dialect="linuxcnc-lathe").unsupported
+    )

@@ -487,6 +487,13 @@ class _Machine:
         scope = self.globals if ref.startswith("_") else self.frames[-1]
         if ref in scope:
             return True if exists else scope[ref]
+        if exists and ref.startswith("_"):
+            # (LinuxCNC's predefined parameters exist, #<_lathe_diameter_mode> on a mill too, and a
+            # global one may come from an earlier program or the parameter file)
+            raise _Error(
+                f"EXISTS[#<{ref}>]: a global parameter the program has not set exists or not as the machine "
+                "has it (LinuxCNC predefines many)"
+            )
         if exists:
             return False
         if ref.startswith("_"):
@@ -853,7 +860,7 @@ class _Run:
             return self.macro(words, i)
         ms = [round(v) for c, v in words if c == "m"]
         gs = [round(v * 10) for c, v in words if c == "g"]
-        if any(g in (700, 710, 711, 720, 721) for g in gs):
+        if any(g in (700, 710, 711, 712, 720, 721, 722) for g in gs):
             raise _Error("lathe cycles G70-G72 take their contour from the program's subroutines: not flattened")
         if isinstance(mac, _Machine) and (any(g in _MACHINE_CODES for g in gs) or any(m in (6, 61) for m in ms)):
             # probing, offsets, stored positions, tool data: the machine sets its parameters again

@@ -1816,7 +1816,7 @@ impl Interpreter {
                             50..=53 => "spline",
                             330 | 331 => "spindle-synchronised motion",
                             171 | 181 | 191 => "UVW plane",
-                            700 | 710 | 720 | 711 | 721 => "lathe cycle",
+                            700 | 710 | 720 | 711 | 721 | 712 | 722 => "lathe cycle",
                             _ => "unknown G code",
                         };
                         // (LinuxCNC's NURBS: its control points on the lines up to G5.3, which
