@@ -781,3 +781,18 @@ def test_after_a_contour_the_nose_turns_from_the_return_to_its_start():
     prog = nc.parse(text, dialect="fanuc-lathe", tools={1: 0.8})
     assert prog.unsupported == ()
     prog.correct(fields.Shift((0.01, 0, 0.02)))
+
+
+def test_after_an_offset_on_x_in_diameter_mode_kept_as_written_x_is_unknown():
+    """G92 X50 under G7 is not followed (whether its X is a diameter); kept with
+    --keep-unsupported, the moves after it are not corrected in the old frame (they were: 100 µm
+    off under a field whose x grows by 1 % of X), they are left as written until the program
+    tells where the tool is, and the correction says so."""
+    from ncadapt import nc
+
+    src = "G7 G18 G21 G90\nF100\nG0 X30 Z2\nG1 X20 Z0\nG92 X50\nG1 X40 Z-10\nG1 Z-20\nM2\n"
+    prog = nc.parse(src, dialect="linuxcnc-lathe")
+    assert [u.line for u in prog.unsupported] == [5]
+    out = prog.correct(lambda p: np.c_[0.01 * p[:, 0], 0 * p[:, 0], 0 * p[:, 0]], keep_unsupported=True)
+    assert out.text.splitlines()[-3:] == ["G1 X40 Z-10", "G1 Z-20", "M2"]
+    assert any("not corrected because the position is unknown" in w for w in out.correction.warnings)

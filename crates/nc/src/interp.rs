@@ -1891,6 +1891,17 @@ impl Interpreter {
                 };
                 if let Some((c, why)) = why {
                     untraced = Some(push_unsupported(out, li, c, why));
+                    // (kept as written, the offsets it sets on the axes it names are the
+                    // machine's from here: the program's numbers no longer tell where they are)
+                    if !polar_used {
+                        let mut off = st.off;
+                        for (k, o) in off.iter_mut().enumerate() {
+                            if named & (1 << k) != 0 {
+                                *o = f64::NAN;
+                            }
+                        }
+                        set_offsets(out, st, off);
+                    }
                 }
             }
             if st.inch {
