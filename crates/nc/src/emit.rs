@@ -850,14 +850,6 @@ impl<'a> Emitter<'a> {
         (rec.rot != NO_ROT).then(|| self.it.rotations[rec.rot as usize])
     }
 
-    /// The spline of record `ri`, if it is one.
-    fn spline(&self, ri: usize) -> Option<&crate::interp::Spline> {
-        let sp = &self.it.splines;
-        sp.binary_search_by_key(&(ri as u32), |s| s.rec)
-            .ok()
-            .map(|k| &sp[k])
-    }
-
     /// The output's spline register after record `ri`, written as a G5 (`kept`) or in pieces: a
     /// G5 without I and J whose register the output no longer holds is refused (written as a G5
     /// it would start by another control point).
@@ -866,7 +858,7 @@ impl<'a> Emitter<'a> {
         if rec.motion != Motion::Spline {
             return Ok(());
         }
-        if kept && !self.st.spline_reg && self.spline(ri).is_some_and(|s| s.continued) {
+        if kept && !self.st.spline_reg && self.it.spline(ri).is_some_and(|s| s.continued) {
             return Err(refused_at(rec, "a G5 without I and J after a G5 written in straight pieces: kept as written, it would start by another control point (LinuxCNC's register holds the last G5's P and Q); write its I and J"));
         }
         self.st.spline_reg = kept;
@@ -1057,7 +1049,7 @@ impl<'a> Emitter<'a> {
             && moved == 0
             && uniform
             && on_path
-            && (self.st.spline_reg || !self.spline(ri).is_some_and(|s| s.continued));
+            && (self.st.spline_reg || !self.it.spline(ri).is_some_and(|s| s.continued));
         let straight = !rec.motion.is_curve()
             && (n == 1
                 || moved == 0 && {
@@ -1175,12 +1167,12 @@ impl<'a> Emitter<'a> {
         }
         // before the first move giving X and Y after G68/G69, a corrected X or Y is written with
         // the other, absolute: not in G91
+        let half = self.fmt.half(rec.inch);
         if rec.xy_both
             && rec.incremental
             && (0..n).any(|k| {
                 // (the distance from where the output stands, which a rotation does not change)
                 let e = target_at(k, ts[k]);
-                let half = self.fmt.half(rec.inch);
                 (0..2).any(|a| !((e[a] - self.st.epos[a]).abs() / Self::unit(rec, a) < half * 0.5))
             })
         {
@@ -1369,7 +1361,6 @@ impl<'a> Emitter<'a> {
         };
         // XYZ and the other axes the block names, in the order of AXES
         let axes = 0b111 | rec.named | moved;
-        let half = self.fmt.half(rec.inch);
         // under a coordinate rotation the pieces' X and Y are written as programmed, turned back
         let rot = self.rotation(rec);
         if let Some(r) = rot {

@@ -614,6 +614,16 @@ pub struct Interp {
     pub rotations: Vec<Rotation>,
 }
 
+impl Interp {
+    /// The spline of record `ri` ([`Interp::splines`]), if it is one.
+    pub fn spline(&self, ri: usize) -> Option<&Spline> {
+        let sp = &self.splines;
+        sp.binary_search_by_key(&(ri as u32), |s| s.rec)
+            .ok()
+            .map(|k| &sp[k])
+    }
+}
+
 /// Modal conditions under which motion blocks cannot be corrected, with the line that set them.
 #[derive(Clone, Copy, Debug, Default)]
 struct Active {
@@ -727,8 +737,8 @@ struct State {
     /// After G40: the offset the tool centre stands at until the move that ends compensation.
     comp_exit: Option<[f64; 2]>,
     /// LinuxCNC's register a G5 without I and J takes its first control point from (offsets as
-    /// written: the last G5's -P -Q); None where the program has not set it (a canned cycle
-    /// sets it too, from its I J).
+    /// written: the last G5's -P -Q); None where the program has not set it (G87 sets it
+    /// too, from its I J).
     spline_ij: Option<[f64; 2]>,
     /// Inside LinuxCNC's NURBS (after G5.2, before G5.3): its unsupported construct.
     nurbs_open: Option<usize>,
@@ -2334,16 +2344,11 @@ impl Interpreter {
                 }
             }
             if let (Some(rot), false, true) = (st.rot, g53, named & 0b11 != 0) {
-                let mut p = st.prog_xy;
-                for (k, pk) in p.iter_mut().enumerate() {
-                    if let Some(v) = axis[k] {
-                        *pk = if st.incremental {
-                            st.prog_xy[k] + v * unit
-                        } else {
-                            v * unit + st.off[k]
-                        };
-                    }
-                }
+                // (the axis words' target from the programmed X Y, not where the tool is)
+                let mut from = st.pos;
+                (from[0], from[1]) = (st.prog_xy[0], st.prog_xy[1]);
+                let t = target(&from, &axis, st.incremental, unit, &st.off);
+                let p = [t[0], t[1]];
                 if end[0].is_finite() || end[1].is_finite() {
                     let f = rot.to_frame(p);
                     end[0] = f[0];
@@ -2451,7 +2456,7 @@ impl Interpreter {
                             spline_blocker = Some(idx);
                         }
                         if m.is_spline() && spline.is_none() && spline_blocker.is_none() {
-                            let idx = push_unsupported(out, li, gcol, "a G5 without I and J: its first control point comes from LinuxCNC's register (the last G5's P and Q, or a canned cycle's I and J), which the program has not set before it");
+                            let idx = push_unsupported(out, li, gcol, "a G5 without I and J: its first control point comes from LinuxCNC's register (the last G5's P and Q, or G87's I and J), which the program has not set before it");
                             spline_blocker = Some(idx);
                         }
                         if m.is_arc() {
@@ -4348,13 +4353,6 @@ fn spline_block(
             ))
         }
     };
-    if ijk[2].is_some() {
-        return Err(ierr(
-            li,
-            wcol[(b'K' - b'A') as usize],
-            "a K word on a spline: it has none",
-        ));
-    }
     if m == Motion::QSpline {
         if p.is_some() || q.is_some() {
             return Err(ierr(

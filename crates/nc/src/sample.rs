@@ -323,13 +323,9 @@ pub fn sample_range(
         };
         let end = [rec.end[0], rec.end[1], rec.end[2]];
         // (a G5 whose first control point is not known: its end alone)
+        let spline = rec.motion.is_spline().then(|| it.spline(i)).flatten();
         let spline_unknown = rec.motion.is_spline()
-            && it
-                .splines
-                .binary_search_by_key(&(i as u32), |s| s.rec)
-                .map_or(true, |k| {
-                    !it.splines[k].ctrl.iter().flatten().all(|v| v.is_finite())
-                });
+            && spline.is_none_or(|sp| !sp.ctrl.iter().flatten().all(|v| v.is_finite()));
         let end_only = !prev.iter().all(|v| v.is_finite())
             || spline_unknown
             || rec.cycle == crate::interp::CYCLE_BOTTOM
@@ -353,18 +349,7 @@ pub fn sample_range(
             if let Some(range) = flat {
                 s.flat.push((i as u32, range));
             }
-        } else if rec.motion.is_spline() {
-            let Some(sp) = it
-                .splines
-                .binary_search_by_key(&(i as u32), |s| s.rec)
-                .ok()
-                .map(|k| it.splines[k])
-            else {
-                return Err(NcError::Usage(format!(
-                    "line {}: a spline without its control points",
-                    rec.line + 1
-                )));
-            };
+        } else if let Some(sp) = spline {
             // LinuxCNC's arcs of the curve, each cut in chords within the tolerance
             let mut cp = vec![
                 [start[0], start[1], 1.0],
@@ -387,11 +372,12 @@ pub fn sample_range(
                     message: why.into(),
                 }
             })?;
-            // the chords of each piece: (start, centre or none, sweep, radius, count)
+            // the chords of each piece: (start, end, centre, start angle, sweep and radius of an
+            // arc, length, count)
             let mut plan = Vec::with_capacity(pieces.len());
             let (mut from, mut total, mut count) = ([start[0], start[1]], 0.0, 0.0);
             for pc in &pieces {
-                let (len, n) = match pc.centre {
+                let (len, n, arc) = match pc.centre {
                     Some(c) => {
                         let r = (from[0] - c[0]).hypot(from[1] - c[1]);
                         let a0 = (from[1] - c[1]).atan2(from[0] - c[0]);
@@ -407,8 +393,7 @@ pub fn sample_range(
                             }
                         }
                         let n = arc_pieces_within((a0, d, r, r), 0.0, opts, opts.chord_tol);
-                        plan.push((from, Some((c, a0, d, r)), n));
-                        (r * d.abs(), n)
+                        (r * d.abs(), n, Some((c, a0, d, r)))
                     }
                     None => {
                         let len = (pc.end[0] - from[0]).hypot(pc.end[1] - from[1]);
@@ -417,10 +402,10 @@ pub fn sample_range(
                         } else {
                             1.0
                         };
-                        plan.push((from, None, n));
-                        (len, n)
+                        (len, n, None)
                     }
                 };
+                plan.push((from, pc.end, arc, len, n));
                 total += len;
                 count += n;
                 from = pc.end;
@@ -429,16 +414,12 @@ pub fn sample_range(
                 return Err(too_many(rec, count));
             }
             let mut done = 0.0;
-            for (q, (from, arc, n)) in plan.into_iter().enumerate() {
-                let to = pieces[q].end;
+            let count = plan.len();
+            for (q, (from, to, arc, len, n)) in plan.into_iter().enumerate() {
                 let n = n as usize;
-                let len = match arc {
-                    Some((_, _, d, r)) => r * d.abs(),
-                    None => (to[0] - from[0]).hypot(to[1] - from[1]),
-                };
                 for m in 1..=n {
                     let f = m as f64 / n as f64;
-                    let last = q + 1 == pieces.len() && m == n;
+                    let last = q + 1 == count && m == n;
                     let xy = match arc {
                         _ if m == n => to,
                         Some((c, a0, d, r)) => {
